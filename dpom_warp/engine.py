@@ -1,0 +1,204 @@
+"""The Warp inference engine: buffers allocated once per camera and grid, one call per frame."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from . import kernels as K
+from .geometry import Geometry
+from .model import Background, ModelParams
+
+wp.config.quiet = True
+
+
+def resolve_device(name: str = "auto") -> str:
+    """'auto' -> the first CUDA device when there is one, else 'cpu'; otherwise as given."""
+    wp.init()
+    if name == "auto":
+        cuda = wp.get_cuda_devices()
+        return str(cuda[0]) if cuda else "cpu"
+    if name != "cpu" and not str(name).startswith("cuda"):
+        raise ValueError(f"device: expected auto, cpu or cuda[:N], found {name!r}")
+    if name not in [str(d) for d in wp.get_devices()] and name != "cuda":
+        raise ValueError(f"device: {name!r} is not available here (have "
+                         f"{', '.join(str(d) for d in wp.get_devices())})")
+    return name
+
+
+def pixel_model(params: ModelParams) -> K.PixelModel:
+    pm = K.PixelModel()
+    pm.sigma_object2 = params.sigma_object ** 2
+    pm.noise_a, pm.noise_b = (float(x) for x in params.sensor_noise)
+    pm.log_outlier = math.log(params.outlier_prob) - math.log(params.z_max)
+    pm.log_inlier_weight = math.log1p(-params.outlier_prob)
+    pm.log_reading = math.log1p(-params.missing_prob)
+    pm.z_max = params.z_max
+    pm.outlier_prob = params.outlier_prob
+    pm.missing_prob = params.missing_prob
+    pm.missing_clip = params.missing_clip
+    return pm
+
+
+class ListOverflow(RuntimeError):
+    """The mask entries of a frame exceed the list capacity and growth is not allowed."""
+
+
+@dataclass
+class FrameResult:
+    """Occupancy of one frame. Arrays are flat over locations (map order)."""
+
+    rho: np.ndarray
+    rho_star: np.ndarray
+    evidence_share: np.ndarray
+    iterations: int
+    entries: int
+    timings: dict = field(default_factory=dict)
+    max_change: np.ndarray | None = None
+
+
+class Engine:
+    """DPOM inference for one camera and grid on one Warp device.
+
+    Buffers (per-pixel lists, accumulators) are allocated up front; the list capacity grows
+    (and says so in `grown`) only when a frame needs more entries than it holds, unless
+    `max_entries` caps it, in which case the frame is refused with ListOverflow.
+
+    Args:
+        geometry: silhouettes, facing planes and rays (geometry.build_geometry).
+        params: model and inference parameters.
+        device: Warp device name ('cpu', 'cuda:0').
+        entries_per_pixel: initial list capacity per pixel.
+        max_entries: hard cap on the list capacity (None: no cap).
+    """
+
+    def __init__(self, geometry: Geometry, params: ModelParams, device: str = "cpu",
+                 entries_per_pixel: float = 8.0, max_entries: int | None = None):
+        self.geometry, self.params, self.device = geometry, params, device
+        self.height, self.width = geometry.rays.shape[:2]
+        self.n_pixels = self.height * self.width
+        self.n_locations = len(geometry.rect)
+        self.max_entries = max_entries
+        self.grown: list[int] = []
+        self.pm = pixel_model(params)
+        with wp.ScopedDevice(device):
+            g = K.GeometryArrays()
+            g.rays = wp.array(geometry.rays, dtype=wp.vec3d)
+            g.rect = wp.array(geometry.rect, dtype=wp.vec4i)
+            g.normal = wp.array(geometry.normal, dtype=wp.vec3d)
+            g.plane = wp.array(geometry.plane, dtype=wp.float64)
+            self.geo = g
+            self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
+            P, L = self.n_pixels, self.n_locations
+            self.depth = wp.zeros((self.height, self.width), dtype=wp.float32)
+            self.counts = wp.zeros(P, dtype=wp.int32)
+            self.offsets = wp.zeros(P, dtype=wp.int32)
+            self.delta_bg = wp.zeros(P, dtype=wp.float64)
+            self.bg = wp.zeros((P, 4), dtype=wp.float64)
+            self.rho = wp.zeros(L, dtype=wp.float64)
+            self.evidence = wp.zeros(L, dtype=wp.float64)
+            self.visible = wp.zeros(L, dtype=wp.float64)
+            self.share = wp.zeros(L, dtype=wp.float64)
+            self.rho_star = wp.zeros(L, dtype=wp.float64)
+            self.max_change = wp.zeros(max(1, params.max_iterations), dtype=wp.float64)
+        self._allocate_lists(int(entries_per_pixel * P))
+        self.set_floor_background()
+
+    # -- buffers -------------------------------------------------------------------------
+    def _allocate_lists(self, capacity: int):
+        capacity = max(1024, capacity)
+        if self.max_entries is not None:
+            capacity = min(capacity, self.max_entries)
+        with wp.ScopedDevice(self.device):
+            self.entry_loc = wp.zeros(capacity, dtype=wp.int32)
+            self.entry_mu = wp.zeros(capacity, dtype=wp.float32)
+            self.entry_delta = wp.zeros(capacity, dtype=wp.float32)
+            self.behind = wp.zeros(capacity, dtype=wp.float64)
+        self.capacity = capacity
+
+    # -- background ----------------------------------------------------------------------
+    def set_floor_background(self):
+        """Use the floor-only background of MODEL.md (no background frames)."""
+        wp.launch(K.floor_background, dim=(self.height, self.width), device=self.device,
+                  inputs=[self.geo.rays, float(self.geometry.centre[2]), self.pm, self.bg])
+
+    def set_background_frames(self, frames_m: np.ndarray):
+        """Estimate the background from (N, H, W) frames in metres (0 = no reading)."""
+        frames = np.ascontiguousarray(frames_m, dtype=np.float32)
+        with wp.ScopedDevice(self.device):
+            f = wp.array(frames, dtype=wp.float32)
+            scratch = wp.zeros((self.n_pixels, frames.shape[0]), dtype=wp.float64)
+            wp.launch(K.background_from_frames, dim=(self.height, self.width),
+                      inputs=[f, self.pm, scratch, self.bg])
+
+    def background(self) -> Background:
+        b = self.bg.numpy().reshape(self.height, self.width, 4)
+        return Background(mu=b[..., 0], sigma=b[..., 1], missing=b[..., 2], outlier=b[..., 3])
+
+    # -- one frame -----------------------------------------------------------------------
+    def build_lists(self, depth_m: np.ndarray) -> int:
+        """Masks, Delta and depth-sorted per-pixel lists of one frame; returns the entry count."""
+        dev, L = self.device, self.n_locations
+        self.depth.assign(np.ascontiguousarray(depth_m, dtype=np.float32))
+        wp.launch(K.background_delta, dim=(self.height, self.width), device=dev,
+                  inputs=[self.depth, self.pm, self.bg, self.delta_bg])
+        self.counts.zero_()
+        lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu,
+                 self.entry_delta]
+        wp.launch(K.mask_entries, dim=L, device=dev, inputs=[self.depth, self.geo, self.pm, 0] + lists)
+        wp.utils.array_scan(self.counts, self.offsets, inclusive=False)
+        total = int(self.offsets[-1:].numpy()[0] + self.counts[-1:].numpy()[0])
+        if total > self.capacity:
+            if self.max_entries is not None and total > self.max_entries:
+                raise ListOverflow(f"frame needs {total} mask entries, above the cap of "
+                                   f"{self.max_entries} (raise it or coarsen the grid)")
+            self.grown.append(total)
+            self._allocate_lists(int(total * 1.25))
+        self.counts.zero_()
+        lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu,
+                 self.entry_delta]
+        wp.launch(K.mask_entries, dim=L, device=dev, inputs=[self.depth, self.geo, self.pm, 1] + lists)
+        wp.launch(K.sort_pixel_lists, dim=self.n_pixels, device=dev,
+                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta])
+        return total
+
+    def infer(self, depth_m: np.ndarray) -> FrameResult:
+        """Occupancy probabilities of one depth frame (metres, 0 = no reading)."""
+        p, dev = self.params, self.device
+        t0 = time.perf_counter()
+        entries = self.build_lists(depth_m)
+        wp.synchronize_device(dev)
+        t1 = time.perf_counter()
+        self.rho.fill_(p.prior)
+        self.evidence.zero_()
+        self.max_change.zero_()
+        logit_prior = math.log(p.prior) - math.log1p(-p.prior)
+        lists = [self.offsets, self.counts, self.entry_loc]
+        iterations = 0
+        for it in range(p.max_iterations):
+            wp.launch(K.evidence_pass, dim=self.n_pixels, device=dev,
+                      inputs=lists + [self.entry_delta, self.delta_bg, self.rho, self.behind,
+                                      self.evidence])
+            wp.launch(K.update_rho, dim=self.n_locations, device=dev,
+                      inputs=[logit_prior, p.damping, it, self.evidence, self.rho, self.max_change])
+            iterations = it + 1
+            if (it + 1) % p.check_every == 0 and self.max_change[it:it + 1].numpy()[0] < p.tolerance:
+                break
+        wp.synchronize_device(dev)
+        t2 = time.perf_counter()
+        self.visible.zero_()
+        wp.launch(K.transparency_pass, dim=self.n_pixels, device=dev, inputs=lists + [self.rho, self.visible])
+        wp.launch(K.soft_threshold, dim=self.n_locations, device=dev,
+                  inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.share, self.rho_star])
+        result = FrameResult(
+            rho=self.rho.numpy().copy(), rho_star=self.rho_star.numpy().copy(),
+            evidence_share=self.share.numpy().copy(), iterations=iterations, entries=entries,
+            max_change=self.max_change.numpy()[:iterations].copy())
+        t3 = time.perf_counter()
+        result.timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2,
+                          "total_s": t3 - t0}
+        return result

@@ -1,0 +1,216 @@
+"""Camera, location grid and the per-location silhouette and facing plane (MODEL.md, Geometry).
+
+Everything here is computed once per camera and grid, in float64 NumPy, and shared by the Warp
+engine and the NumPy reference, so both paths see exactly the same geometry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def pose_from_angles(height_m: float, pitch_deg: float, roll_deg: float = 0.0,
+                     yaw_deg: float = 0.0, x_m: float = 0.0, y_m: float = 0.0) -> np.ndarray:
+    """Build `T_world_from_camera` for a camera at (x, y, height) looking along world +y.
+
+    Args:
+        height_m: height of the camera centre above the floor (z = 0), metres.
+        pitch_deg: downward tilt of the optical axis below the horizon, degrees.
+        roll_deg: rotation about the optical axis, degrees (positive turns the image clockwise).
+        yaw_deg: rotation of the viewing direction about world z, degrees (0 looks along +y).
+        x_m, y_m: camera position on the floor plane, metres.
+
+    Returns:
+        (4, 4) float64 rigid transform from the OpenCV camera frame (x right, y down, z forward)
+        to the world frame (z up, floor at z = 0).
+    """
+    p, r, w = np.deg2rad([pitch_deg, roll_deg, yaw_deg])
+    # Camera axes in the world for yaw = 0, roll = 0: right, down, forward (columns).
+    right = np.array([1.0, 0.0, 0.0])
+    down = np.array([0.0, -np.sin(p), -np.cos(p)])
+    forward = np.array([0.0, np.cos(p), -np.sin(p)])
+    r_level = np.stack([right, down, forward], axis=1)
+    roll = np.array([[np.cos(r), -np.sin(r), 0.0], [np.sin(r), np.cos(r), 0.0], [0.0, 0.0, 1.0]])
+    yaw = np.array([[np.cos(w), -np.sin(w), 0.0], [np.sin(w), np.cos(w), 0.0], [0.0, 0.0, 1.0]])
+    t = np.eye(4)
+    t[:3, :3] = yaw @ r_level @ roll
+    t[:3, 3] = [x_m, y_m, height_m]
+    return t
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole depth camera: image size, intrinsics (pixels) and pose in the world frame."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    T_world_from_camera: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Camera centre C in world coordinates (metres)."""
+        return np.asarray(self.T_world_from_camera, dtype=np.float64)[:3, 3].copy()
+
+    @property
+    def R_wc(self) -> np.ndarray:
+        return np.asarray(self.T_world_from_camera, dtype=np.float64)[:3, :3]
+
+    def rays(self) -> np.ndarray:
+        """World direction of every pixel's ray, scaled so that the ray parameter is z-depth.
+
+        Returns:
+            (height, width, 3) float64 array `d = R_wc @ [(u - cx)/fx, (v - cy)/fy, 1]`.
+        """
+        u = np.arange(self.width, dtype=np.float64)
+        v = np.arange(self.height, dtype=np.float64)
+        uu, vv = np.meshgrid(u, v)
+        cam = np.stack([(uu - self.cx) / self.fx, (vv - self.cy) / self.fy, np.ones_like(uu)], -1)
+        return cam @ self.R_wc.T
+
+    def project(self, points_w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Project world points to pixels.
+
+        Returns:
+            (u, v, z): pixel coordinates and z-depth (metres) in the camera frame.
+        """
+        pc = (np.asarray(points_w, dtype=np.float64) - self.centre) @ self.R_wc
+        z = pc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = self.fx * pc[..., 0] / z + self.cx
+            v = self.fy * pc[..., 1] / z + self.cy
+        return u, v, z
+
+
+def axis_cells(lo: float, hi: float, step: float) -> np.ndarray:
+    """Centres of the cells of width `step` that tile [lo, hi] (the last one may overhang)."""
+    n = max(1, int(np.ceil((hi - lo) / step - 1e-9)))
+    return lo + (np.arange(n) + 0.5) * step
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Locations k: cells of a ground grid (mode 'ground') or voxels of a 3D grid ('voxel').
+
+    Attributes:
+        x, y: (min, max, step) in metres; z likewise for voxel grids.
+        mode: 'ground' (objects stand on the floor at the cell centre) or 'voxel' (objects
+            are centred on the voxel centre).
+    """
+
+    x: tuple[float, float, float]
+    y: tuple[float, float, float]
+    mode: str = "ground"
+    z: tuple[float, float, float] | None = None
+
+    @property
+    def xs(self) -> np.ndarray:
+        return axis_cells(*self.x)
+
+    @property
+    def ys(self) -> np.ndarray:
+        return axis_cells(*self.y)
+
+    @property
+    def zs(self) -> np.ndarray:
+        return axis_cells(*self.z) if self.mode == "voxel" else np.zeros(1)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Map shape: (ny, nx) for ground grids, (nz, ny, nx) for voxel grids."""
+        if self.mode == "voxel":
+            return (len(self.zs), len(self.ys), len(self.xs))
+        return (len(self.ys), len(self.xs))
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+    def centres(self) -> np.ndarray:
+        """(K, 3) location centres in world metres, in map order (z slowest, x fastest)."""
+        zz, yy, xx = np.meshgrid(self.zs, self.ys, self.xs, indexing="ij")
+        return np.stack([xx.ravel(), yy.ravel(), zz.ravel()], axis=1)
+
+
+@dataclass(frozen=True)
+class ObjectBox:
+    """Object size in metres; `depth` defaults to `width`."""
+
+    width: float
+    height: float
+    depth: float | None = None
+
+    def corners(self, centre: np.ndarray, mode: str) -> np.ndarray:
+        """(K, 8, 3) corners of the boxes at `centre` (K, 3): standing on it or centred on it."""
+        d = self.width if self.depth is None else self.depth
+        hx, hy = 0.5 * self.width, 0.5 * d
+        z0, z1 = (0.0, self.height) if mode == "ground" else (-0.5 * self.height, 0.5 * self.height)
+        offs = np.array([[sx, sy, sz] for sx in (-hx, hx) for sy in (-hy, hy) for sz in (z0, z1)])
+        return centre[:, None, :] + offs[None, :, :]
+
+
+@dataclass
+class Geometry:
+    """Per-location quantities shared by the Warp engine and the NumPy reference.
+
+    Attributes:
+        rays: (H, W, 3) world ray directions, ray parameter = z-depth.
+        centre: camera centre C (3,).
+        locations: (K, 3) location centres.
+        rect: (K, 4) int32 silhouette rectangle u0, v0, u1, v1 (inclusive pixel indices,
+            clipped to the image); u1 < u0 for a location with no silhouette.
+        area: (K,) silhouette area in pixels inside the image, 0 when there is none.
+        normal: (K, 3) unit normal of the facing plane (pointing at the camera).
+        plane: (K,) n . (P_k - C); the object depth along pixel ray d is plane / (n . d).
+    """
+
+    rays: np.ndarray
+    centre: np.ndarray
+    locations: np.ndarray
+    rect: np.ndarray
+    area: np.ndarray
+    normal: np.ndarray
+    plane: np.ndarray
+
+
+def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
+    """Silhouette rectangles and facing planes for every location of `grid` seen by `camera`."""
+    locs = grid.centres()
+    corners = obj.corners(locs, grid.mode)
+    u, v, z = camera.project(corners)
+    in_front = np.all(z > 1e-6, axis=1)
+    with np.errstate(invalid="ignore"):
+        u0 = np.ceil(np.nanmin(np.where(in_front[:, None], u, np.nan), axis=1))
+        u1 = np.floor(np.nanmax(np.where(in_front[:, None], u, np.nan), axis=1))
+        v0 = np.ceil(np.nanmin(np.where(in_front[:, None], v, np.nan), axis=1))
+        v1 = np.floor(np.nanmax(np.where(in_front[:, None], v, np.nan), axis=1))
+    big = 1e9
+    u0 = np.clip(np.nan_to_num(u0, nan=big), 0, camera.width)
+    v0 = np.clip(np.nan_to_num(v0, nan=big), 0, camera.height)
+    u1 = np.clip(np.nan_to_num(u1, nan=-big), -1, camera.width - 1)
+    v1 = np.clip(np.nan_to_num(v1, nan=-big), -1, camera.height - 1)
+    empty = ~in_front | (u1 < u0) | (v1 < v0)
+    rect = np.stack([u0, v0, u1, v1], axis=1).astype(np.int64)
+    rect[empty] = (0, 0, -1, -1)
+    area = np.where(empty, 0, (rect[:, 2] - rect[:, 0] + 1) * (rect[:, 3] - rect[:, 1] + 1))
+
+    c = camera.centre
+    to_cam = c[None, :] - locs
+    if grid.mode == "ground":
+        to_cam[:, 2] = 0.0  # people: vertical facing plane
+    norm = np.linalg.norm(to_cam, axis=1)
+    fallback = -camera.R_wc[:, 2].copy()  # camera directly above a location: face the camera axis
+    if grid.mode == "ground":
+        fallback[2] = 0.0
+    fallback /= max(np.linalg.norm(fallback), 1e-12)
+    normal = np.where(norm[:, None] > 1e-9, to_cam / np.maximum(norm, 1e-12)[:, None], fallback)
+    plane = np.einsum("kj,kj->k", normal, locs - c[None, :])
+    return Geometry(
+        rays=camera.rays(), centre=c, locations=locs, rect=rect.astype(np.int32),
+        area=area.astype(np.int64), normal=normal, plane=plane,
+    )

@@ -1,0 +1,62 @@
+"""Model parameters and the per-pixel background distribution (MODEL.md, eq. 11)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ModelParams:
+    """Parameters of the DPOM pixel models and of mean-field inference.
+
+    Attributes:
+        prior: prior occupancy probability epsilon of every location.
+        sigma_object: spread of an object's surface about its facing plane, metres.
+        sensor_noise: (a, b) of the sensor's depth noise sigma(z) = a + b z^2, metres.
+        outlier_prob: pi_out, weight of the uniform outlier term.
+        missing_prob: pi_inf of objects (and of the floor-only background).
+        z_max: sensor range, metres; readings beyond it are treated as no reading.
+        alpha, beta: soft threshold rho* = sigmoid(alpha e + beta) rho (eq. 13, corrected sign).
+        damping: lambda of the damped parallel update rho <- (1 - lambda) rho + lambda rho_new.
+        tolerance: stop when max |rho_new - rho| falls below it.
+        max_iterations: iteration cap.
+        check_every: read the convergence test back to the host every this many iterations.
+        missing_clip: background pi_inf is clipped to [missing_clip, 1 - missing_clip].
+    """
+
+    prior: float = 0.01
+    sigma_object: float = 0.15
+    sensor_noise: tuple[float, float] = (0.002, 0.0015)
+    outlier_prob: float = 0.05
+    missing_prob: float = 0.05
+    z_max: float = 10.0
+    alpha: float = 100.0
+    beta: float = -8.0
+    damping: float = 0.1
+    tolerance: float = 1e-4
+    max_iterations: int = 100
+    check_every: int = 5
+    missing_clip: float = 0.01
+
+    def sensor_sigma(self, z):
+        a, b = self.sensor_noise
+        return a + b * np.asarray(z, dtype=np.float64) ** 2
+
+
+@dataclass
+class Background:
+    """Per-pixel background distribution theta_bg,i (arrays of shape (H, W), float64).
+
+    Attributes:
+        mu: mean depth, metres.
+        sigma: spread, metres.
+        missing: pi_inf, probability of no reading.
+        outlier: pi_out; 1 means a broad (uniform) distribution over the sensor range.
+    """
+
+    mu: np.ndarray
+    sigma: np.ndarray
+    missing: np.ndarray
+    outlier: np.ndarray

@@ -1,0 +1,186 @@
+"""Plain NumPy reference of the DPOM maths (MODEL.md). Small, readable, slow.
+
+The Warp kernels in `dpom_warp.kernels` implement exactly these steps; the tests compare the two.
+List entries are stored as float32 (object depth and Delta) on the fast path, so the reference
+rounds them the same way; everything else is float64.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import Geometry
+from .model import Background, ModelParams
+
+LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
+
+
+def gaussian_logpdf(z, mu, sigma):
+    return -0.5 * ((z - mu) / sigma) ** 2 - np.log(sigma) - LOG_SQRT_2PI
+
+
+def log_theta(z, mu, sigma, missing, outlier, z_max):
+    """Delta = log theta(z) of eq. 11 for a reading z (metres) in (0, z_max]."""
+    with np.errstate(divide="ignore"):
+        return np.log1p(-missing) + np.logaddexp(
+            np.log(outlier) - np.log(z_max), np.log1p(-outlier) + gaussian_logpdf(z, mu, sigma))
+
+
+def valid_reading(depth_m, params: ModelParams):
+    return (depth_m > 0) & (depth_m <= params.z_max)
+
+
+def object_sigma(mu, params: ModelParams):
+    return np.sqrt(params.sigma_object ** 2 + params.sensor_sigma(mu) ** 2)
+
+
+def floor_background(geom: Geometry, params: ModelParams) -> Background:
+    """Background without background frames: the floor plane z = 0 where the ray meets it."""
+    dz = geom.rays[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(dz < -1e-12, -geom.centre[2] / dz, np.inf)
+    floor = (t > 0) & (t <= params.z_max)
+    mu = np.where(floor, t, 0.0)
+    return Background(
+        mu=mu,
+        sigma=np.where(floor, params.sensor_sigma(mu), 1.0),
+        missing=np.full(mu.shape, params.missing_prob),
+        outlier=np.where(floor, params.outlier_prob, 1.0),
+    )
+
+
+def background_from_frames(frames_m: np.ndarray, params: ModelParams) -> Background:
+    """Per-pixel background from (N, H, W) frames in metres (0 = no reading).
+
+    pi_inf = share of frames with no reading (clipped), mu = median of readings,
+    sigma = 1.4826 * MAD floored by the sensor noise, pi_out = outlier_prob.
+    Pixels with no reading in any frame get a broad (uniform) distribution.
+    """
+    frames = np.asarray(frames_m, dtype=np.float64)
+    ok = valid_reading(frames, params)
+    n_ok = ok.sum(axis=0)
+    data = np.where(ok, frames, np.nan)
+    with np.errstate(all="ignore"):
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mu = np.nanmedian(data, axis=0)
+            mad = np.nanmedian(np.abs(data - mu[None]), axis=0)
+    seen = n_ok > 0
+    mu = np.where(seen, mu, 0.0)
+    sigma = np.where(seen, np.maximum(1.4826 * np.nan_to_num(mad), params.sensor_sigma(mu)), 1.0)
+    c = params.missing_clip
+    missing = np.clip(1.0 - n_ok / frames.shape[0], c, 1.0 - c)
+    return Background(mu=mu, sigma=sigma, missing=missing,
+                      outlier=np.where(seen, params.outlier_prob, 1.0))
+
+
+def background_delta(depth_m, bg: Background, params: ModelParams):
+    """Delta_bg,i for every pixel (0 where there is no reading: such pixels are in no mask)."""
+    z = np.asarray(depth_m, dtype=np.float64)
+    ok = valid_reading(z, params)
+    d = log_theta(np.where(ok, z, 1.0), bg.mu, bg.sigma, bg.missing, bg.outlier, params.z_max)
+    return np.where(ok, d, 0.0)
+
+
+def mask_entries(depth_m, geom: Geometry, params: ModelParams):
+    """All (pixel, location) pairs with i in M_k (eq. 12, corrected sign).
+
+    Returns:
+        pixel (int64 flat index), loc (int64), mu (float32 object depth), delta (float32 Delta_ki),
+        sorted by pixel, then mu (near to far), then location id.
+    """
+    z_img = np.asarray(depth_m, dtype=np.float64)
+    w = z_img.shape[1]
+    out = []
+    for k in range(len(geom.rect)):
+        u0, v0, u1, v1 = (int(x) for x in geom.rect[k])
+        if u1 < u0 or v1 < v0:
+            continue
+        z = z_img[v0:v1 + 1, u0:u1 + 1]
+        denom = geom.rays[v0:v1 + 1, u0:u1 + 1] @ geom.normal[k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mu = np.where(denom < -1e-12, geom.plane[k] / denom, -1.0)
+        s = object_sigma(mu, params)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inlier = np.log1p(-params.outlier_prob) + gaussian_logpdf(z, mu, s)
+        outlier = np.log(params.outlier_prob) - np.log(params.z_max)
+        m = valid_reading(z, params) & (mu > 0) & (inlier > outlier)
+        vv, uu = np.nonzero(m)
+        delta = np.log1p(-params.missing_prob) + np.logaddexp(outlier, inlier[m])
+        out.append(((vv + v0) * w + (uu + u0), np.full(len(vv), k), mu[m], delta))
+    if not out:
+        e = np.zeros(0, np.int64)
+        return e, e, np.zeros(0, np.float32), np.zeros(0, np.float32)
+    pixel, loc, mu, delta = (np.concatenate(c) for c in zip(*out))
+    mu32, delta32 = mu.astype(np.float32), delta.astype(np.float32)
+    order = np.lexsort((loc, mu32, pixel))
+    return pixel[order].astype(np.int64), loc[order].astype(np.int64), mu32[order], delta32[order]
+
+
+def sigmoid(x):
+    x = np.asarray(x, dtype=np.float64)
+    e = np.exp(-np.abs(x))
+    return np.where(x >= 0, 1.0 / (1.0 + e), e / (1.0 + e))
+
+
+def _padded_lists(pixel, loc, delta):
+    """Per-pixel lists as (P_active, L) arrays padded with a transparent entry (rho = 0)."""
+    pix, start, count = np.unique(pixel, return_index=True, return_counts=True)
+    width = int(count.max()) if len(count) else 0
+    slot = np.arange(len(pixel)) - np.repeat(start, count)
+    row = np.repeat(np.arange(len(pix)), count)
+    valid = np.zeros((len(pix), width), bool)
+    valid[row, slot] = True
+    L = np.zeros((len(pix), width), np.int64)
+    D = np.zeros((len(pix), width))
+    L[row, slot] = loc
+    D[row, slot] = delta
+    return pix, valid, L, D
+
+
+def front_transparency(r):
+    """T_j = prod_{m<j} (1 - r_m) along axis 1."""
+    t = np.ones_like(r)
+    t[:, 1:] = np.cumprod(1.0 - r[:, :-1], axis=1)
+    return t
+
+
+def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams):
+    """Mean-field inference of MODEL.md in exclusive form, with damping and soft threshold.
+
+    Returns:
+        dict with rho (K,), rho_star (K,), evidence_share e_k (K,), iterations, entries.
+    """
+    K = len(geom.rect)
+    pixel, loc, _, delta = mask_entries(depth_m, geom, params)
+    d_bg = background_delta(depth_m, bg, params).ravel()
+    pix, valid, L, D = _padded_lists(pixel, loc, delta.astype(np.float64))
+    dbg = d_bg[pix]
+    logit_prior = np.log(params.prior) - np.log1p(-params.prior)
+    rho = np.full(K, params.prior)
+    iterations = 0
+    for it in range(params.max_iterations):
+        r = np.where(valid, rho[L], 0.0)
+        T = front_transparency(r)
+        B = np.empty_like(D)
+        b = dbg.copy()
+        for j in range(D.shape[1] - 1, -1, -1):
+            B[:, j] = b
+            b = r[:, j] * D[:, j] + (1.0 - r[:, j]) * b
+        contrib = np.where(valid, T * (D - B), 0.0)
+        evidence = np.bincount(L[valid], weights=contrib[valid], minlength=K)
+        rho_new = sigmoid(logit_prior + evidence)
+        diff = float(np.max(np.abs(rho_new - rho))) if K else 0.0
+        rho = (1.0 - params.damping) * rho + params.damping * rho_new
+        iterations = it + 1
+        if (it + 1) % params.check_every == 0 and diff < params.tolerance:
+            break
+    r = np.where(valid, rho[L], 0.0)
+    T = front_transparency(r)
+    tsum = np.bincount(L[valid], weights=T[valid], minlength=K)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(geom.area > 0, tsum / geom.area, 0.0)
+    rho_star = np.where(geom.area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
+    return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
+                entries=len(pixel))

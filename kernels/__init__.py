@@ -1,0 +1,20 @@
+"""Warp kernels of DPOM, one file per step (installed as `dpom_warp.kernels`).
+
+- `pixel_model`: the pixel distributions of eq. 11 as `@wp.func`s and the parameter structs.
+- `masks`: masks M_k and Delta_ki (eq. 12), counted then filled into per-pixel lists.
+- `lists`: depth sort of each pixel's list, location id breaking ties.
+- `mean_field`: the exclusive-form mean-field evidence pass, damped update, soft threshold.
+- `background`: background distributions from background frames or from the floor plane.
+"""
+
+from .background import background_delta, background_from_frames, floor_background
+from .lists import sort_pixel_lists
+from .masks import mask_entries
+from .mean_field import evidence_pass, soft_threshold, transparency_pass, update_rho
+from .pixel_model import GeometryArrays, PixelModel
+
+__all__ = [
+    "GeometryArrays", "PixelModel", "background_delta", "background_from_frames",
+    "evidence_pass", "floor_background", "mask_entries", "soft_threshold", "sort_pixel_lists",
+    "transparency_pass", "update_rho",
+]

@@ -1,0 +1,111 @@
+"""Background pixel distributions theta_bg,i (MODEL.md) and their Delta_bg,i.
+
+Parameters per pixel live in a (H*W, 4) float64 array: mu, sigma, pi_inf, pi_out
+(pi_out = 1 is a broad, uniform distribution over the sensor range).
+"""
+
+import warp as wp
+
+from .pixel_model import PixelModel, f64, gaussian_logpdf, is_reading, logaddexp, sensor_sigma
+
+
+@wp.func
+def log_theta(pm: PixelModel, z: wp.float64, mu: wp.float64, sigma: wp.float64,
+              missing: wp.float64, outlier: wp.float64) -> wp.float64:
+    gauss = wp.log(f64(1.0) - outlier) + gaussian_logpdf(z, mu, sigma)
+    return wp.log(f64(1.0) - missing) + logaddexp(wp.log(outlier) - wp.log(pm.z_max), gauss)
+
+
+@wp.kernel(enable_backward=False)
+def background_delta(
+    depth: wp.array2d(dtype=wp.float32),
+    pm: PixelModel,
+    bg: wp.array2d(dtype=wp.float64),
+    delta_bg: wp.array(dtype=wp.float64),
+):
+    v, u = wp.tid()
+    p = v * depth.shape[1] + u
+    z = f64(depth[v, u])
+    if is_reading(pm, z):
+        delta_bg[p] = log_theta(pm, z, bg[p, 0], bg[p, 1], bg[p, 2], bg[p, 3])
+    else:
+        delta_bg[p] = f64(0.0)
+
+
+@wp.kernel(enable_backward=False)
+def floor_background(
+    rays: wp.array2d(dtype=wp.vec3d),
+    camera_height: wp.float64,
+    pm: PixelModel,
+    bg: wp.array2d(dtype=wp.float64),
+):
+    """Floor-only background: the ray's hit on z = 0 within range, else broad."""
+    v, u = wp.tid()
+    p = v * rays.shape[1] + u
+    dz = rays[v, u][2]
+    t = f64(-1.0)
+    if dz < f64(-1.0e-12):
+        t = -camera_height / dz
+    if t > f64(0.0) and t <= pm.z_max:
+        bg[p, 0] = t
+        bg[p, 1] = sensor_sigma(pm, t)
+        bg[p, 3] = pm.outlier_prob
+    else:
+        bg[p, 0] = f64(0.0)
+        bg[p, 1] = f64(1.0)
+        bg[p, 3] = f64(1.0)
+    bg[p, 2] = pm.missing_prob
+
+
+@wp.func
+def sort_row(a: wp.array2d(dtype=wp.float64), p: int, n: int):
+    for i in range(1, n):
+        x = a[p, i]
+        j = i - 1
+        while j >= 0 and a[p, j] > x:
+            a[p, j + 1] = a[p, j]
+            j -= 1
+        a[p, j + 1] = x
+
+
+@wp.func
+def sorted_median(a: wp.array2d(dtype=wp.float64), p: int, n: int) -> wp.float64:
+    h = n / 2
+    if n % 2 == 1:
+        return a[p, h]
+    return f64(0.5) * (a[p, h - 1] + a[p, h])
+
+
+@wp.kernel(enable_backward=False)
+def background_from_frames(
+    frames: wp.array3d(dtype=wp.float32),
+    pm: PixelModel,
+    scratch: wp.array2d(dtype=wp.float64),
+    bg: wp.array2d(dtype=wp.float64),
+):
+    """mu = median of readings, sigma = max(1.4826 MAD, sensor noise), pi_inf = missing share."""
+    v, u = wp.tid()
+    n_frames = frames.shape[0]
+    p = v * frames.shape[2] + u
+    n = int(0)
+    for f in range(n_frames):
+        z = f64(frames[f, v, u])
+        if is_reading(pm, z):
+            scratch[p, n] = z
+            n += 1
+    missing = f64(1.0) - f64(n) / f64(n_frames)
+    bg[p, 2] = wp.clamp(missing, pm.missing_clip, f64(1.0) - pm.missing_clip)
+    if n == 0:
+        bg[p, 0] = f64(0.0)
+        bg[p, 1] = f64(1.0)
+        bg[p, 3] = f64(1.0)
+        return
+    sort_row(scratch, p, n)
+    mu = sorted_median(scratch, p, n)
+    for i in range(n):
+        scratch[p, i] = wp.abs(scratch[p, i] - mu)
+    sort_row(scratch, p, n)
+    mad = sorted_median(scratch, p, n)
+    bg[p, 0] = mu
+    bg[p, 1] = wp.max(f64(1.4826) * mad, sensor_sigma(pm, mu))
+    bg[p, 3] = pm.outlier_prob

@@ -1,0 +1,105 @@
+"""Mean-field update of MODEL.md in exclusive form, the damped rho update and eq. 13.
+
+For pixel i with depth-sorted list k_1..k_n, r_j = rho_{k_j}, D_j = Delta_{k_j,i}:
+T_j = prod_{m<j} (1 - r_m);  B_n = Delta_bg,i,  B_j = r_{j+1} D_{j+1} + (1 - r_{j+1}) B_{j+1};
+pixel i adds T_j (D_j - B_j) to the evidence of k_j (float64 accumulators).
+"""
+
+import warp as wp
+
+from .pixel_model import f64
+
+
+@wp.func
+def sigmoid(x: wp.float64) -> wp.float64:
+    if x >= f64(0.0):
+        return f64(1.0) / (f64(1.0) + wp.exp(-x))
+    e = wp.exp(x)
+    return e / (f64(1.0) + e)
+
+
+@wp.kernel(enable_backward=False)
+def evidence_pass(
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    entry_loc: wp.array(dtype=wp.int32),
+    entry_delta: wp.array(dtype=wp.float32),
+    delta_bg: wp.array(dtype=wp.float64),
+    rho: wp.array(dtype=wp.float64),
+    behind: wp.array(dtype=wp.float64),
+    evidence: wp.array(dtype=wp.float64),
+):
+    p = wp.tid()
+    n = counts[p]
+    if n == 0:
+        return
+    start = offsets[p]
+    # back to front: B_j, the expected log-likelihood of what lies behind entry j
+    b = delta_bg[p]
+    for jj in range(n):
+        j = start + n - 1 - jj
+        behind[j] = b
+        r = rho[entry_loc[j]]
+        b = r * f64(entry_delta[j]) + (f64(1.0) - r) * b
+    # front to back: transparency T_j and the evidence T_j (D_j - B_j)
+    t = f64(1.0)
+    for j in range(start, start + n):
+        k = entry_loc[j]
+        wp.atomic_add(evidence, k, t * (f64(entry_delta[j]) - behind[j]))
+        t = t * (f64(1.0) - rho[k])
+
+
+@wp.kernel(enable_backward=False)
+def update_rho(
+    logit_prior: wp.float64,
+    damping: wp.float64,
+    iteration: int,
+    evidence: wp.array(dtype=wp.float64),
+    rho: wp.array(dtype=wp.float64),
+    max_change: wp.array(dtype=wp.float64),
+):
+    """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence); clears the evidence."""
+    k = wp.tid()
+    rho_new = sigmoid(logit_prior + evidence[k])
+    wp.atomic_max(max_change, iteration, wp.abs(rho_new - rho[k]))
+    rho[k] = (f64(1.0) - damping) * rho[k] + damping * rho_new
+    evidence[k] = f64(0.0)
+
+
+@wp.kernel(enable_backward=False)
+def transparency_pass(
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    entry_loc: wp.array(dtype=wp.int32),
+    rho: wp.array(dtype=wp.float64),
+    visible: wp.array(dtype=wp.float64),
+):
+    """visible[k] = sum over i in M_k of T_{k,i}: the unhidden, supported part of S_k."""
+    p = wp.tid()
+    start = offsets[p]
+    t = f64(1.0)
+    for j in range(start, start + counts[p]):
+        k = entry_loc[j]
+        wp.atomic_add(visible, k, t)
+        t = t * (f64(1.0) - rho[k])
+
+
+@wp.kernel(enable_backward=False)
+def soft_threshold(
+    alpha: wp.float64,
+    beta: wp.float64,
+    area: wp.array(dtype=wp.float64),
+    visible: wp.array(dtype=wp.float64),
+    rho: wp.array(dtype=wp.float64),
+    share: wp.array(dtype=wp.float64),
+    rho_star: wp.array(dtype=wp.float64),
+):
+    """Eq. 13 with the corrected sign: rho* = sigmoid(alpha e + beta) rho, e = visible / |S_k|."""
+    k = wp.tid()
+    if area[k] > f64(0.0):
+        e = visible[k] / area[k]
+        share[k] = e
+        rho_star[k] = sigmoid(alpha * e + beta) * rho[k]
+    else:
+        share[k] = f64(0.0)
+        rho_star[k] = f64(0.0)
