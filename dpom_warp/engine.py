@@ -13,7 +13,7 @@ from . import kernels as K
 from .geometry import Geometry
 from .model import Background, ModelParams
 
-wp.config.quiet = True
+wp.config.log_level = wp.LOG_WARNING
 
 
 def resolve_device(name: str = "auto") -> str:

@@ -1,0 +1,365 @@
+"""Run configuration: YAML validated once, at the edge, into typed objects.
+
+Every error is one line naming the key, what was expected and what was found.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .geometry import Camera, Grid, ObjectBox, pose_from_angles
+from .model import ModelParams
+from .synthetic import SceneSpec
+
+
+class ConfigError(ValueError):
+    """Invalid configuration; str(e) is one line naming the key."""
+
+
+def _fmt(v):
+    return repr(v) if not isinstance(v, (dict, list)) else type(v).__name__
+
+
+class _Section:
+    """Reads one mapping of the config, remembering the keys used so unknown ones are errors."""
+
+    def __init__(self, raw, path: str):
+        if raw is None:
+            raw = {}
+        if not isinstance(raw, dict):
+            raise ConfigError(f"{path or 'config'}: expected a mapping, found {_fmt(raw)}")
+        self.raw, self.path, self.used = raw, path, set()
+
+    def key(self, name):
+        return f"{self.path}.{name}" if self.path else name
+
+    def get(self, name, default=None, required=False):
+        self.used.add(name)
+        v = self.raw.get(name)
+        if v is None:
+            if required:
+                raise ConfigError(f"{self.key(name)}: required key is missing")
+            return default
+        return v
+
+    def section(self, name) -> "_Section":
+        return _Section(self.get(name), self.key(name))
+
+    def number(self, name, default=None, *, lo=None, hi=None, lo_open=False, hi_open=False,
+               integer=False, required=False):
+        v = self.get(name, default, required)
+        if v is None:
+            return None
+        ok_type = isinstance(v, int) if integer else isinstance(v, (int, float))
+        if isinstance(v, bool) or not ok_type:
+            kind = "an integer" if integer else "a number"
+            raise ConfigError(f"{self.key(name)}: expected {kind}, found {_fmt(v)}")
+        check_range(self.key(name), v, lo, hi, lo_open, hi_open)
+        return int(v) if integer else float(v)
+
+    def string(self, name, default=None, required=False, choices=None, nullable=False):
+        v = self.get(name, default, required)
+        if v is None and (nullable or default is None):
+            return None
+        if not isinstance(v, str):
+            raise ConfigError(f"{self.key(name)}: expected a string, found {_fmt(v)}")
+        if choices and v not in choices:
+            raise ConfigError(f"{self.key(name)}: expected one of {', '.join(choices)}, found {v!r}")
+        return v
+
+    def boolean(self, name, default):
+        v = self.get(name, default)
+        if not isinstance(v, bool):
+            raise ConfigError(f"{self.key(name)}: expected true or false, found {_fmt(v)}")
+        return v
+
+    def numbers(self, name, n, default=None, required=False):
+        v = self.get(name, default, required)
+        if v is None:
+            return None
+        if (not isinstance(v, (list, tuple)) or len(v) != n
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+            raise ConfigError(f"{self.key(name)}: expected a list of {n} numbers, found {_fmt(v)}"
+                              + (f" of length {len(v)}" if isinstance(v, list) else ""))
+        return tuple(float(x) for x in v)
+
+    def done(self):
+        unknown = sorted(set(self.raw) - self.used)
+        if unknown:
+            raise ConfigError(f"{self.key(unknown[0])}: unknown key (expected one of "
+                              f"{', '.join(sorted(self.used))})")
+
+
+def check_range(key, v, lo=None, hi=None, lo_open=False, hi_open=False):
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise ConfigError(f"{key}: expected a value {'>' if lo_open else '>='} {lo}, found {v!r}")
+    if hi is not None and (v > hi or (hi_open and v == hi)):
+        raise ConfigError(f"{key}: expected a value {'<' if hi_open else '<='} {hi}, found {v!r}")
+
+
+@dataclass(frozen=True)
+class Detection:
+    threshold: float = 0.5
+    nms_radius: float = 0.4
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    ground_truth: str | None = None
+    match_distance: float = 0.5
+    hidden_visibility: float = 0.1
+
+
+@dataclass(frozen=True)
+class Inputs:
+    frames: str
+    background: str | None = None
+    depth_scale: float = 0.001
+
+
+@dataclass(frozen=True)
+class Output:
+    dir: str = "runs/out"
+    images: bool = True
+
+
+@dataclass(frozen=True)
+class EngineOptions:
+    entries_per_pixel: float = 8.0
+    max_entries: int | None = None
+
+
+@dataclass
+class RunConfig:
+    """A validated run configuration; `resolved` is the config with every default filled in."""
+
+    device: str
+    inputs: Inputs
+    camera: Camera
+    grid: Grid
+    obj: ObjectBox
+    model: ModelParams
+    detection: Detection
+    evaluation: Evaluation
+    output: Output
+    engine: EngineOptions
+    synthetic: SceneSpec | None
+    synthetic_cache: str | None
+    resolved: dict
+
+
+def _axis(sec: _Section, name, required=True):
+    v = sec.numbers(name, 3, required=required)
+    if v is None:
+        return None
+    lo, hi, step = v
+    if step <= 0:
+        raise ConfigError(f"{sec.key(name)}: expected a step > 0 in [min, max, step], found {step!r}")
+    if lo >= hi:
+        raise ConfigError(f"{sec.key(name)}: expected min < max in [min, max, step], found {lo!r} >= {hi!r}")
+    return v
+
+
+def _pose(sec: _Section):
+    if "T_world_from_camera" in sec.raw:
+        t = sec.get("T_world_from_camera")
+        a = np.asarray(t, dtype=object)
+        if a.shape != (4, 4) or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                         for x in a.ravel()):
+            raise ConfigError(f"{sec.key('T_world_from_camera')}: expected a 4x4 list of numbers, "
+                              f"found {_fmt(t)} of shape {a.shape}")
+        m = a.astype(np.float64)
+        r = m[:3, :3]
+        if (not np.allclose(r.T @ r, np.eye(3), atol=1e-3) or abs(np.linalg.det(r) - 1) > 1e-3
+                or not np.allclose(m[3], [0, 0, 0, 1])):
+            raise ConfigError(f"{sec.key('T_world_from_camera')}: expected a rigid transform "
+                              f"(orthonormal rotation, last row 0 0 0 1), found a matrix that is not")
+        sec.done()
+        return m, {"T_world_from_camera": m.tolist()}
+    h = sec.number("height", required=True, lo=0, lo_open=True)
+    pitch = sec.number("pitch_deg", 0.0, lo=-90, hi=90)
+    roll = sec.number("roll_deg", 0.0, lo=-180, hi=180)
+    yaw = sec.number("yaw_deg", 0.0, lo=-360, hi=360)
+    x, y = sec.number("x", 0.0), sec.number("y", 0.0)
+    sec.done()
+    m = pose_from_angles(h, pitch, roll, yaw, x, y)
+    return m, {"height": h, "pitch_deg": pitch, "roll_deg": roll, "yaw_deg": yaw, "x": x, "y": y}
+
+
+def parse_config(raw: dict[str, Any]) -> RunConfig:
+    """Validate a config mapping (as loaded from YAML) into a RunConfig."""
+    top = _Section(raw, "")
+    device = top.string("device", "auto")
+    if device not in ("auto", "cpu", "cuda") and not (device.startswith("cuda:") and device[5:].isdigit()):
+        raise ConfigError(f"device: expected auto, cpu, cuda or cuda:N, found {device!r}")
+
+    s = top.section("input")
+    inputs = Inputs(frames=s.string("frames", required=True),
+                    background=s.string("background", None, nullable=True),
+                    depth_scale=s.number("depth_scale", 0.001, lo=0, lo_open=True))
+    s.done()
+
+    s = top.section("camera")
+    width = s.number("width", required=True, integer=True, lo=1)
+    height = s.number("height", required=True, integer=True, lo=1)
+    i = s.section("intrinsics")
+    fx = i.number("fx", required=True, lo=0, lo_open=True)
+    fy = i.number("fy", required=True, lo=0, lo_open=True)
+    cx = i.number("cx", required=True, lo=0, hi=width)
+    cy = i.number("cy", required=True, lo=0, hi=height)
+    i.done()
+    ext = s.get("extrinsics", required=True)
+    if ext == "auto":
+        raise ConfigError("camera.extrinsics: 'auto' (ground-plane fitting) is not available yet; "
+                          "expected {T_world_from_camera: 4x4} or {height, pitch_deg, roll_deg}")
+    pose, pose_resolved = _pose(_Section(ext, "camera.extrinsics"))
+    s.done()
+    camera = Camera(width, height, fx, fy, cx, cy, pose)
+
+    s = top.section("grid")
+    mode = s.string("mode", "ground", choices=("ground",))
+    grid = Grid(x=_axis(s, "x"), y=_axis(s, "y"), mode=mode)
+    s.done()
+
+    s = top.section("object")
+    obj = ObjectBox(width=s.number("width", 0.5, lo=0, lo_open=True),
+                    height=s.number("height", 1.8, lo=0, lo_open=True),
+                    depth=s.number("depth", None, lo=0, lo_open=True))
+    s.done()
+    for axis, size in (("x", obj.width), ("y", obj.depth or obj.width)):
+        lo, hi, _ = getattr(grid, axis)
+        if size > hi - lo:
+            raise ConfigError(f"object.{'width' if axis == 'x' or obj.depth is None else 'depth'}: "
+                              f"expected at most the grid's {axis} extent {hi - lo:g} m, found {size:g}")
+
+    s = top.section("model")
+    d = ModelParams()
+    model = ModelParams(
+        prior=s.number("prior", d.prior, lo=0, hi=1, lo_open=True, hi_open=True),
+        sigma_object=s.number("sigma_object", d.sigma_object, lo=0, lo_open=True),
+        sensor_noise=s.numbers("sensor_noise", 2, d.sensor_noise),
+        outlier_prob=s.number("outlier_prob", d.outlier_prob, lo=0, hi=1, lo_open=True, hi_open=True),
+        missing_prob=s.number("missing_prob", d.missing_prob, lo=0, hi=1, hi_open=True),
+        z_max=s.number("z_max", d.z_max, lo=0, lo_open=True),
+        alpha=s.number("alpha", d.alpha),
+        beta=s.number("beta", d.beta),
+        damping=s.number("damping", d.damping, lo=0, hi=1, lo_open=True),
+        tolerance=s.number("tolerance", d.tolerance, lo=0, lo_open=True),
+        max_iterations=s.number("max_iterations", d.max_iterations, integer=True, lo=1),
+        check_every=s.number("check_every", d.check_every, integer=True, lo=1),
+        missing_clip=s.number("missing_clip", d.missing_clip, lo=0, hi=0.5, lo_open=True, hi_open=True),
+    )
+    if min(model.sensor_noise) < 0:
+        raise ConfigError(f"model.sensor_noise: expected [a, b] >= 0, found {list(model.sensor_noise)}")
+    s.done()
+
+    s = top.section("detection")
+    detection = Detection(threshold=s.number("threshold", 0.5, lo=0, hi=1, lo_open=True, hi_open=True),
+                          nms_radius=s.number("nms_radius", 0.4, lo=0))
+    s.done()
+
+    s = top.section("evaluation")
+    evaluation = Evaluation(ground_truth=s.string("ground_truth", None, nullable=True),
+                            match_distance=s.number("match_distance", 0.5, lo=0, lo_open=True),
+                            hidden_visibility=s.number("hidden_visibility", 0.1, lo=0, hi=1))
+    s.done()
+
+    s = top.section("output")
+    output = Output(dir=s.string("dir", "runs/out"), images=s.boolean("images", True))
+    s.done()
+
+    s = top.section("engine")
+    engine = EngineOptions(entries_per_pixel=s.number("entries_per_pixel", 8.0, lo=0, lo_open=True),
+                           max_entries=s.number("max_entries", None, integer=True, lo=1))
+    s.done()
+
+    synthetic, cache = None, None
+    if top.get("synthetic") is not None:
+        s = top.section("synthetic")
+        d = SceneSpec()
+        cache = s.string("cache", required=True)
+        synthetic = SceneSpec(
+            seed=s.number("seed", d.seed, integer=True, lo=0),
+            frames=s.number("frames", d.frames, integer=True, lo=1),
+            background_frames=s.number("background_frames", d.background_frames, integer=True, lo=0),
+            people=s.number("people", d.people, integer=True, lo=0),
+            area=s.numbers("area", 4, d.area),
+            room=s.numbers("room", 5, d.room),
+            furniture=s.number("furniture", d.furniture, integer=True, lo=0),
+            step_m=s.number("step_m", d.step_m, lo=0),
+            noise=s.numbers("noise", 2, d.noise),
+            dropout=s.number("dropout", d.dropout, lo=0, hi=1),
+            edge_holes=s.number("edge_holes", d.edge_holes, lo=0, hi=1),
+            range_m=s.numbers("range_m", 2, d.range_m),
+        )
+        s.done()
+    top.done()
+
+    resolved = {
+        "device": device,
+        "input": vars_of(inputs),
+        "camera": {"width": width, "height": height,
+                   "intrinsics": {"fx": fx, "fy": fy, "cx": cx, "cy": cy},
+                   "extrinsics": pose_resolved},
+        "grid": {"mode": mode, "x": list(grid.x), "y": list(grid.y)},
+        "object": {"width": obj.width, "height": obj.height, "depth": obj.depth},
+        "model": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars_of(model).items()},
+        "detection": vars_of(detection), "evaluation": vars_of(evaluation),
+        "output": vars_of(output), "engine": vars_of(engine),
+    }
+    if synthetic is not None:
+        resolved["synthetic"] = {"cache": cache, **{k: (list(v) if isinstance(v, tuple) else v)
+                                                    for k, v in vars_of(synthetic).items()}}
+    return RunConfig(device, inputs, camera, grid, obj, model, detection, evaluation, output,
+                     engine, synthetic, cache, resolved)
+
+
+def vars_of(dc) -> dict:
+    return {f.name: getattr(dc, f.name) for f in fields(dc)}
+
+
+def apply_overrides(raw: dict, overrides: list[str]) -> dict:
+    """Apply `key.path=value` overrides (value parsed as YAML) to a copy of `raw`."""
+    out = copy.deepcopy(raw) if raw else {}
+    for item in overrides or []:
+        if "=" not in item:
+            raise ConfigError(f"--set {item}: expected key.path=value")
+        path, value = item.split("=", 1)
+        keys = path.strip().split(".")
+        node = out
+        for k in keys[:-1]:
+            if not isinstance(node.get(k), dict):
+                node[k] = {} if node.get(k) is None else node[k]
+                if not isinstance(node[k], dict):
+                    raise ConfigError(f"--set {path}: {k} is not a mapping")
+            node = node[k]
+        try:
+            node[keys[-1]] = yaml.safe_load(value)
+        except yaml.YAMLError as e:
+            raise ConfigError(f"--set {path}: value is not valid YAML ({e.problem})") from None
+    return out
+
+
+def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConfig:
+    """Read, override and validate a YAML run config."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such config file")
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise ConfigError(f"{path}: not valid YAML{where} ({getattr(e, 'problem', e)})") from None
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{path}: expected a YAML mapping at the top, found {_fmt(raw)}")
+    try:
+        return parse_config(apply_overrides(raw, overrides or []))
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}") from None

@@ -1,0 +1,99 @@
+"""Depth frames in and results out. Every output file is written atomically
+(temporary file in the same folder, then rename), so a crash never leaves half a file."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+
+class InputError(ValueError):
+    """Bad input file or value; the message is one line naming the file."""
+
+
+@contextmanager
+def atomic_path(path: str | Path, suffix: str = ""):
+    """Yield a temporary path beside `path`; on success it is renamed onto `path`."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_json_atomic(path, obj):
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(obj, indent=2) + "\n")
+
+
+def write_npy_atomic(path, array):
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.save(f, array)
+
+
+def write_text_atomic(path, text: str):
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def write_depth_png(path, depth_m: np.ndarray, depth_scale: float = 0.001):
+    """Save depth in metres as a 16-bit PNG in units of `depth_scale` (0 = no reading)."""
+    units = np.clip(np.round(np.asarray(depth_m) / depth_scale), 0, 65535).astype(np.uint16)
+    with atomic_path(path) as tmp:
+        Image.fromarray(units).save(tmp, format="PNG")
+
+
+def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Read a depth frame (16-bit PNG in depth units, or .npy) as float32 metres, 0 = no reading.
+
+    Args:
+        path: the file.
+        depth_scale: metres per unit of the file's values.
+        shape: expected (height, width), checked when given.
+
+    Raises:
+        InputError: missing or unreadable file, not a single-channel 16-bit depth image,
+            non-finite or negative values, wrong size.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    if path.suffix.lower() == ".npy":
+        try:
+            raw = np.load(path, allow_pickle=False)
+        except Exception as e:  # noqa: BLE001 - numpy raises many kinds
+            raise InputError(f"{path}: not a readable .npy file ({e})") from None
+        if raw.ndim != 2 or not np.issubdtype(raw.dtype, np.number):
+            raise InputError(f"{path}: expected a 2-D numeric depth array, found shape {raw.shape} "
+                             f"dtype {raw.dtype}")
+        if not np.all(np.isfinite(raw)):
+            raise InputError(f"{path}: depth has NaN or infinite values")
+        if np.any(raw < 0):
+            raise InputError(f"{path}: depth has negative values")
+    else:
+        try:
+            with Image.open(path) as im:
+                im.load()
+                mode = im.mode
+                raw = np.asarray(im)
+        except Exception as e:  # noqa: BLE001 - PIL raises many kinds
+            raise InputError(f"{path}: not a readable image ({type(e).__name__}: {e})") from None
+        if raw.ndim != 2 or raw.dtype not in (np.uint16, np.int32, np.uint32):
+            raise InputError(f"{path}: expected a single-channel 16-bit depth PNG, found mode {mode}")
+    depth = raw.astype(np.float64) * depth_scale
+    if shape is not None and depth.shape != tuple(shape):
+        raise InputError(f"{path}: expected {shape[1]}x{shape[0]} pixels (camera.width x "
+                         f"camera.height), found {depth.shape[1]}x{depth.shape[0]}")
+    return depth.astype(np.float32)

@@ -1,0 +1,304 @@
+"""Synthetic depth sequences: people (or other meshes) in a furnished room, rendered with
+Open3D's RaycastingScene from a pinhole camera, with sensor-like noise, and ground truth.
+
+Everything is seeded: the same spec and camera give the same frames, bit for bit.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+
+from .geometry import Camera
+from .io import write_depth_png, write_json_atomic
+
+GENERATOR_VERSION = 1
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """What to generate.
+
+    Attributes:
+        seed: random seed of the whole sequence.
+        frames: number of frames with people.
+        background_frames: number of frames of the empty room.
+        people: number of people walking (fixed for the sequence).
+        area: (x_min, x_max, y_min, y_max) where people walk, world metres.
+        room: (x_min, x_max, y_min, y_max, height) of the room's walls.
+        furniture: number of furniture pieces placed in the room.
+        step_m: distance a person walks between frames.
+        noise: (a, b) of the depth noise sigma(z) = a + b z^2, metres.
+        dropout: share of pixels with no reading, at random.
+        edge_holes: probability that a pixel at a depth edge has no reading.
+        range_m: (near, far) sensor range; outside it there is no reading.
+    """
+
+    seed: int = 0
+    frames: int = 20
+    background_frames: int = 10
+    people: int = 5
+    area: tuple[float, float, float, float] = (-2.7, 2.7, 1.5, 6.7)
+    room: tuple[float, float, float, float, float] = (-3.6, 3.6, -0.5, 8.0, 3.0)
+    furniture: int = 4
+    step_m: float = 0.3
+    noise: tuple[float, float] = (0.002, 0.0015)
+    dropout: float = 0.01
+    edge_holes: float = 0.5
+    range_m: tuple[float, float] = (0.5, 8.0)
+
+
+def _cylinder(radius, length, p0, p1=None, resolution=12):
+    """Cylinder from point p0 downwards by `length` (or from p0 to p1)."""
+    p0 = np.asarray(p0, float)
+    p1 = p0 - np.array([0, 0, length]) if p1 is None else np.asarray(p1, float)
+    axis = p1 - p0
+    n = np.linalg.norm(axis)
+    m = o3d.geometry.TriangleMesh.create_cylinder(radius=radius, height=n, resolution=resolution)
+    z = axis / n
+    a = np.cross([0.0, 0.0, 1.0], z)
+    s, c = np.linalg.norm(a), z[2]
+    if s > 1e-9:
+        k = a / s
+        kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        r = np.eye(3) + s * kx + (1 - c) * kx @ kx
+    else:
+        r = np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    m.rotate(r, center=(0, 0, 0))
+    m.translate((p0 + p1) / 2)
+    return m
+
+
+def _box(size, centre):
+    m = o3d.geometry.TriangleMesh.create_box(*size)
+    m.translate(np.asarray(centre, float) - np.asarray(size, float) / 2)
+    return m
+
+
+def person_mesh(height: float, heading: float, phase: float, build: float = 1.0):
+    """A human-like figure standing at the origin: legs, torso, arms, neck and head.
+
+    Args:
+        height: overall height, metres.
+        heading: walking direction, radians from world +x.
+        phase: gait phase, radians (legs and arms swing with sin(phase)).
+        build: width scale of torso and shoulders.
+    """
+    h = height
+    swing = 0.3 * math.sin(phase)
+    hip_z, leg_len = 0.49 * h, 0.49 * h
+    parts = []
+    for side, sgn in ((-1, 1), (1, -1)):
+        hip = np.array([side * 0.09 * build, 0.0, hip_z])
+        a = sgn * swing
+        foot = hip + leg_len * np.array([0.0, math.sin(a), -math.cos(a)])
+        parts.append(_cylinder(0.065, 0, hip, foot))
+    torso = o3d.geometry.TriangleMesh.create_cylinder(radius=1.0, height=1.0, resolution=20)
+    v = np.asarray(torso.vertices)
+    v *= np.array([0.19 * build, 0.12, 0.33 * h])
+    torso.vertices = o3d.utility.Vector3dVector(v + np.array([0, 0, hip_z + 0.16 * h]))
+    parts.append(torso)
+    shoulder_z = hip_z + 0.31 * h
+    for side, sgn in ((-1, -1), (1, 1)):
+        sh = np.array([side * 0.23 * build, 0.0, shoulder_z])
+        a = sgn * swing * 0.8
+        hand = sh + 0.36 * h * np.array([side * 0.05, math.sin(a), -math.cos(a)])
+        parts.append(_cylinder(0.045, 0, sh, hand))
+    r_head = 0.063 * h
+    parts.append(_cylinder(0.05, 0, np.array([0, 0, h - 2 * r_head + 0.02]),
+                           np.array([0, 0, shoulder_z])))
+    head = o3d.geometry.TriangleMesh.create_sphere(radius=r_head, resolution=10)
+    head.translate((0, 0.01, h - r_head))
+    parts.append(head)
+    mesh = parts[0]
+    for p in parts[1:]:
+        mesh += p
+    rot = o3d.geometry.get_rotation_matrix_from_xyz((0, 0, heading - math.pi / 2))
+    mesh.rotate(rot, center=(0, 0, 0))
+    return mesh
+
+
+def room_meshes(spec: SceneSpec, rng: np.random.Generator):
+    """Floor, walls and furniture; returns (meshes, footprints (x0, x1, y0, y1))."""
+    x0, x1, y0, y1, hgt = spec.room
+    t = 0.1
+    meshes = [
+        _box((x1 - x0 + 2, y1 - y0 + 2, t), ((x0 + x1) / 2, (y0 + y1) / 2, -t / 2)),  # floor
+        _box((t, y1 - y0, hgt), (x0 - t / 2, (y0 + y1) / 2, hgt / 2)),
+        _box((t, y1 - y0, hgt), (x1 + t / 2, (y0 + y1) / 2, hgt / 2)),
+        _box((x1 - x0, t, hgt), ((x0 + x1) / 2, y1 + t / 2, hgt / 2)),
+        _box((x1 - x0, t, hgt), ((x0 + x1) / 2, y0 - t / 2, hgt / 2)),
+    ]
+    footprints = []
+    for i in range(spec.furniture):
+        kind = ("table", "cabinet", "shelf")[i % 3]
+        for _ in range(100):
+            if kind == "table":
+                w, d, hh = rng.uniform(1.0, 1.6), rng.uniform(0.6, 0.9), 0.75
+            elif kind == "cabinet":
+                w, d, hh = rng.uniform(0.6, 1.2), rng.uniform(0.4, 0.6), rng.uniform(0.9, 1.4)
+            else:
+                w, d, hh = rng.uniform(0.8, 1.5), 0.35, rng.uniform(1.6, 2.0)
+            # against a side or the back wall
+            wall = rng.integers(0, 3)
+            if wall == 0:
+                cx, cy, w, d = x0 + d / 2 + 0.02, rng.uniform(y0 + 2, y1 - 1), d, w
+            elif wall == 1:
+                cx, cy, w, d = x1 - d / 2 - 0.02, rng.uniform(y0 + 2, y1 - 1), d, w
+            else:
+                cx, cy = rng.uniform(x0 + 1, x1 - 1), y1 - d / 2 - 0.02
+            fp = (cx - w / 2, cx + w / 2, cy - d / 2, cy + d / 2)
+            if all(fp[1] < f[0] - 0.3 or fp[0] > f[1] + 0.3 or fp[3] < f[2] - 0.3 or fp[2] > f[3] + 0.3
+                   for f in footprints):
+                break
+        footprints.append(fp)
+        if kind == "table":
+            meshes.append(_box((w, d, 0.04), (cx, cy, hh - 0.02)))
+            for sx in (-1, 1):
+                for sy in (-1, 1):
+                    meshes.append(_box((0.05, 0.05, hh - 0.04),
+                                       (cx + sx * (w / 2 - 0.05), cy + sy * (d / 2 - 0.05), (hh - 0.04) / 2)))
+        else:
+            meshes.append(_box((w, d, hh), (cx, cy, hh / 2)))
+    return meshes, footprints
+
+
+def _scene(meshes):
+    scene = o3d.t.geometry.RaycastingScene()
+    ids = [scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(m)) for m in meshes]
+    return scene, ids
+
+
+def render(scene, camera: Camera):
+    """z-depth (metres, inf = no hit) and geometry id of every pixel."""
+    d = camera.rays().reshape(-1, 3)
+    o = np.broadcast_to(camera.centre, d.shape)
+    rays = o3d.core.Tensor(np.concatenate([o, d], 1).astype(np.float32))
+    out = scene.cast_rays(rays)
+    t = out["t_hit"].numpy().reshape(camera.height, camera.width).astype(np.float64)
+    gid = out["geometry_ids"].numpy().reshape(camera.height, camera.width)
+    return t, gid
+
+
+def sensor_noise(depth, spec: SceneSpec, rng: np.random.Generator):
+    """Depth-dependent Gaussian noise, random dropouts, holes at depth edges, range limits."""
+    z = np.where(np.isfinite(depth), depth, 0.0)
+    a, b = spec.noise
+    noisy = z + rng.normal(size=z.shape) * (a + b * z ** 2)
+    jump = np.zeros(z.shape, bool)
+    dv = np.abs(np.diff(z, axis=0)) > 0.1
+    du = np.abs(np.diff(z, axis=1)) > 0.1
+    jump[1:] |= dv
+    jump[:-1] |= dv
+    jump[:, 1:] |= du
+    jump[:, :-1] |= du
+    lost = (jump & (rng.random(z.shape) < spec.edge_holes)) | (rng.random(z.shape) < spec.dropout)
+    lost |= (z < spec.range_m[0]) | (z > spec.range_m[1])
+    return np.where(lost, 0.0, noisy)
+
+
+def _in_view(camera: Camera, x, y, top):
+    u, v, z = camera.project(np.array([[x, y, 0.0], [x, y, top]]))
+    return bool(np.all(z > 0.3) and np.all((u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)))
+
+
+def _free(x, y, footprints, margin=0.45):
+    return all(not (f[0] - margin < x < f[1] + margin and f[2] - margin < y < f[3] + margin)
+               for f in footprints)
+
+
+def walk(spec: SceneSpec, camera: Camera, footprints, rng: np.random.Generator):
+    """People's (x, y, heading, phase) per frame: a random walk that keeps them in view,
+    off the furniture and 0.6 m apart. Returns list over frames of lists of dicts."""
+    ax0, ax1, ay0, ay1 = spec.area
+    heights = rng.uniform(1.55, 1.95, spec.people)
+    builds = rng.uniform(0.9, 1.15, spec.people)
+
+    def ok(x, y, others, i):
+        return (ax0 <= x <= ax1 and ay0 <= y <= ay1 and _free(x, y, footprints)
+                and _in_view(camera, x, y, heights[i])
+                and all(math.hypot(x - o[0], y - o[1]) > 0.6 for o in others))
+
+    pos = []
+    for i in range(spec.people):
+        for _ in range(10000):
+            x, y = rng.uniform(ax0, ax1), rng.uniform(ay0, ay1)
+            if ok(x, y, pos, i):
+                break
+        else:
+            raise RuntimeError("synthetic: could not place everyone in view; enlarge 'area'")
+        pos.append([x, y, rng.uniform(0, 2 * math.pi), rng.uniform(0, 2 * math.pi)])
+    frames = []
+    for _ in range(spec.frames):
+        frames.append([dict(x=p[0], y=p[1], heading=p[2], phase=p[3], height=float(heights[i]),
+                            build=float(builds[i])) for i, p in enumerate(pos)])
+        for i, p in enumerate(pos):
+            others = [q for j, q in enumerate(pos) if j != i]
+            for attempt in range(50):
+                hd = p[2] + rng.normal(0, 0.3) + (0 if attempt < 5 else rng.uniform(-math.pi, math.pi))
+                x, y = p[0] + spec.step_m * math.cos(hd), p[1] + spec.step_m * math.sin(hd)
+                if ok(x, y, others, i):
+                    p[:3] = [x, y, hd]
+                    break
+            p[3] += 1.3
+    return frames
+
+
+def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
+    """Render the sequence into `out_dir` (frames/, background/, ground_truth.json, scene.json).
+
+    The folder is reused when its scene.json matches spec, camera and generator version.
+
+    Returns:
+        The scene description written to scene.json.
+    """
+    out = Path(out_dir)
+    desc = {"version": GENERATOR_VERSION, "spec": asdict(spec),
+            "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx,
+                       "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
+                       "T_world_from_camera": np.asarray(camera.T_world_from_camera).tolist()}}
+    meta = out / "scene.json"
+    if meta.exists():
+        try:
+            if json.loads(meta.read_text()) == json.loads(json.dumps(desc)):
+                return desc
+        except json.JSONDecodeError:
+            pass
+    rng = np.random.default_rng(spec.seed)
+    room, footprints = room_meshes(spec, rng)
+    (out / "frames").mkdir(parents=True, exist_ok=True)
+    (out / "background").mkdir(parents=True, exist_ok=True)
+    static, _ = _scene(room)
+    t_static, _ = render(static, camera)
+    for f in range(spec.background_frames):
+        write_depth_png(out / "background" / f"{f:04d}.png", sensor_noise(t_static, spec, rng))
+    truth = []
+    for f, people in enumerate(walk(spec, camera, footprints, rng)):
+        meshes = [person_mesh(p["height"], p["heading"], p["phase"], p["build"]) for p in people]
+        for m, p in zip(meshes, people):
+            m.translate((p["x"], p["y"], 0.0))
+        scene, ids = _scene(room + meshes)
+        t, gid = render(scene, camera)
+        name = f"{f:04d}.png"
+        write_depth_png(out / "frames" / name, sensor_noise(t, spec, rng))
+        objects = []
+        for m, p, pid in zip(meshes, people, ids[len(room):]):
+            alone, _ = _scene([m])
+            ta, _ = render(alone, camera)
+            full = np.isfinite(ta)
+            if not full.any():
+                continue
+            vv, uu = np.nonzero(full)
+            objects.append({"x": round(p["x"], 4), "y": round(p["y"], 4), "z": 0.0,
+                            "height": round(p["height"], 3),
+                            "bbox": [int(uu.min()), int(vv.min()), int(uu.max()), int(vv.max())],
+                            "visibility": round(float((gid == pid).sum() / full.sum()), 4)})
+        truth.append({"frame": name, "objects": objects})
+    write_json_atomic(out / "ground_truth.json", truth)
+    write_json_atomic(meta, desc)
+    return desc

@@ -1,0 +1,24 @@
+import os
+
+import numpy as np
+import pytest
+import warp as wp
+
+wp.config.log_level = wp.LOG_ERROR
+wp.init()
+DEVICES = ["cpu"] + [str(d) for d in wp.get_cuda_devices()]
+
+
+@pytest.fixture(params=DEVICES)
+def device(request):
+    """Every test that takes `device` runs on the CPU and on each CUDA device present."""
+    return request.param
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)
+
+
+def pytest_report_header(config):
+    return f"warp devices: {', '.join(DEVICES)}; WARP_CACHE_PATH={os.environ.get('WARP_CACHE_PATH', 'default')}"

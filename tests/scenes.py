@@ -1,0 +1,37 @@
+"""Small random scenes for comparing the Warp path with the NumPy reference."""
+
+import numpy as np
+
+from dpom_warp import reference as ref
+from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
+from dpom_warp.model import ModelParams
+
+
+def random_scene(seed: int, width=48, height=40):
+    """A tilted camera over a small grid; depth = floor background with a few fronto-parallel
+    slabs standing on it (some hiding others), noise and dropouts; background frames too."""
+    rng = np.random.default_rng(seed)
+    cam = Camera(width, height, 0.8 * width, 0.8 * width, (width - 1) / 2, (height - 1) / 2,
+                 pose_from_angles(rng.uniform(1.5, 2.8), rng.uniform(10, 30), rng.uniform(-4, 4)))
+    grid = Grid(x=(-1.5, 1.5, 0.3), y=(1.5, 5.0, 0.3))
+    geom = build_geometry(cam, grid, ObjectBox(0.5, rng.uniform(1.6, 1.9)))
+    params = ModelParams(prior=rng.uniform(0.005, 0.05), sigma_object=rng.uniform(0.05, 0.2),
+                         damping=rng.uniform(0.1, 0.4), max_iterations=int(rng.integers(20, 60)),
+                         check_every=int(rng.integers(1, 6)), outlier_prob=rng.uniform(0.02, 0.2))
+    floor = ref.floor_background(geom, params).mu
+    depth = floor.copy()
+    # slabs: people-sized boxes drawn at the depth of their facing plane
+    for k in rng.choice(len(geom.rect), size=int(rng.integers(1, 5)), replace=False):
+        u0, v0, u1, v1 = geom.rect[k]
+        if u1 < u0:
+            continue
+        d = geom.rays[v0:v1 + 1, u0:u1 + 1] @ geom.normal[k]
+        mu = np.where(d < 0, geom.plane[k] / np.where(d < 0, d, -1), 0)
+        patch = depth[v0:v1 + 1, u0:u1 + 1]
+        front = (mu > 0) & ((patch == 0) | (mu < patch))
+        patch[front] = mu[front]
+    bg_frames = np.stack([floor + rng.normal(0, 0.01, floor.shape) * (floor > 0) for _ in range(7)])
+    bg_frames[rng.random(bg_frames.shape) < 0.1] = 0
+    depth = depth + rng.normal(0, 0.02, depth.shape) * (depth > 0)
+    depth[rng.random(depth.shape) < 0.05] = 0
+    return geom, params, depth.astype(np.float32), bg_frames.astype(np.float32)

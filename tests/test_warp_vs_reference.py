@@ -1,0 +1,84 @@
+"""The Warp kernels against the plain NumPy reference, on random small scenes, every device."""
+
+import numpy as np
+import pytest
+
+from dpom_warp import reference as ref
+from dpom_warp.engine import Engine
+
+from scenes import random_scene
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_rho_matches_reference(device, seed):
+    geom, params, depth, bg_frames = random_scene(seed)
+    engine = Engine(geom, params, device)
+    use_frames = seed % 2 == 0
+    if use_frames:
+        engine.set_background_frames(bg_frames)
+        bg = ref.background_from_frames(bg_frames, params)
+    else:
+        bg = ref.floor_background(geom, params)
+    want = ref.mean_field(depth, geom, bg, params)
+    got = engine.infer(depth)
+    assert want["entries"] > 100, "scene too easy: no mask entries"
+    assert got.entries == want["entries"]
+    assert got.iterations == want["iterations"]
+    np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.evidence_share, want["evidence_share"], rtol=0, atol=1e-9)
+    assert np.all((got.rho >= 0) & (got.rho <= 1)) and np.all(np.isfinite(got.rho))
+    assert got.rho.max() > 0.5, "no location became occupied: the comparison is not exercised"
+
+
+def test_sorted_lists_match_reference(device):
+    geom, params, depth, _ = random_scene(11)
+    engine = Engine(geom, params, device)
+    total = engine.build_lists(depth)
+    pixel, loc, mu, delta = ref.mask_entries(depth, geom, params)
+    assert total == len(pixel) > 0
+    counts = engine.counts.numpy()
+    offsets = engine.offsets.numpy()
+    np.testing.assert_array_equal(np.bincount(pixel, minlength=len(counts)), counts)
+    order = np.concatenate([np.arange(o, o + c) for o, c in zip(offsets, counts) if c])
+    np.testing.assert_array_equal(engine.entry_loc.numpy()[order], loc)
+    np.testing.assert_array_equal(engine.entry_mu.numpy()[order], mu)
+    np.testing.assert_allclose(engine.entry_delta.numpy()[order], delta, rtol=1e-6, atol=1e-6)
+
+
+def test_background_kernels_match_reference(device):
+    geom, params, depth, frames = random_scene(3)
+    frames[:, :5, :5] = 0  # never a reading: broad distribution
+    engine = Engine(geom, params, device)
+    want = ref.floor_background(geom, params)
+    got = engine.background()
+    for name in ("mu", "sigma", "missing", "outlier"):
+        np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=1e-12, atol=1e-12)
+    engine.set_background_frames(frames)
+    want = ref.background_from_frames(frames, params)
+    got = engine.background()
+    for name in ("mu", "sigma", "missing", "outlier"):
+        np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=1e-6, atol=1e-6,
+                                   err_msg=name)
+    assert np.all(got.outlier[:5, :5] == 1.0)
+    np.testing.assert_allclose(engine.delta_bg.numpy().size, depth.size)
+
+
+def test_list_capacity_grows_and_is_reported(device):
+    geom, params, depth, _ = random_scene(5)
+    engine = Engine(geom, params, device, entries_per_pixel=0.01)
+    small = engine.capacity
+    want = ref.mean_field(depth, geom, ref.floor_background(geom, params), params)
+    assert want["entries"] > small
+    got = engine.infer(depth)
+    assert engine.grown == [want["entries"]] and engine.capacity >= want["entries"]
+    np.testing.assert_allclose(got.rho, want["rho"], atol=1e-6)
+
+
+def test_list_overflow_is_refused_not_truncated(device):
+    from dpom_warp.engine import ListOverflow
+
+    geom, params, depth, _ = random_scene(5)
+    engine = Engine(geom, params, device, entries_per_pixel=0.01, max_entries=1500)
+    with pytest.raises(ListOverflow, match="mask entries"):
+        engine.infer(depth)
