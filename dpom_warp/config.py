@@ -6,6 +6,7 @@ Every error is one line naming the key, what was expected and what was found.
 from __future__ import annotations
 
 import copy
+import dataclasses
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -250,11 +251,18 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         alpha=s.number("alpha", d.alpha),
         beta=s.number("beta", d.beta),
         damping=s.number("damping", d.damping, lo=0, hi=1, lo_open=True),
+        damping_growth=s.number("damping_growth", d.damping_growth, lo=1),
+        damping_max=s.number("damping_max", None, lo=0, hi=1, lo_open=True),
         tolerance=s.number("tolerance", d.tolerance, lo=0, lo_open=True),
         max_iterations=s.number("max_iterations", d.max_iterations, integer=True, lo=1),
         check_every=s.number("check_every", d.check_every, integer=True, lo=1),
         missing_clip=s.number("missing_clip", d.missing_clip, lo=0, hi=0.5, lo_open=True, hi_open=True),
     )
+    if "damping_max" not in s.raw:  # default cap, never below the starting damping
+        model = dataclasses.replace(model, damping_max=max(d.damping_max, model.damping))
+    if model.damping_max < model.damping:
+        raise ConfigError(f"model.damping_max: expected at least model.damping "
+                          f"({model.damping}), found {model.damping_max}")
     if min(model.sensor_noise) < 0:
         raise ConfigError(f"model.sensor_noise: expected [a, b] >= 0, found {list(model.sensor_noise)}")
     s.done()

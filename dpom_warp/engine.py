@@ -135,6 +135,11 @@ class Engine:
             wp.launch(K.background_from_frames, dim=(self.height, self.width),
                       inputs=[f, self.pm, scratch, self.bg])
 
+    def set_background(self, bg: Background):
+        """Use a given per-pixel background distribution (arrays of shape (H, W))."""
+        b = np.stack([bg.mu, bg.sigma, bg.missing, bg.outlier], -1).reshape(self.n_pixels, 4)
+        self.bg.assign(np.ascontiguousarray(b, dtype=np.float64))
+
     def background(self) -> Background:
         b = self.bg.numpy().reshape(self.height, self.width, 4)
         return Background(mu=b[..., 0], sigma=b[..., 1], missing=b[..., 2], outlier=b[..., 3])
@@ -184,7 +189,7 @@ class Engine:
                       inputs=lists + [self.entry_delta, self.delta_bg, self.rho, self.behind,
                                       self.evidence])
             wp.launch(K.update_rho, dim=self.n_locations, device=dev,
-                      inputs=[logit_prior, p.damping, it, self.evidence, self.rho, self.max_change])
+                      inputs=[logit_prior, p.damping_at(it), it, self.evidence, self.rho, self.max_change])
             iterations = it + 1
             if (it + 1) % p.check_every == 0 and self.max_change[it:it + 1].numpy()[0] < p.tolerance:
                 break

@@ -19,7 +19,11 @@ class ModelParams:
         missing_prob: pi_inf of objects (and of the floor-only background).
         z_max: sensor range, metres; readings beyond it are treated as no reading.
         alpha, beta: soft threshold rho* = sigmoid(alpha e + beta) rho (eq. 13, corrected sign).
-        damping: lambda of the damped parallel update rho <- (1 - lambda) rho + lambda rho_new.
+        damping: lambda of the damped parallel update rho <- (1 - lambda) rho + lambda rho_new,
+            at the first iteration.
+        damping_growth: lambda is multiplied by this after every iteration (annealing: small
+            steps while neighbours compete, larger ones once the map has settled) ...
+        damping_max: ... up to this value (None: no growth beyond `damping`).
         tolerance: stop when max |rho_new - rho| falls below it.
         max_iterations: iteration cap.
         check_every: read the convergence test back to the host every this many iterations.
@@ -27,7 +31,7 @@ class ModelParams:
     """
 
     prior: float = 0.01
-    sigma_object: float = 0.15
+    sigma_object: float = 0.1
     sensor_noise: tuple[float, float] = (0.002, 0.0015)
     outlier_prob: float = 0.05
     missing_prob: float = 0.05
@@ -35,10 +39,17 @@ class ModelParams:
     alpha: float = 100.0
     beta: float = -8.0
     damping: float = 0.1
+    damping_growth: float = 1.03
+    damping_max: float | None = 0.4
     tolerance: float = 1e-4
     max_iterations: int = 100
     check_every: int = 5
     missing_clip: float = 0.01
+
+    def damping_at(self, iteration: int) -> float:
+        """lambda of iteration `iteration` (0-based)."""
+        cap = self.damping if self.damping_max is None else self.damping_max
+        return min(cap, self.damping * self.damping_growth ** iteration)
 
     def sensor_sigma(self, z):
         a, b = self.sensor_noise

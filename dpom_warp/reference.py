@@ -172,7 +172,8 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams):
         evidence = np.bincount(L[valid], weights=contrib[valid], minlength=K)
         rho_new = sigmoid(logit_prior + evidence)
         diff = float(np.max(np.abs(rho_new - rho))) if K else 0.0
-        rho = (1.0 - params.damping) * rho + params.damping * rho_new
+        lam = params.damping_at(it)
+        rho = (1.0 - lam) * rho + lam * rho_new
         iterations = it + 1
         if (it + 1) % params.check_every == 0 and diff < params.tolerance:
             break

@@ -1,0 +1,1 @@
+"""Benchmarks and robustness sweeps of dpom-warp (run from the repository root)."""

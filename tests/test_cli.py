@@ -1,0 +1,109 @@
+"""`dpom-warp run` end to end on a small rendered scene, and its errors."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from dpom_warp.cli import main
+
+
+def small_config(tmp_path, **changes):
+    cfg = yaml.safe_load(open("configs/demo_people.yaml"))
+    cache = tmp_path / "scene"
+    cfg["device"] = "cpu"
+    cfg["input"]["frames"] = f"{cache}/frames/*.png"
+    cfg["input"]["background"] = f"{cache}/background/*.png"
+    cfg["camera"].update(width=128, height=106,
+                         intrinsics={"fx": 91.25, "fy": 91.25, "cx": 63.5, "cy": 52.5})
+    cfg["grid"].update(x=[-2.5, 2.5, 0.2], y=[1.0, 6.5, 0.2])
+    cfg["evaluation"]["ground_truth"] = f"{cache}/ground_truth.json"
+    cfg["output"]["dir"] = str(tmp_path / "out")
+    cfg["synthetic"].update(cache=str(cache), frames=3, background_frames=4, people=3, seed=3)
+    for k, v in changes.items():
+        cfg[k] = v
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def test_run_writes_all_outputs(tmp_path, capsys):
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    out = tmp_path / "out"
+    printed = capsys.readouterr().out
+    assert "MODA" in printed
+    rows = list(csv.reader(open(out / "detections.csv")))
+    assert rows[0] == ["frame", "x", "y", "z", "rho", "u0", "v0", "u1", "v1"]
+    assert len(rows) > 1
+    for r in rows[1:]:
+        assert r[0].endswith(".png") and 0.5 <= float(r[4]) <= 1.0
+        u0, v0, u1, v1 = map(int, r[5:])
+        assert 0 <= u0 <= u1 < 128 and 0 <= v0 <= v1 < 106
+    frames = sorted(p.name for p in (tmp_path / "scene" / "frames").glob("*.png"))
+    assert len(frames) == 3
+    for name in frames:
+        stem = name[:-4]
+        m = np.load(out / "maps" / f"{stem}.npy")
+        assert m.shape == (28, 25) and m.dtype == np.float32
+        assert np.all((m >= 0) & (m <= 1))
+        assert (out / "images" / f"{stem}.png").stat().st_size > 10_000
+    summary = json.load(open(out / "summary.json"))
+    assert summary["config"]["grid"]["x"] == [-2.5, 2.5, 0.2]
+    assert summary["scores"]["n_gt"] == 9
+    assert summary["scores"]["moda"] > 0.5
+    assert summary["timings"]["median_infer_s"] > 0
+    assert not list(out.rglob(".*.tmp")) and not list(out.rglob(".*png"))  # no temporary files
+
+
+def test_floor_only_background_and_set_override(tmp_path):
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress", "--set", "input.background=null",
+                 "--set", "detection.threshold=0.6", "--output", str(tmp_path / "floor")]) == 0
+    summary = json.load(open(tmp_path / "floor" / "summary.json"))
+    assert summary["background"] == "floor plane only"
+    assert summary["config"]["detection"]["threshold"] == 0.6
+    assert summary["scores"]["tp"] > 0
+
+
+@pytest.mark.parametrize("override, message", [
+    ("grid.x=[1, 0, 0.1]", "grid.x: expected min < max"),
+    ("grid.y=[0, 5, 0]", "grid.y: expected a step > 0"),
+    ("model.damping=0", "model.damping: expected a value > 0"),
+    ("detection.threshold=1.5", "detection.threshold: expected a value < 1"),
+    ("model.dampng=0.2", "model.dampng: unknown key"),
+    ("camera.width=abc", "camera.width: expected an integer, found 'abc'"),
+    ("device=tpu", "device: expected auto, cpu, cuda or cuda:N, found 'tpu'"),
+    ("camera.width=640", "expected 640x106 pixels (camera.width x camera.height), found 128x106"),
+    ("object.width=9", "object.width: expected at most the grid's x extent 5 m, found 9"),
+    ("camera.extrinsics.T_world_from_camera=[[1,0],[0,1]]", "expected a 4x4 list of numbers"),
+])
+def test_bad_config_is_one_line_exit_2(tmp_path, capsys, override, message):
+    path = small_config(tmp_path)
+    if override.startswith("camera.extrinsics"):
+        cfg = yaml.safe_load(path.read_text())
+        cfg["camera"]["extrinsics"] = {"T_world_from_camera": [[1, 0], [0, 1]]}
+        path.write_text(yaml.safe_dump(cfg))
+        override = "device=cpu"
+    if override.startswith("camera.width=640"):
+        assert main(["run", str(path), "--no-progress"]) == 0  # render the frames first
+        override = "camera.width=640"
+        capsys.readouterr()
+        args = ["run", str(path), "--no-progress", "--set", override, "--set", "synthetic=null",
+                "--set", "camera.intrinsics.cx=319.5"]
+    else:
+        args = ["run", str(path), "--no-progress", "--set", override]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err
+    assert len(err.splitlines()) == 1 and err.startswith("dpom-warp: error: ")
+    assert "Traceback" not in err
+
+
+def test_missing_frames_names_the_key(tmp_path, capsys):
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress", "--set", "synthetic=null",
+                 "--set", f"input.frames={tmp_path}/nothing/*.png"]) == 2
+    assert "input.frames: no files match" in capsys.readouterr().err

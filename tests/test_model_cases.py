@@ -1,0 +1,125 @@
+"""Hand-computed cases of the model: one visible object, one object hiding another, an empty
+scene. Expected values come from the formulas of MODEL.md written out here, not from the code."""
+
+import math
+
+import numpy as np
+import pytest
+
+from dpom_warp import reference as ref
+from dpom_warp.engine import Engine
+from dpom_warp.geometry import Geometry
+from dpom_warp.model import Background, ModelParams
+
+H, W = 4, 6
+
+
+def toy_geometry(depths, rects):
+    """Camera at the origin looking along +z with every ray (0, 0, 1); location k is a plane
+    z = depths[k] facing the camera with silhouette rects[k]."""
+    rays = np.zeros((H, W, 3))
+    rays[..., 2] = 1.0
+    n = len(depths)
+    rect = np.array(rects, dtype=np.int32)
+    area = (rect[:, 2] - rect[:, 0] + 1) * (rect[:, 3] - rect[:, 1] + 1)
+    normal = np.tile([0.0, 0.0, -1.0], (n, 1))
+    locs = np.array([[0.0, 0.0, d] for d in depths])
+    return Geometry(rays=rays, centre=np.zeros(3), locations=locs, rect=rect, area=area,
+                    normal=normal, plane=-np.array(depths, dtype=float))
+
+
+def wall_background(z=5.0):
+    return Background(mu=np.full((H, W), z), sigma=np.full((H, W), 0.05),
+                      missing=np.full((H, W), 0.05), outlier=np.full((H, W), 0.05))
+
+
+def log_theta(z, mu, s, p: ModelParams, missing):
+    g = math.exp(-0.5 * ((z - mu) / s) ** 2) / (s * math.sqrt(2 * math.pi))
+    return math.log((1 - missing) * (p.outlier_prob / p.z_max + (1 - p.outlier_prob) * g))
+
+
+def sigmoid(x):
+    return 1 / (1 + math.exp(-x))
+
+
+def run_both(device, depth, geom, bg, params):
+    engine = Engine(geom, params, device)
+    engine.set_background(bg)
+    got = engine.infer(depth.astype(np.float32))
+    want = ref.mean_field(depth, geom, bg, params)
+    np.testing.assert_allclose(got.rho, want["rho"], atol=1e-6)
+    return got
+
+
+def test_single_visible_object(device):
+    params = ModelParams(prior=0.02, sigma_object=0.1, damping=0.2, damping_growth=1.0, tolerance=1e-4,
+                         max_iterations=200, check_every=1)
+    geom = toy_geometry([2.0], [(1, 1, 3, 2)])  # 3 x 2 pixels
+    depth = np.full((H, W), 5.0)
+    depth[1:3, 1:4] = 2.0
+    got = run_both(device, depth, geom, wall_background(), params)
+
+    s = math.hypot(0.1, params.sensor_sigma(2.0))
+    d_obj = log_theta(2.0, 2.0, s, params, params.missing_prob)
+    d_bg = log_theta(2.0, 5.0, 0.05, params, 0.05)
+    target = sigmoid(math.log(0.02 / 0.98) + 6 * (d_obj - d_bg))  # evidence does not depend on rho
+    # rho_t = target - (1 - lam)^t (target - prior); stop at the first t with
+    # |target - rho_{t-1}| = (1 - lam)^(t-1) |target - prior| < tol
+    t = next(t for t in range(1, 200) if 0.8 ** (t - 1) * abs(target - 0.02) < 1e-4)
+    assert got.iterations == t
+    assert got.rho[0] == pytest.approx(target - 0.8 ** t * (target - 0.02), abs=1e-9)
+    assert got.evidence_share[0] == pytest.approx(1.0)  # every silhouette pixel supports it
+    assert got.rho_star[0] == pytest.approx(sigmoid(100 * 1.0 - 8) * got.rho[0], abs=1e-9)
+    assert got.entries == 6
+
+
+def test_object_hiding_another_one_step(device):
+    """A at 2.0 m and B at 2.1 m share a silhouette; pixels read 2.0 m. One damped step."""
+    params = ModelParams(prior=0.05, sigma_object=0.15, damping=0.3, max_iterations=1)
+    geom = toy_geometry([2.0, 2.1], [(1, 1, 3, 2), (1, 1, 3, 2)])
+    depth = np.full((H, W), 5.0)
+    depth[1:3, 1:4] = 2.0
+    got = run_both(device, depth, geom, wall_background(), params)
+
+    sa = math.hypot(0.15, params.sensor_sigma(2.0))
+    sb = math.hypot(0.15, params.sensor_sigma(2.1))
+    da = log_theta(2.0, 2.0, sa, params, params.missing_prob)
+    db = log_theta(2.0, 2.1, sb, params, params.missing_prob)
+    dbg = log_theta(2.0, 5.0, 0.05, params, 0.05)
+    r = 0.05
+    ev_a = 6 * (da - (r * db + (1 - r) * dbg))  # A in front: T = 1, behind it B then bg
+    ev_b = 6 * (1 - r) * (db - dbg)  # B seen through A with transparency 1 - rho_A
+    lp = math.log(0.05 / 0.95)
+    assert got.rho[0] == pytest.approx(0.7 * r + 0.3 * sigmoid(lp + ev_a), abs=1e-9)
+    assert got.rho[1] == pytest.approx(0.7 * r + 0.3 * sigmoid(lp + ev_b), abs=1e-9)
+    assert got.entries == 12
+
+
+def test_hidden_object_is_explained_away_not_penalised(device):
+    """At convergence the front object takes the pixels; the one behind it returns to its
+    prior (it is hidden, not absent), and its soft-thresholded rho* vanishes."""
+    params = ModelParams(prior=0.05, sigma_object=0.15, damping=0.2, max_iterations=300)
+    geom = toy_geometry([2.0, 2.1, 4.0], [(1, 1, 3, 2), (1, 1, 3, 2), (1, 1, 3, 2)])
+    depth = np.full((H, W), 5.0)
+    depth[1:3, 1:4] = 2.0
+    got = run_both(device, depth, geom, wall_background(), params)
+    assert got.rho[0] > 0.999
+    assert got.rho[1] == pytest.approx(0.05, abs=1e-3)  # evidence x (1 - rho_A) -> 0
+    assert got.rho[2] == pytest.approx(0.05, abs=1e-12)  # 2 m in front of its plane: no mask
+    assert got.rho_star[1] < 1e-3 and got.rho_star[2] < 1e-3
+    assert got.rho_star[0] > 0.99
+
+
+def test_empty_scene_stays_at_or_below_prior(device):
+    """Depth equal to the background everywhere: nothing is occupied."""
+    from scenes import random_scene
+
+    geom, params, _, frames = random_scene(2)
+    engine = Engine(geom, params, device)
+    engine.set_background_frames(frames)
+    bg = ref.background_from_frames(frames, params)
+    depth = np.where(bg.outlier < 1, bg.mu, 0.0).astype(np.float32)
+    got = engine.infer(depth)
+    assert got.entries > 0
+    assert got.rho.max() <= params.prior + 1e-9
+    assert got.rho_star.max() < 0.01
