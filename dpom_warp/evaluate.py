@@ -23,7 +23,8 @@ def match(det_xy: np.ndarray, gt_xy: np.ndarray, max_distance: float) -> list[tu
 
 
 def score_frames(detections: dict[str, np.ndarray], truth: dict[str, list[dict]],
-                 max_distance: float, hidden_visibility: float = 0.0) -> dict:
+                 max_distance: float, hidden_visibility: float = 0.0,
+                 camera_xy: np.ndarray | None = None) -> dict:
     """MODA, precision and recall over a sequence.
 
     Args:
@@ -32,6 +33,8 @@ def score_frames(detections: dict[str, np.ndarray], truth: dict[str, list[dict]]
         max_distance: match gate, metres.
         hidden_visibility: ground truth whose visibility is below this is 'hidden'; the
             `*_visible` scores neither penalise missing it nor count a detection on it as false.
+        camera_xy: camera position on the ground; when given, `mean_range_error_m` is the mean
+            signed error of matched detections along the line of sight (negative: too near).
 
     Returns:
         dict with n_gt, tp, fp, fn, moda, precision, recall, mean localisation error of matched
@@ -39,7 +42,7 @@ def score_frames(detections: dict[str, np.ndarray], truth: dict[str, list[dict]]
     """
     tp = fp = fn = n_gt = 0
     tp_v = fp_v = fn_v = n_gt_v = 0
-    errors = []
+    errors, range_errors = [], []
     for name, objs in truth.items():
         det = np.asarray(detections.get(name, np.zeros((0, 2))), dtype=float).reshape(-1, 2)
         gt = np.array([[o["x"], o["y"]] for o in objs], dtype=float).reshape(-1, 2)
@@ -47,6 +50,10 @@ def score_frames(detections: dict[str, np.ndarray], truth: dict[str, list[dict]]
         pairs = match(det, gt, max_distance)
         matched_gt = {g for _, g in pairs}
         errors += [float(np.linalg.norm(det[d] - gt[g])) for d, g in pairs]
+        if camera_xy is not None:
+            c = np.asarray(camera_xy, float)
+            range_errors += [float(np.linalg.norm(det[d] - c) - np.linalg.norm(gt[g] - c))
+                             for d, g in pairs]
         tp += len(pairs)
         fp += len(det) - len(pairs)
         fn += len(gt) - len(pairs)
@@ -65,6 +72,7 @@ def score_frames(detections: dict[str, np.ndarray], truth: dict[str, list[dict]]
         "precision": ratio(tp, tp + fp), "recall": ratio(tp, n_gt),
         "mean_error_m": float(np.mean(errors)) if errors else float("nan"),
         "median_error_m": float(np.median(errors)) if errors else float("nan"),
+        "mean_range_error_m": float(np.mean(range_errors)) if range_errors else float("nan"),
         "n_gt_visible": n_gt_v,
         "moda_visible": 1.0 - ratio(fp_v + fn_v, n_gt_v) if n_gt_v else float("nan"),
         "recall_visible": ratio(tp_v, n_gt_v),

@@ -112,7 +112,8 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         if missing:
             raise InputError(f"{cfg.evaluation.ground_truth}: no ground truth for frame {missing[0]}")
         scores = score_frames(det_xy, {f.name: truth[f.name] for f in frames},
-                              cfg.evaluation.match_distance, cfg.evaluation.hidden_visibility)
+                              cfg.evaluation.match_distance, cfg.evaluation.hidden_visibility,
+                              geometry.centre[:2])
         summary["scores"] = scores
     summary["timings"]["total_s"] = time.perf_counter() - t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))

@@ -45,11 +45,14 @@ def test_scores_hand_computed():
     dets = {"a.png": np.array([[0.1, 0.0]]),  # 1 TP, hidden person missed
             "b.png": np.array([[1.0, 1.3], [5.0, 5.0]]),  # TP at 0.3 m, 1 FP
             "c.png": np.array([[0.0, 0.0]])}  # FP in an empty frame
-    s = score_frames(dets, truth, max_distance=0.5, hidden_visibility=0.1)
+    s = score_frames(dets, truth, max_distance=0.5, hidden_visibility=0.1, camera_xy=(0.0, -1.0))
     assert (s["n_gt"], s["tp"], s["fp"], s["fn"]) == (3, 2, 2, 1)
     assert s["moda"] == pytest.approx(1 - 3 / 3)
     assert s["precision"] == pytest.approx(0.5) and s["recall"] == pytest.approx(2 / 3)
     assert s["mean_error_m"] == pytest.approx((0.1 + 0.3) / 2)
+    # along the line of sight from (0, -1): hypot(0.1, 1) - 1 and hypot(1, 2.3) - hypot(1, 2)
+    want = (np.hypot(0.1, 1) - 1 + np.hypot(1, 2.3) - np.hypot(1, 2)) / 2
+    assert s["mean_range_error_m"] == pytest.approx(want)
     assert s["n_gt_visible"] == 2 and s["moda_visible"] == pytest.approx(1 - 2 / 2)
     empty = score_frames({}, {"x.png": []}, 0.5)
     assert empty["n_gt"] == 0 and np.isnan(empty["moda"])
