@@ -257,6 +257,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         max_iterations=s.number("max_iterations", d.max_iterations, integer=True, lo=1),
         check_every=s.number("check_every", d.check_every, integer=True, lo=1),
         missing_clip=s.number("missing_clip", d.missing_clip, lo=0, hi=0.5, lo_open=True, hi_open=True),
+        background_outside_grid=s.boolean("background_outside_grid", d.background_outside_grid),
     )
     if "damping_max" not in s.raw:  # default cap, never below the starting damping
         model = dataclasses.replace(model, damping_max=max(d.damping_max, model.damping))

@@ -93,6 +93,8 @@ class Engine:
             g.plane = wp.array(geometry.plane, dtype=wp.float64)
             self.geo = g
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
+            self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
+            self.centre = wp.vec3d(*(float(c) for c in geometry.centre))
             P, L = self.n_pixels, self.n_locations
             self.depth = wp.zeros((self.height, self.width), dtype=wp.float32)
             self.counts = wp.zeros(P, dtype=wp.int32)
@@ -122,9 +124,15 @@ class Engine:
 
     # -- background ----------------------------------------------------------------------
     def set_floor_background(self):
-        """Use the floor-only background of MODEL.md (no background frames)."""
+        """Use the floor-only background of MODEL.md (no background frames); with
+        params.background_outside_grid it is completed from each frame (see reference)."""
+        self.floor_mode = True
+        self._floor_background(self.depth, 0)
+
+    def _floor_background(self, depth, outside_is_static: int):
         wp.launch(K.floor_background, dim=(self.height, self.width), device=self.device,
-                  inputs=[self.geo.rays, float(self.geometry.centre[2]), self.pm, self.bg])
+                  inputs=[self.geo.rays, self.centre, depth, self.bounds, outside_is_static,
+                          self.pm, self.bg])
 
     def set_background_frames(self, frames_m: np.ndarray):
         """Estimate the background from (N, H, W) frames in metres (0 = no reading)."""
@@ -134,9 +142,11 @@ class Engine:
             scratch = wp.zeros((self.n_pixels, frames.shape[0]), dtype=wp.float64)
             wp.launch(K.background_from_frames, dim=(self.height, self.width),
                       inputs=[f, self.pm, scratch, self.bg])
+        self.floor_mode = False
 
     def set_background(self, bg: Background):
         """Use a given per-pixel background distribution (arrays of shape (H, W))."""
+        self.floor_mode = False
         b = np.stack([bg.mu, bg.sigma, bg.missing, bg.outlier], -1).reshape(self.n_pixels, 4)
         self.bg.assign(np.ascontiguousarray(b, dtype=np.float64))
 
@@ -149,6 +159,8 @@ class Engine:
         """Masks, Delta and depth-sorted per-pixel lists of one frame; returns the entry count."""
         dev, L = self.device, self.n_locations
         self.depth.assign(np.ascontiguousarray(depth_m, dtype=np.float32))
+        if self.floor_mode and self.params.background_outside_grid:
+            self._floor_background(self.depth, 1)
         wp.launch(K.background_delta, dim=(self.height, self.width), device=dev,
                   inputs=[self.depth, self.pm, self.bg, self.delta_bg])
         self.counts.zero_()

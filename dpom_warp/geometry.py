@@ -167,6 +167,8 @@ class Geometry:
         area: (K,) silhouette area in pixels inside the image, 0 when there is none.
         normal: (K, 3) unit normal of the facing plane (pointing at the camera).
         plane: (K,) n . (P_k - C); the object depth along pixel ray d is plane / (n . d).
+        bounds: (6,) x_min, x_max, y_min, y_max, z_min, z_max of all object boxes: a point
+            outside can belong to no object.
     """
 
     rays: np.ndarray
@@ -176,6 +178,7 @@ class Geometry:
     area: np.ndarray
     normal: np.ndarray
     plane: np.ndarray
+    bounds: np.ndarray
 
 
 def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
@@ -213,4 +216,5 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
     return Geometry(
         rays=camera.rays(), centre=c, locations=locs, rect=rect.astype(np.int32),
         area=area.astype(np.int64), normal=normal, plane=plane,
+        bounds=np.stack([corners.min(axis=(0, 1)), corners.max(axis=(0, 1))], 1).ravel(),
     )

@@ -28,6 +28,9 @@ class ModelParams:
         max_iterations: iteration cap.
         check_every: read the convergence test back to the host every this many iterations.
         missing_clip: background pi_inf is clipped to [missing_clip, 1 - missing_clip].
+        background_outside_grid: without background frames, a reading whose 3D point lies
+            outside every object box (beyond the grid, or above the objects) is background at
+            that depth, instead of broad; walls and ceiling then stop looking like objects.
     """
 
     prior: float = 0.01
@@ -45,6 +48,7 @@ class ModelParams:
     max_iterations: int = 100
     check_every: int = 5
     missing_clip: float = 0.01
+    background_outside_grid: bool = True
 
     def damping_at(self, iteration: int) -> float:
         """lambda of iteration `iteration` (0-based)."""

@@ -34,18 +34,33 @@ def object_sigma(mu, params: ModelParams):
     return np.sqrt(params.sigma_object ** 2 + params.sensor_sigma(mu) ** 2)
 
 
-def floor_background(geom: Geometry, params: ModelParams) -> Background:
-    """Background without background frames: the floor plane z = 0 where the ray meets it."""
+def outside_objects(points, bounds):
+    """True for world points outside the objects' reach (beside the grid or above objects)."""
+    x, y, z = points[..., 0], points[..., 1], points[..., 2]
+    return (x < bounds[0]) | (x > bounds[1]) | (y < bounds[2]) | (y > bounds[3]) | (z > bounds[5])
+
+
+def floor_background(geom: Geometry, params: ModelParams, depth_m=None) -> Background:
+    """Background without background frames: the floor plane z = 0 where the ray meets it,
+    else broad; with `depth_m` and params.background_outside_grid, readings out of every
+    object's reach are background at their own depth."""
     dz = geom.rays[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(dz < -1e-12, -geom.centre[2] / dz, np.inf)
     floor = (t > 0) & (t <= params.z_max)
     mu = np.where(floor, t, 0.0)
+    known = floor
+    if depth_m is not None and params.background_outside_grid:
+        z = np.asarray(depth_m, dtype=np.float64)
+        static = valid_reading(z, params) & outside_objects(geom.centre + z[..., None] * geom.rays,
+                                                            geom.bounds)
+        mu = np.where(static, z, mu)
+        known = known | static
     return Background(
         mu=mu,
-        sigma=np.where(floor, params.sensor_sigma(mu), 1.0),
+        sigma=np.where(known, params.sensor_sigma(mu), 1.0),
         missing=np.full(mu.shape, params.missing_prob),
-        outlier=np.where(floor, params.outlier_prob, 1.0),
+        outlier=np.where(known, params.outlier_prob, 1.0),
     )
 
 

@@ -35,17 +35,26 @@ def background_delta(
 @wp.kernel(enable_backward=False)
 def floor_background(
     rays: wp.array2d(dtype=wp.vec3d),
-    camera_height: wp.float64,
+    centre: wp.vec3d,
+    depth: wp.array2d(dtype=wp.float32),
+    bounds: wp.array(dtype=wp.float64),
+    outside_is_static: int,
     pm: PixelModel,
     bg: wp.array2d(dtype=wp.float64),
 ):
-    """Floor-only background: the ray's hit on z = 0 within range, else broad."""
+    """Floor-only background: the ray's hit on z = 0 within range, else broad; with
+    `outside_is_static`, a reading whose point no object box can reach is background there."""
     v, u = wp.tid()
     p = v * rays.shape[1] + u
-    dz = rays[v, u][2]
+    d = rays[v, u]
     t = f64(-1.0)
-    if dz < f64(-1.0e-12):
-        t = -camera_height / dz
+    if d[2] < f64(-1.0e-12):
+        t = -centre[2] / d[2]
+    z = f64(depth[v, u])
+    if outside_is_static == 1 and is_reading(pm, z):
+        x = centre + z * d
+        if x[0] < bounds[0] or x[0] > bounds[1] or x[1] < bounds[2] or x[1] > bounds[3] or x[2] > bounds[5]:
+            t = z
     if t > f64(0.0) and t <= pm.z_max:
         bg[p, 0] = t
         bg[p, 1] = sensor_sigma(pm, t)

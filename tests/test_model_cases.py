@@ -25,7 +25,8 @@ def toy_geometry(depths, rects):
     normal = np.tile([0.0, 0.0, -1.0], (n, 1))
     locs = np.array([[0.0, 0.0, d] for d in depths])
     return Geometry(rays=rays, centre=np.zeros(3), locations=locs, rect=rect, area=area,
-                    normal=normal, plane=-np.array(depths, dtype=float))
+                    normal=normal, plane=-np.array(depths, dtype=float),
+                    bounds=np.array([-1.0, 1.0, -1.0, 1.0, 0.0, 10.0]))
 
 
 def wall_background(z=5.0):

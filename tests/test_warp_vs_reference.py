@@ -18,7 +18,7 @@ def test_rho_matches_reference(device, seed):
         engine.set_background_frames(bg_frames)
         bg = ref.background_from_frames(bg_frames, params)
     else:
-        bg = ref.floor_background(geom, params)
+        bg = ref.floor_background(geom, params, depth)
     want = ref.mean_field(depth, geom, bg, params)
     got = engine.infer(depth)
     assert want["entries"] > 100, "scene too easy: no mask entries"
@@ -68,7 +68,7 @@ def test_list_capacity_grows_and_is_reported(device):
     geom, params, depth, _ = random_scene(5)
     engine = Engine(geom, params, device, entries_per_pixel=0.01)
     small = engine.capacity
-    want = ref.mean_field(depth, geom, ref.floor_background(geom, params), params)
+    want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
     assert want["entries"] > small
     got = engine.infer(depth)
     assert engine.grown == [want["entries"]] and engine.capacity >= want["entries"]
@@ -82,3 +82,19 @@ def test_list_overflow_is_refused_not_truncated(device):
     engine = Engine(geom, params, device, entries_per_pixel=0.01, max_entries=1500)
     with pytest.raises(ListOverflow, match="mask entries"):
         engine.infer(depth)
+
+
+@pytest.mark.parametrize("outside", [True, False])
+def test_floor_background_per_frame_matches_reference(device, outside):
+    import dataclasses
+
+    geom, params, depth, _ = random_scene(8)
+    params = dataclasses.replace(params, background_outside_grid=outside)
+    engine = Engine(geom, params, device)
+    got = engine.infer(depth)
+    bg = ref.floor_background(geom, params, depth)
+    np.testing.assert_allclose(engine.background().mu, bg.mu, atol=1e-6)
+    want = ref.mean_field(depth, geom, bg, params)
+    np.testing.assert_allclose(got.rho, want["rho"], atol=1e-6)
+    static = (bg.outlier < 1) & (depth > 0) & ~np.isclose(bg.mu, ref.floor_background(geom, params).mu)
+    assert static.any() == outside  # the slabs' tops or the far floor are out of every box
