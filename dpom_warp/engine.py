@@ -22,11 +22,11 @@ def resolve_device(name: str = "auto") -> str:
     if name == "auto":
         cuda = wp.get_cuda_devices()
         return str(cuda[0]) if cuda else "cpu"
-    if name != "cpu" and not str(name).startswith("cuda"):
-        raise ValueError(f"device: expected auto, cpu or cuda[:N], found {name!r}")
-    if name not in [str(d) for d in wp.get_devices()] and name != "cuda":
-        raise ValueError(f"device: {name!r} is not available here (have "
-                         f"{', '.join(str(d) for d in wp.get_devices())})")
+    if name == "cuda":
+        name = "cuda:0"
+    have = [str(d) for d in wp.get_devices()]
+    if name not in have:
+        raise ValueError(f"device: expected one of auto, {', '.join(have)}, found {name!r}")
     return name
 
 
@@ -42,6 +42,9 @@ def pixel_model(params: ModelParams) -> K.PixelModel:
     pm.missing_prob = params.missing_prob
     pm.missing_clip = params.missing_clip
     return pm
+
+
+INT32_MAX = 2**31 - 1  # list offsets are int32
 
 
 class ListOverflow(RuntimeError):
@@ -112,15 +115,17 @@ class Engine:
 
     # -- buffers -------------------------------------------------------------------------
     def _allocate_lists(self, capacity: int):
-        capacity = max(1024, capacity)
-        if self.max_entries is not None:
-            capacity = min(capacity, self.max_entries)
+        capacity = min(max(1024, capacity), self.max_entries or INT32_MAX, INT32_MAX)
         with wp.ScopedDevice(self.device):
             self.entry_loc = wp.zeros(capacity, dtype=wp.int32)
             self.entry_mu = wp.zeros(capacity, dtype=wp.float32)
             self.entry_delta = wp.zeros(capacity, dtype=wp.float32)
             self.behind = wp.zeros(capacity, dtype=wp.float64)
         self.capacity = capacity
+
+    def _list_arrays(self):
+        return [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu,
+                self.entry_delta]
 
     # -- background ----------------------------------------------------------------------
     def set_floor_background(self):
@@ -164,21 +169,20 @@ class Engine:
         wp.launch(K.background_delta, dim=(self.height, self.width), device=dev,
                   inputs=[self.depth, self.pm, self.bg, self.delta_bg])
         self.counts.zero_()
-        lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu,
-                 self.entry_delta]
-        wp.launch(K.mask_entries, dim=L, device=dev, inputs=[self.depth, self.geo, self.pm, 0] + lists)
+        wp.launch(K.mask_entries, dim=L, device=dev,
+                  inputs=[self.depth, self.geo, self.pm, 0] + self._list_arrays())
         wp.utils.array_scan(self.counts, self.offsets, inclusive=False)
-        total = int(self.offsets[-1:].numpy()[0] + self.counts[-1:].numpy()[0])
+        total = int(self.offsets[-1:].numpy()[0]) + int(self.counts[-1:].numpy()[0])
         if total > self.capacity:
-            if self.max_entries is not None and total > self.max_entries:
-                raise ListOverflow(f"frame needs {total} mask entries, above the cap of "
-                                   f"{self.max_entries} (raise it or coarsen the grid)")
+            cap = min(self.max_entries or INT32_MAX, INT32_MAX)
+            if total > cap or total < 0:
+                raise ListOverflow(f"frame needs {total} mask entries, above the cap of {cap} "
+                                   f"(engine.max_entries; coarsen the grid or raise the cap)")
             self.grown.append(total)
             self._allocate_lists(int(total * 1.25))
         self.counts.zero_()
-        lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu,
-                 self.entry_delta]
-        wp.launch(K.mask_entries, dim=L, device=dev, inputs=[self.depth, self.geo, self.pm, 1] + lists)
+        wp.launch(K.mask_entries, dim=L, device=dev,
+                  inputs=[self.depth, self.geo, self.pm, 1] + self._list_arrays())
         wp.launch(K.sort_pixel_lists, dim=self.n_pixels, device=dev,
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta])
         return total

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import RunConfig
+from .config import ConfigError, RunConfig
 from .detect import detect
 from .engine import Engine, resolve_device
 from .evaluate import load_ground_truth, score_frames
@@ -44,12 +44,14 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     frames = expand(cfg.inputs.frames, "input.frames")
     shape = (cfg.camera.height, cfg.camera.width)
     scale = cfg.inputs.depth_scale
-    depths = {}  # read and check every frame before writing anything
-    for f in frames:
-        depths[f] = read_depth(f, scale, shape)
+    for f in frames:  # check every frame before writing anything (kept out of memory)
+        read_depth(f, scale, shape)
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
 
-    dev = resolve_device(device or cfg.device)
+    try:
+        dev = resolve_device(device or cfg.device)
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
     t = time.perf_counter()
     geometry = build_geometry(cfg.camera, cfg.grid, cfg.obj)
     engine = Engine(geometry, cfg.model, dev, cfg.engine.entries_per_pixel, cfg.engine.max_entries)
@@ -69,8 +71,10 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         from tqdm import tqdm
         iterator = tqdm(frames, unit="frame", desc="dpom", leave=False)
     for f in iterator:
+        t_read = time.perf_counter()
+        depth = read_depth(f, scale, shape)
         t0 = time.perf_counter()
-        res = engine.infer(depths[f])
+        res = engine.infer(depth)
         t1 = time.perf_counter()
         rho_map = res.rho_star.reshape(cfg.grid.shape)
         dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
@@ -79,14 +83,14 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         write_npy_atomic(out / "maps" / f"{f.stem}.npy", rho_map.astype(np.float32))
         if cfg.output.images:
             from .render import frame_picture
-            frame_picture(out / "images" / f"{f.stem}.png", depths[f], rho_map, cfg.grid, dets,
+            frame_picture(out / "images" / f"{f.stem}.png", depth, rho_map, cfg.grid, dets,
                           geometry.centre[:2], truth.get(f.name) if truth else None, f.name)
         t3 = time.perf_counter()
         rows += [f"{f.name},{d.x:.4f},{d.y:.4f},{d.z:.4f},{d.rho:.6f},{d.box[0]},{d.box[1]},"
                  f"{d.box[2]},{d.box[3]}" for d in dets]
         det_xy[f.name] = np.array([[d.x, d.y] for d in dets]).reshape(-1, 2)
         per_frame.append({"frame": f.name, "detections": len(dets), "iterations": res.iterations,
-                          "entries": res.entries, "infer_s": t1 - t0, "detect_s": t2 - t1,
+                          "entries": res.entries, "read_s": t0 - t_read, "infer_s": t1 - t0, "detect_s": t2 - t1,
                           "write_s": t3 - t2, **{f"engine_{k}": v for k, v in res.timings.items()}})
     write_text_atomic(out / "detections.csv", "\n".join(rows) + "\n")
 
@@ -100,7 +104,7 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         "detections": sum(p["detections"] for p in per_frame),
         "list_capacity_growth": engine.grown,
         "timings": {"setup_s": t_setup, "total_s": time.perf_counter() - t_start,
-                    "median_infer_s": median("infer_s"),
+                    "median_read_s": median("read_s"), "median_infer_s": median("infer_s"),
                     "median_lists_s": median("engine_lists_s"),
                     "median_iterations_s": median("engine_iterations_s"),
                     "median_detect_s": median("detect_s"), "median_write_s": median("write_s"),

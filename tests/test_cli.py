@@ -102,6 +102,12 @@ def test_bad_config_is_one_line_exit_2(tmp_path, capsys, override, message):
     assert "Traceback" not in err
 
 
+def test_unavailable_device_is_a_config_error(tmp_path, capsys):
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress", "--device", "cuda:7"]) == 2
+    assert "device: expected one of auto, cpu" in capsys.readouterr().err
+
+
 def test_missing_frames_names_the_key(tmp_path, capsys):
     path = small_config(tmp_path)
     assert main(["run", str(path), "--no-progress", "--set", "synthetic=null",
