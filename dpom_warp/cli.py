@@ -1,4 +1,8 @@
-"""Command line: `dpom-warp run CONFIG [--output DIR] [--device D] [--set key.path=value ...]`."""
+"""dpom-warp: people (and other objects) from single depth images with DPOM on Warp kernels.
+
+  dpom-warp run CONFIG [--output DIR] [--device D] [--set key.path=value ...]
+  dpom-warp fit-ground DEPTH... --camera CAMERA.yaml [--output POSE.yaml]
+"""
 
 from __future__ import annotations
 
@@ -30,6 +34,35 @@ def _run(args) -> int:
     return 0
 
 
+def _fit_ground(args) -> int:
+    import yaml
+
+    from .config import load_camera_file
+    from .ground import GroundFitError, GroundOptions, fit_ground_frames
+    from .io import read_depth, write_text_atomic
+
+    camera, scale = load_camera_file(args.camera)
+    shape = (camera.height, camera.width)
+    depths = [read_depth(f, scale, shape) for f in args.depth]
+    options = GroundOptions(max_angle_deg=args.max_angle, depth_max=args.depth_max)
+    try:
+        fit = fit_ground_frames(depths, camera, options)
+    except GroundFitError as e:
+        which = args.depth[0] if len(args.depth) == 1 else f"{args.depth[0]} and {len(args.depth) - 1} more"
+        raise InputError(f"{which}: {e}") from None
+    report = fit.report()
+    text = (f"# dpom-warp fit-ground on {len(depths)} frame(s); paste under camera.extrinsics\n"
+            + yaml.safe_dump(report, default_flow_style=None, sort_keys=False))
+    if args.output:
+        write_text_atomic(args.output, text)
+    print(f"camera {fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
+          f"{fit.roll_deg:.2f} deg; {fit.inlier_count} floor points, rms {1000 * fit.rms_m:.1f} mm"
+          + (f"; pose written to {args.output}" if args.output else ""))
+    if not args.output:
+        print(text, end="")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="dpom-warp", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -40,10 +73,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="override a config value, e.g. --set model.damping=0.2")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    g = sub.add_parser("fit-ground", help="find the floor and the camera pose from depth frames")
+    g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy) of the same camera")
+    g.add_argument("--camera", required=True, help="camera YAML: width, height, intrinsics, depth_scale")
+    g.add_argument("--output", help="write the pose YAML here")
+    g.add_argument("--max-angle", type=float, default=45.0,
+                   help="largest angle between the floor normal and the image's up (degrees)")
+    g.add_argument("--depth-max", type=float, default=6.0, help="ignore readings beyond (metres)")
     args = parser.parse_args(argv)
     try:
         if args.command == "run":
             return _run(args)
+        if args.command == "fit-ground":
+            return _fit_ground(args)
     except (ConfigError, InputError) as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 2

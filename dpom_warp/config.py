@@ -15,6 +15,7 @@ import numpy as np
 import yaml
 
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
+from .ground import GroundOptions
 from .model import ModelParams
 from .synthetic import SceneSpec
 
@@ -138,7 +139,11 @@ class EngineOptions:
 
 @dataclass
 class RunConfig:
-    """A validated run configuration; `resolved` is the config with every default filled in."""
+    """A validated run configuration; `resolved` is the config with every default filled in.
+
+    With `pose_auto` (camera.extrinsics: auto) the camera's pose is a placeholder until the
+    run fits the floor with `ground` options on `ground_frames` frames.
+    """
 
     device: str
     inputs: Inputs
@@ -153,6 +158,9 @@ class RunConfig:
     synthetic: SceneSpec | None
     synthetic_cache: str | None
     resolved: dict
+    pose_auto: bool = False
+    ground: GroundOptions = GroundOptions()
+    ground_frames: int = 5
 
 
 def _axis(sec: _Section, name, required=True):
@@ -167,15 +175,20 @@ def _axis(sec: _Section, name, required=True):
     return v
 
 
+FIT_REPORT_KEYS = ("camera_height", "pitch_deg", "roll_deg", "inlier_count")
+
+
 def _pose(sec: _Section):
     if "T_world_from_camera" in sec.raw:
         t = sec.get("T_world_from_camera")
-        a = np.asarray(t, dtype=object)
-        if a.shape != (4, 4) or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                         for x in a.ravel()):
+        if not (isinstance(t, list) and len(t) == 4 and all(
+                isinstance(row, list) and len(row) == 4
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in row)
+                for row in t)):
             raise ConfigError(f"{sec.key('T_world_from_camera')}: expected a 4x4 list of numbers, "
-                              f"found {_fmt(t)} of shape {a.shape}")
-        m = a.astype(np.float64)
+                              f"found {_fmt(t)}")
+        sec.used.update(FIT_REPORT_KEYS)  # `dpom-warp fit-ground` output pastes in as it is
+        m = np.array(t, dtype=np.float64)
         r = m[:3, :3]
         if (not np.allclose(r.T @ r, np.eye(3), atol=1e-3) or abs(np.linalg.det(r) - 1) > 1e-3
                 or not np.allclose(m[3], [0, 0, 0, 1])):
@@ -216,12 +229,31 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     cy = i.number("cy", required=True, lo=0, hi=height)
     i.done()
     ext = s.get("extrinsics", required=True)
-    if ext == "auto":
-        raise ConfigError("camera.extrinsics: 'auto' (ground-plane fitting) is not available yet; "
-                          "expected {T_world_from_camera: 4x4} or {height, pitch_deg, roll_deg}")
-    pose, pose_resolved = _pose(_Section(ext, "camera.extrinsics"))
+    pose_auto = ext == "auto"
+    if pose_auto:
+        pose, pose_resolved = np.eye(4), "auto"
+    elif isinstance(ext, str):
+        raise ConfigError(f"camera.extrinsics: expected auto, {{T_world_from_camera: 4x4}} or "
+                          f"{{height, pitch_deg, roll_deg}}, found {ext!r}")
+    else:
+        pose, pose_resolved = _pose(_Section(ext, "camera.extrinsics"))
+    distortion = s.numbers("distortion", 5, None)
+    g = s.section("ground")
+    d = GroundOptions()
+    ground = GroundOptions(
+        up=g.numbers("up", 3, d.up),
+        max_angle_deg=g.number("max_angle_deg", d.max_angle_deg, lo=0, hi=90, lo_open=True),
+        distance_threshold=g.number("distance_threshold", d.distance_threshold, lo=0, lo_open=True),
+        depth_max=g.number("depth_max", d.depth_max, lo=0, lo_open=True),
+        min_inliers=g.number("min_inliers", d.min_inliers, integer=True, lo=3),
+        stride=g.number("stride", d.stride, integer=True, lo=1),
+    )
+    ground_frames = g.number("frames", 5, integer=True, lo=1)
+    if np.linalg.norm(ground.up) == 0:
+        raise ConfigError(f"camera.ground.up: expected a non-zero direction, found {list(ground.up)}")
+    g.done()
     s.done()
-    camera = Camera(width, height, fx, fy, cx, cy, pose)
+    camera = Camera(width, height, fx, fy, cx, cy, pose, distortion)
 
     s = top.section("grid")
     mode = s.string("mode", "ground", choices=("ground",))
@@ -289,6 +321,9 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     s.done()
 
     synthetic, cache = None, None
+    if top.get("synthetic") is not None and pose_auto:
+        raise ConfigError("synthetic: rendering needs a camera pose; expected camera.extrinsics "
+                          "given as {height, pitch_deg, ...} or a matrix, found auto")
     if top.get("synthetic") is not None:
         s = top.section("synthetic")
         d = SceneSpec()
@@ -315,7 +350,9 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         "input": vars_of(inputs),
         "camera": {"width": width, "height": height,
                    "intrinsics": {"fx": fx, "fy": fy, "cx": cx, "cy": cy},
-                   "extrinsics": pose_resolved},
+                   "extrinsics": pose_resolved, "distortion": list(distortion) if distortion else None,
+                   "ground": {"frames": ground_frames, **{k: (list(v) if isinstance(v, tuple) else v)
+                                                          for k, v in vars_of(ground).items()}}},
         "grid": {"mode": mode, "x": list(grid.x), "y": list(grid.y)},
         "object": {"width": obj.width, "height": obj.height, "depth": obj.depth},
         "model": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars_of(model).items()},
@@ -326,7 +363,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         resolved["synthetic"] = {"cache": cache, **{k: (list(v) if isinstance(v, tuple) else v)
                                                     for k, v in vars_of(synthetic).items()}}
     return RunConfig(device, inputs, camera, grid, obj, model, detection, evaluation, output,
-                     engine, synthetic, cache, resolved)
+                     engine, synthetic, cache, resolved, pose_auto, ground, ground_frames)
 
 
 def vars_of(dc) -> dict:
@@ -372,3 +409,35 @@ def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConf
         return parse_config(apply_overrides(raw, overrides or []))
     except ConfigError as e:
         raise ConfigError(f"{path}: {e}") from None
+
+
+def load_camera_file(path: str | Path) -> tuple[Camera, float]:
+    """Read a camera file (width, height, intrinsics {fx, fy, cx, cy}, depth_scale, optional
+    distortion [k1, k2, p1, p2, k3]) as in shared/data/real/*/camera.yaml.
+
+    Returns:
+        (camera with identity pose, depth_scale in metres per unit).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such camera file")
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path}: not valid YAML ({getattr(e, 'problem', e)})") from None
+    try:
+        s = _Section(raw, "")
+        width = s.number("width", required=True, integer=True, lo=1)
+        height = s.number("height", required=True, integer=True, lo=1)
+        i = s.section("intrinsics")
+        cam = Camera(width, height, i.number("fx", required=True, lo=0, lo_open=True),
+                     i.number("fy", required=True, lo=0, lo_open=True),
+                     i.number("cx", required=True, lo=0, hi=width),
+                     i.number("cy", required=True, lo=0, hi=height),
+                     distortion=s.numbers("distortion", 5, None))
+        i.done()
+        scale = s.number("depth_scale", 0.001, lo=0, lo_open=True)
+        s.done()
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}") from None
+    return cam, scale

@@ -42,7 +42,8 @@ def pose_from_angles(height_m: float, pitch_deg: float, roll_deg: float = 0.0,
 
 @dataclass(frozen=True)
 class Camera:
-    """Pinhole depth camera: image size, intrinsics (pixels) and pose in the world frame."""
+    """Pinhole depth camera: image size, intrinsics (pixels), pose in the world frame and
+    optional lens distortion (k1, k2, p1, p2, k3; OpenCV's Brown-Conrady model)."""
 
     width: int
     height: int
@@ -51,6 +52,33 @@ class Camera:
     cx: float
     cy: float
     T_world_from_camera: np.ndarray = field(default_factory=lambda: np.eye(4))
+    distortion: tuple[float, float, float, float, float] | None = None
+
+    def distort(self, x, y):
+        """Distorted normalised image coordinates of undistorted ones (x = X/Z, y = Y/Z)."""
+        if self.distortion is None:
+            return x, y
+        k1, k2, p1, p2, k3 = self.distortion
+        r2 = x * x + y * y
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        return (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+                y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
+
+    def undistort(self, xd, yd, iterations: int = 20):
+        """Inverse of `distort`, by fixed-point iteration (exact to ~1e-12 for lens-like
+        distortion within the image)."""
+        if self.distortion is None:
+            return xd, yd
+        x, y = xd, yd
+        for _ in range(iterations):
+            dx, dy = self.distort(x, y)
+            x, y = x + (xd - dx), y + (yd - dy)
+        return x, y
+
+    def normalised(self, u, v):
+        """Undistorted normalised coordinates (x, y) of pixel (u, v); the ray is (x, y, 1)."""
+        return self.undistort((np.asarray(u, np.float64) - self.cx) / self.fx,
+                              (np.asarray(v, np.float64) - self.cy) / self.fy)
 
     @property
     def centre(self) -> np.ndarray:
@@ -67,11 +95,9 @@ class Camera:
         Returns:
             (height, width, 3) float64 array `d = R_wc @ [(u - cx)/fx, (v - cy)/fy, 1]`.
         """
-        u = np.arange(self.width, dtype=np.float64)
-        v = np.arange(self.height, dtype=np.float64)
-        uu, vv = np.meshgrid(u, v)
-        cam = np.stack([(uu - self.cx) / self.fx, (vv - self.cy) / self.fy, np.ones_like(uu)], -1)
-        return cam @ self.R_wc.T
+        uu, vv = np.meshgrid(np.arange(self.width), np.arange(self.height))
+        x, y = self.normalised(uu, vv)
+        return np.stack([x, y, np.ones_like(x)], -1) @ self.R_wc.T
 
     def project(self, points_w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Project world points to pixels.
@@ -82,9 +108,8 @@ class Camera:
         pc = (np.asarray(points_w, dtype=np.float64) - self.centre) @ self.R_wc
         z = pc[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            u = self.fx * pc[..., 0] / z + self.cx
-            v = self.fy * pc[..., 1] / z + self.cy
-        return u, v, z
+            x, y = self.distort(pc[..., 0] / z, pc[..., 1] / z)
+        return self.fx * x + self.cx, self.fy * y + self.cy, z
 
 
 def axis_cells(lo: float, hi: float, step: float) -> np.ndarray:

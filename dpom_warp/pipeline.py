@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
 import glob
-import io
 import platform
 import statistics
 import time
@@ -16,6 +16,7 @@ from .detect import detect
 from .engine import Engine, resolve_device
 from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
+from .ground import GroundFitError, fit_ground_frames
 from .io import InputError, read_depth, write_json_atomic, write_npy_atomic, write_text_atomic
 from .synthetic import generate
 
@@ -30,6 +31,28 @@ def expand(pattern: str, key: str) -> list[Path]:
     return files
 
 
+def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
+    """camera.extrinsics: auto. Fit the floor on `files` and return the posed camera and a
+    report for summary.json.
+
+    Raises:
+        InputError: naming the frames, when no floor plane is found in them.
+    """
+    depths = [read_depth(f, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
+              for f in files]
+    try:
+        fit = fit_ground_frames(depths, cfg.camera, cfg.ground)
+    except GroundFitError as e:
+        which = str(files[0]) if len(files) == 1 else f"{files[0]} and {len(files) - 1} more frames"
+        raise InputError(f"{which}: {e}") from None
+    kind = "background frame" if cfg.inputs.background else "frame"
+    log(f"ground plane from {len(files)} {kind}{'s' if len(files) > 1 else ''}: camera "
+        f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
+        f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")
+    report = {**fit.report(), "rms_m": fit.rms_m, "frames": [str(f) for f in files]}
+    return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
+
+
 def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None,
         progress: bool = True, log=print) -> dict:
     """Run DPOM over the configured frames; returns the summary also written to summary.json."""
@@ -42,21 +65,24 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         log(f"synthetic scene: {cfg.synthetic.frames} frames in {cfg.synthetic_cache} "
             f"({'checked' if cached else 'generated'} in {time.perf_counter() - t:.1f} s)")
     frames = expand(cfg.inputs.frames, "input.frames")
+    bg_files = expand(cfg.inputs.background, "input.background") if cfg.inputs.background else []
     shape = (cfg.camera.height, cfg.camera.width)
     scale = cfg.inputs.depth_scale
-    for f in frames:  # check every frame before writing anything (kept out of memory)
+    for f in frames + bg_files:  # check every frame before writing anything (kept out of memory)
         read_depth(f, scale, shape)
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
+    camera, ground = cfg.camera, None
+    if cfg.pose_auto:
+        camera, ground = fit_camera_pose(cfg, bg_files or frames[:cfg.ground_frames], log)
 
     try:
         dev = resolve_device(device or cfg.device)
     except ValueError as e:
         raise ConfigError(str(e)) from None
     t = time.perf_counter()
-    geometry = build_geometry(cfg.camera, cfg.grid, cfg.obj)
+    geometry = build_geometry(camera, cfg.grid, cfg.obj)
     engine = Engine(geometry, cfg.model, dev, cfg.engine.entries_per_pixel, cfg.engine.max_entries)
-    if cfg.inputs.background:
-        bg_files = expand(cfg.inputs.background, "input.background")
+    if bg_files:
         engine.set_background_frames(np.stack([read_depth(f, scale, shape) for f in bg_files]))
         background = f"{len(bg_files)} background frames"
     else:
@@ -100,7 +126,7 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     summary = {
         "config": cfg.resolved,
         "device": dev, "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
-        "background": background, "frames": len(frames),
+        "background": background, "ground_fit": ground, "frames": len(frames),
         "detections": sum(p["detections"] for p in per_frame),
         "list_capacity_growth": engine.grown,
         "timings": {"setup_s": t_setup, "total_s": time.perf_counter() - t_start,

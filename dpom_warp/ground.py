@@ -1,0 +1,203 @@
+"""The floor plane from depth frames, with Open3D: back-projection, RANSAC plane segmentation,
+a least-squares refinement, and the camera pose in the project's world frame.
+
+World frame built from the plane: z up (the floor normal), floor at z = 0, origin on the
+floor right below the camera, y = the camera's forward direction projected on the floor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+
+from .geometry import Camera
+
+
+class GroundFitError(ValueError):
+    """No floor plane could be found; the message says why in one line."""
+
+
+@dataclass(frozen=True)
+class GroundOptions:
+    """How to look for the floor.
+
+    Attributes:
+        up: the prior for "up" in the camera frame (OpenCV: -y is up in the image).
+        max_angle_deg: a floor candidate's normal is at most this far from `up`.
+        distance_threshold: RANSAC inlier distance, metres.
+        depth_max: points farther than this are not used (noise grows with depth), metres.
+        min_inliers: a floor candidate needs at least this many (downsampled) points.
+        max_planes: how many planes to peel off the cloud, largest first.
+        voxel: voxel size of the downsampling before RANSAC, metres.
+        stride: use every `stride`-th pixel in each direction.
+        noise: (a, b) of the depth noise sigma(z) = a + b z^2 used by the refinement, metres.
+    """
+
+    up: tuple[float, float, float] = (0.0, -1.0, 0.0)
+    max_angle_deg: float = 45.0
+    distance_threshold: float = 0.03
+    depth_max: float = 6.0
+    min_inliers: int = 300
+    max_planes: int = 6
+    voxel: float = 0.04
+    stride: int = 2
+    noise: tuple[float, float] = (0.002, 0.0015)
+
+
+@dataclass(frozen=True)
+class GroundFit:
+    """The fitted floor and the camera pose it implies.
+
+    Attributes:
+        normal: unit floor normal in the camera frame, pointing to the camera's side.
+        offset: d of the plane normal . X + d = 0 (camera frame); equals the camera height.
+        T_world_from_camera: (4, 4) pose in the world frame described in the module.
+        camera_height: metres above the floor.
+        pitch_deg: optical axis below the horizon, degrees.
+        roll_deg: rotation about the optical axis, degrees (as geometry.pose_from_angles).
+        inlier_count: points within the inlier distance of the refined plane (full cloud).
+        rms_m: root mean square distance of those inliers to the plane, metres.
+    """
+
+    normal: np.ndarray
+    offset: float
+    T_world_from_camera: np.ndarray
+    camera_height: float
+    pitch_deg: float
+    roll_deg: float
+    inlier_count: int
+    rms_m: float
+
+    def report(self) -> dict:
+        """The pose as written by `dpom-warp fit-ground` (pastable into camera.extrinsics)."""
+        return {"T_world_from_camera": [[round(float(x), 9) for x in row]
+                                        for row in self.T_world_from_camera],
+                "camera_height": round(self.camera_height, 4),
+                "pitch_deg": round(self.pitch_deg, 3), "roll_deg": round(self.roll_deg, 3),
+                "inlier_count": int(self.inlier_count)}
+
+
+def backproject(depth_m: np.ndarray, camera: Camera, depth_max: float, stride: int = 1) -> np.ndarray:
+    """Camera-frame points (N, 3) of the readings of a depth frame (metres, 0 = no reading).
+
+    Open3D's back-projection, x = (u - cx) z / fx with pixel centres at integer u as in the
+    rest of the project (no half-pixel shift); with lens distortion the normalised
+    coordinates are then undistorted.
+    """
+    intr = o3d.core.Tensor([[camera.fx, 0, camera.cx], [0, camera.fy, camera.cy], [0, 0, 1]],
+                           o3d.core.Dtype.Float64)
+    img = o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(depth_m, dtype=np.float32)))
+    pcd = o3d.t.geometry.PointCloud.create_from_depth_image(
+        img, intr, depth_scale=1.0, depth_max=float(depth_max), stride=int(stride))
+    pts = pcd.point.positions.numpy().astype(np.float64)
+    if camera.distortion is not None and len(pts):
+        z = pts[:, 2]
+        x, y = camera.undistort(pts[:, 0] / z, pts[:, 1] / z)
+        pts = np.stack([x * z, y * z, z], 1)
+    return pts
+
+
+def pose_from_plane(normal: np.ndarray, offset: float) -> np.ndarray:
+    """T_world_from_camera for the floor normal . X + offset = 0 (camera frame, offset > 0)."""
+    z_w = normal / np.linalg.norm(normal)
+    forward = np.array([0.0, 0.0, 1.0])
+    y_w = forward - (forward @ z_w) * z_w
+    if np.linalg.norm(y_w) < 1e-6:  # looking straight down: use the image's up direction
+        y_w = np.array([0.0, -1.0, 0.0]) - (-z_w[1]) * z_w
+    y_w /= np.linalg.norm(y_w)
+    x_w = np.cross(y_w, z_w)
+    r_wc = np.stack([x_w, y_w, z_w])  # rows: world axes in camera coordinates
+    t = np.eye(4)
+    t[:3, :3] = r_wc
+    t[:3, 3] = [0.0, 0.0, offset]
+    return t
+
+
+def angles_from_normal(normal: np.ndarray) -> tuple[float, float]:
+    """(pitch_deg, roll_deg) of a camera whose floor normal (camera frame) is `normal`."""
+    n = normal / np.linalg.norm(normal)
+    pitch = -math.asin(float(np.clip(n[2], -1, 1)))
+    roll = math.asin(float(np.clip(-n[0] / max(math.cos(pitch), 1e-9), -1, 1)))
+    return math.degrees(pitch), math.degrees(roll)
+
+
+def _refine(points, normal, offset, options: GroundOptions):
+    """Weighted least-squares plane through the points near (normal, offset), three times.
+
+    A point's band and weight follow the sensor noise at its depth, sigma(z) = a + b z^2:
+    inliers lie within max(distance_threshold, 3 sigma) of the plane, weights are
+    1 / sigma^2, so far, noisy floor neither drops out nor dominates.
+    """
+    a, b = options.noise
+    sigma = np.maximum(a + b * points[:, 2] ** 2, 1e-4)
+    band = np.maximum(options.distance_threshold, 3.0 * sigma)
+    for _ in range(3):
+        near = np.abs(points @ normal + offset) < band
+        if near.sum() < 3:
+            break
+        sel, w = points[near], 1.0 / sigma[near] ** 2
+        c = (w[:, None] * sel).sum(0) / w.sum()
+        _, _, vt = np.linalg.svd(np.sqrt(w)[:, None] * (sel - c), full_matrices=False)
+        n = vt[2] if vt[2] @ normal > 0 else -vt[2]
+        normal, offset = n, -float(n @ c)
+    near = np.abs(points @ normal + offset) < band
+    rms = float(np.sqrt(np.mean((points[near] @ normal + offset) ** 2))) if near.any() else float("nan")
+    return normal, offset, int(near.sum()), rms
+
+
+def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), seed: int = 0) -> GroundFit:
+    """Find the floor in camera-frame points (several frames may be stacked).
+
+    Planes are peeled off the downsampled cloud with Open3D's RANSAC, largest first. Floor
+    candidates have enough inliers, a normal within `max_angle_deg` of `up` and the camera on
+    their upper side; among them the lowest (largest camera height) wins, so table tops and
+    shelves lose to the floor, and walls are too steep to compete. The winner is refined by
+    least squares on the full cloud.
+
+    Raises:
+        GroundFitError: no candidate (too little floor visible, or none near `up`).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    pts = pts[np.isfinite(pts).all(1)]
+    if len(pts) < options.min_inliers:
+        raise GroundFitError(f"too few depth readings for a floor ({len(pts)} points within "
+                             f"{options.depth_max} m, need at least {options.min_inliers})")
+    o3d.utility.random.seed(seed)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts)).voxel_down_sample(options.voxel)
+    up = np.asarray(options.up, dtype=np.float64)
+    up /= np.linalg.norm(up)
+    candidates, best_other = [], 0
+    for _ in range(options.max_planes):
+        if len(cloud.points) < options.min_inliers:
+            break
+        plane, idx = cloud.segment_plane(options.distance_threshold, 3, 1000)
+        n, d = np.asarray(plane[:3], dtype=np.float64), float(plane[3])
+        scale = np.linalg.norm(n)
+        n, d = n / scale, d / scale
+        if d < 0:  # orient the normal towards the camera (origin): n . 0 + d > 0
+            n, d = -n, -d
+        angle = math.degrees(math.acos(float(np.clip(n @ up, -1, 1))))
+        if len(idx) >= options.min_inliers and angle <= options.max_angle_deg and d > 0.05:
+            candidates.append((d, n))
+        else:
+            best_other = max(best_other, len(idx))
+        cloud = cloud.select_by_index(idx, invert=True)
+    if not candidates:
+        raise GroundFitError(
+            f"no floor plane found: no plane of at least {options.min_inliers} points lies "
+            f"within {options.max_angle_deg:g} deg of up below the camera (largest other plane: "
+            f"{best_other} points); is enough floor in view?")
+    d, n = max(candidates, key=lambda c: c[0])
+    n, d, count, rms = _refine(pts, n, d, options)
+    pitch, roll = angles_from_normal(n)
+    return GroundFit(normal=n, offset=d, T_world_from_camera=pose_from_plane(n, d),
+                     camera_height=d, pitch_deg=pitch, roll_deg=roll, inlier_count=count, rms_m=rms)
+
+
+def fit_ground_frames(frames_m, camera: Camera, options: GroundOptions = GroundOptions()) -> GroundFit:
+    """Floor from several depth frames (metres), their points stacked for a steadier fit."""
+    pts = [backproject(f, camera, options.depth_max, options.stride) for f in frames_m]
+    return fit_ground(np.concatenate(pts) if pts else np.zeros((0, 3)), options)
