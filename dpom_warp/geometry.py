@@ -64,7 +64,7 @@ class Camera:
         return (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
                 y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
 
-    def undistort(self, xd, yd, iterations: int = 20):
+    def undistort(self, xd, yd, iterations: int = 50):
         """Inverse of `distort`, by fixed-point iteration (exact to ~1e-12 for lens-like
         distortion within the image)."""
         if self.distortion is None:

@@ -75,8 +75,8 @@ class GroundFit:
         """The pose as written by `dpom-warp fit-ground` (pastable into camera.extrinsics)."""
         return {"T_world_from_camera": [[round(float(x), 9) for x in row]
                                         for row in self.T_world_from_camera],
-                "camera_height": round(self.camera_height, 4),
-                "pitch_deg": round(self.pitch_deg, 3), "roll_deg": round(self.roll_deg, 3),
+                "camera_height": round(float(self.camera_height), 4),
+                "pitch_deg": round(float(self.pitch_deg), 3), "roll_deg": round(float(self.roll_deg), 3),
                 "inlier_count": int(self.inlier_count)}
 
 
@@ -125,25 +125,37 @@ def angles_from_normal(normal: np.ndarray) -> tuple[float, float]:
 
 
 def _refine(points, normal, offset, options: GroundOptions):
-    """Weighted least-squares plane through the points near (normal, offset), three times.
+    """Weighted least squares of the floor on the points near (normal, offset), three times.
 
-    A point's band and weight follow the sensor noise at its depth, sigma(z) = a + b z^2:
-    inliers lie within max(distance_threshold, 3 sigma) of the plane, weights are
-    1 / sigma^2, so far, noisy floor neither drops out nor dominates.
+    Only depth is noisy; a pixel's direction r = (x/z, y/z, 1) is exact. On the plane
+    n . X + d = 0 a point z r satisfies 1/z = -(n . r) / d, which is linear in r, so the
+    plane is the linear regression of 1/z on r, with no error in the regressors (a plain
+    orthogonal fit would tilt the plane towards the rays when noise runs along them).
+    Weights are 1 / var(1/z) = z^4 / sigma(z)^2 with sigma(z) = a + b z^2 taken at the
+    plane's depth z_p, times Tukey's biweight of the depth residual (z - z_p) / (3 sigma)
+    along the ray: things standing on the floor (feet, furniture legs, the foot of a wall)
+    lie just in front of it along grazing rays, and a plain least-squares fit would lean
+    towards them. Only points whose z_p is within depth_max count: a cut or a weight on the
+    measured depth would favour the points that noise brought nearer.
     """
     a, b = options.noise
-    sigma = np.maximum(a + b * points[:, 2] ** 2, 1e-4)
-    band = np.maximum(options.distance_threshold, 3.0 * sigma)
-    for _ in range(3):
-        near = np.abs(points @ normal + offset) < band
+    z = points[:, 2]
+    rays = points / z[:, None]
+    for _ in range(10):
+        ray_dot = rays @ normal
+        with np.errstate(divide="ignore"):
+            plane_depth = np.where(ray_dot < 0, -offset / ray_dot, np.inf)
+        zp = np.minimum(plane_depth, z.max())
+        sigma = a + b * zp ** 2
+        band = np.maximum(0.5 * options.distance_threshold, 3.0 * sigma)
+        near = (np.abs(z - zp) < band) & (plane_depth <= options.depth_max)
         if near.sum() < 3:
             break
-        sel, w = points[near], 1.0 / sigma[near] ** 2
-        c = (w[:, None] * sel).sum(0) / w.sum()
-        _, _, vt = np.linalg.svd(np.sqrt(w)[:, None] * (sel - c), full_matrices=False)
-        n = vt[2] if vt[2] @ normal > 0 else -vt[2]
-        normal, offset = n, -float(n @ c)
-    near = np.abs(points @ normal + offset) < band
+        biweight = (1.0 - ((z[near] - zp[near]) / band[near]) ** 2) ** 2
+        w = np.sqrt(biweight * zp[near] ** 4 / sigma[near] ** 2)
+        coef, *_ = np.linalg.lstsq(rays[near] * w[:, None], w / z[near], rcond=None)
+        scale = np.linalg.norm(coef)  # coef = -n / d
+        normal, offset = -coef / scale, float(1.0 / scale)
     rms = float(np.sqrt(np.mean((points[near] @ normal + offset) ** 2))) if near.any() else float("nan")
     return normal, offset, int(near.sum()), rms
 
@@ -162,11 +174,12 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
     """
     pts = np.asarray(points, dtype=np.float64)
     pts = pts[np.isfinite(pts).all(1)]
-    if len(pts) < options.min_inliers:
+    if (pts[:, 2] <= options.depth_max).sum() < options.min_inliers:
         raise GroundFitError(f"too few depth readings for a floor ({len(pts)} points within "
                              f"{options.depth_max} m, need at least {options.min_inliers})")
     o3d.utility.random.seed(seed)
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts)).voxel_down_sample(options.voxel)
+    in_range = pts[pts[:, 2] <= options.depth_max]
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(in_range)).voxel_down_sample(options.voxel)
     up = np.asarray(options.up, dtype=np.float64)
     up /= np.linalg.norm(up)
     candidates, best_other = [], 0
@@ -199,5 +212,6 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
 
 def fit_ground_frames(frames_m, camera: Camera, options: GroundOptions = GroundOptions()) -> GroundFit:
     """Floor from several depth frames (metres), their points stacked for a steadier fit."""
-    pts = [backproject(f, camera, options.depth_max, options.stride) for f in frames_m]
+    # beyond depth_max too: the refinement selects points by the plane's depth, not theirs
+    pts = [backproject(f, camera, 1.5 * options.depth_max, options.stride) for f in frames_m]
     return fit_ground(np.concatenate(pts) if pts else np.zeros((0, 3)), options)

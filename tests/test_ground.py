@@ -1,0 +1,162 @@
+"""Floor fitting and camera pose from depth (camera.extrinsics: auto, dpom-warp fit-ground)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from dpom_warp.cli import main
+from dpom_warp.config import load_config
+from dpom_warp.geometry import Camera, pose_from_angles
+from dpom_warp.ground import GroundFitError, backproject, fit_ground_frames
+from dpom_warp.synthetic import SceneSpec, _box, _scene, person_mesh, render, room_meshes, sensor_noise
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "five_people"
+
+
+def camera(pose, distortion=None):
+    return Camera(256, 212, 182.5, 182.5, 127.5, 105.5, pose, distortion)
+
+
+def rendered(cam, meshes, rng, frames=2, spec=SceneSpec()):
+    t, _ = render(_scene(meshes)[0], cam)
+    return t, [sensor_noise(t, spec, rng) for _ in range(frames)]
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_recovers_height_pitch_roll_in_furnished_rooms(seed):
+    rng = np.random.default_rng(100 + seed)
+    h, pitch, roll = rng.uniform(1, 3), rng.uniform(0, 35), rng.uniform(-5, 5)
+    true = pose_from_angles(h, pitch, roll, x_m=rng.uniform(-1, 1), y_m=rng.uniform(-0.3, 0.5))
+    room, _ = room_meshes(SceneSpec(furniture=5), rng)
+    people = []
+    for x, y in ((-0.8, 3.0), (0.6, 4.2)):
+        m = person_mesh(1.75, rng.uniform(0, 6.3), rng.uniform(0, 6.3))
+        people.append(m.translate((x, y, 0)))
+    cam = camera(np.eye(4))
+    # ten frames, as from background frames: a camera 3 m high looking level sees floor only
+    # beyond 4.6 m, where one frame's fit scatters by 1.5 cm
+    _, frames = rendered(camera(true), room + people, rng, frames=10)
+    fit = fit_ground_frames(frames, cam)
+    assert fit.camera_height == pytest.approx(h, abs=0.02)
+    assert fit.pitch_deg == pytest.approx(pitch, abs=0.5)
+    assert fit.roll_deg == pytest.approx(roll, abs=0.5)
+    # the fitted pose is the true one seen from the world frame below the camera
+    want = pose_from_angles(h, pitch, roll)
+    np.testing.assert_allclose(fit.T_world_from_camera[:3, :3], want[:3, :3], atol=0.01)
+    np.testing.assert_allclose(fit.T_world_from_camera[:3, 3], [0, 0, h], atol=0.02)
+
+
+def test_large_table_top_does_not_win_over_the_floor():
+    rng = np.random.default_rng(7)
+    room, _ = room_meshes(SceneSpec(furniture=0), rng)
+    table = _box((3.0, 1.6, 0.05), (0.0, 2.2, 0.75))  # fills the lower middle of the view
+    _, frames = rendered(camera(pose_from_angles(1.6, 30, 2)), room + [table], rng)
+    fit = fit_ground_frames(frames, camera(np.eye(4)))
+    assert fit.camera_height == pytest.approx(1.6, abs=0.02)
+
+
+def test_no_floor_in_view_is_an_error_not_a_wrong_plane():
+    rng = np.random.default_rng(3)
+    room, _ = room_meshes(SceneSpec(furniture=0), rng)
+    _, frames = rendered(camera(pose_from_angles(1.5, -25)), room, rng)  # looking up at a wall
+    with pytest.raises(GroundFitError, match="no floor plane found"):
+        fit_ground_frames(frames, camera(np.eye(4)))
+
+
+@pytest.mark.parametrize("distortion", [None, (-0.28, 0.09, 0.001, -0.0015, -0.01)])
+def test_rendered_floor_comes_back_at_zero(distortion):
+    rng = np.random.default_rng(0)
+    pose = pose_from_angles(2.0, 25, 3)
+    cam = camera(pose, distortion)
+    floor = _box((20, 20, 0.1), (0, 5, -0.05))
+    clean, _ = rendered(cam, [floor], rng, frames=0)
+    depth = np.where(np.isfinite(clean), clean, 0.0)
+    pts = backproject(depth, cam, depth_max=8.0)
+    world = pts @ pose[:3, :3].T + pose[:3, 3]
+    assert len(world) > 20000
+    assert np.abs(world[:, 2]).max() < 2e-4  # no half-pixel shift, distortion undone
+    if distortion is not None:  # ignoring the distortion would put the floor elsewhere
+        plain = backproject(depth, camera(pose), depth_max=8.0) @ pose[:3, :3].T + pose[:3, 3]
+        assert np.abs(plain[:, 2]).max() > 0.05
+    # and a fit on the distorted frame finds the true camera
+    fit = fit_ground_frames([sensor_noise(clean, SceneSpec(), rng)], cam)
+    assert fit.camera_height == pytest.approx(2.0, abs=0.02)
+    assert fit.pitch_deg == pytest.approx(25, abs=0.5) and fit.roll_deg == pytest.approx(3, abs=0.5)
+
+
+def test_distortion_roundtrip_and_projection():
+    cam = camera(pose_from_angles(2.0, 20), (-0.28, 0.09, 0.001, -0.0015, -0.01))
+    rays = cam.rays()
+    pts = cam.centre + 3.0 * rays[::7, ::9].reshape(-1, 3)
+    u, v, _ = cam.project(pts)
+    uu, vv = np.meshgrid(np.arange(0, 256, 9), np.arange(0, 212, 7))
+    np.testing.assert_allclose(u, uu.ravel(), atol=1e-6)
+    np.testing.assert_allclose(v, vv.ravel(), atol=1e-6)
+
+
+def test_real_frame_floor_is_plausible():
+    from dpom_warp.config import load_camera_file
+    from dpom_warp.io import read_depth
+
+    cam, scale = load_camera_file(REAL / "camera.yaml")
+    fit = fit_ground_frames([read_depth(REAL / "depth_mm.png", scale, (480, 640))], cam)
+    # a Kinect on a tripod at chest height, looking slightly down the corridor
+    assert 1.1 < fit.camera_height < 1.5
+    assert 0 < fit.pitch_deg < 10 and abs(fit.roll_deg) < 2
+    assert fit.inlier_count > 3000 and fit.rms_m < 0.03
+
+
+def test_fit_ground_cli_writes_a_pose_that_pastes_into_a_config(tmp_path, capsys):
+    out = tmp_path / "pose.yaml"
+    assert main(["fit-ground", str(REAL / "depth_mm.png"), "--camera", str(REAL / "camera.yaml"),
+                 "--output", str(out)]) == 0
+    assert "m above the floor" in capsys.readouterr().out
+    pose = yaml.safe_load(out.read_text())
+    assert set(pose) == {"T_world_from_camera", "camera_height", "pitch_deg", "roll_deg", "inlier_count"}
+    cfg = yaml.safe_load(open("configs/real_five_people.yaml"))
+    cfg["camera"]["extrinsics"] = pose
+    cfg["input"]["frames"] = str(REAL / "depth_mm.png")
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    parsed = load_config(path)
+    assert not parsed.pose_auto
+    assert parsed.camera.centre[2] == pose["T_world_from_camera"][2][3]
+    assert parsed.camera.centre[2] == pytest.approx(pose["camera_height"], abs=1e-4)
+
+
+def test_fit_ground_cli_no_floor_is_one_line_exit_2(tmp_path, capsys):
+    wall = np.full((480, 640), 2000, np.uint16)  # a flat wall 2 m in front: no floor
+    np.save(tmp_path / "wall.npy", wall)
+    assert main(["fit-ground", str(tmp_path / "wall.npy"), "--camera", str(REAL / "camera.yaml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "wall.npy: no floor plane found" in err and len(err.splitlines()) == 1
+
+
+def test_run_with_auto_pose_on_the_real_frame(tmp_path, capsys):
+    cfg = yaml.safe_load(open("configs/real_five_people.yaml"))
+    cfg["input"]["frames"] = str(REAL / "depth_mm.png")
+    cfg["device"] = "cpu"
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "out")]) == 0
+    assert "ground plane from 1 frame: camera 1.2" in capsys.readouterr().out
+    summary = json.load(open(tmp_path / "out" / "summary.json"))
+    assert summary["ground_fit"]["camera_height"] == pytest.approx(1.29, abs=0.05)
+    assert summary["background"] == "floor plane only"
+    rows = (tmp_path / "out" / "detections.csv").read_text().splitlines()[1:]
+    xy = np.array([[float(r.split(",")[1]), float(r.split(",")[2])] for r in rows])
+    assert len(xy) >= 5  # five people stand 1.8 to 3 m away
+    assert ((xy[:, 1] > 1.5) & (xy[:, 1] < 3.2)).sum() >= 5
+    assert (tmp_path / "out" / "images" / "depth_mm.png").stat().st_size > 20_000
+
+
+def test_auto_pose_with_synthetic_scene_is_refused(tmp_path):
+    cfg = yaml.safe_load(open("configs/demo_people.yaml"))
+    cfg["camera"]["extrinsics"] = "auto"
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    with pytest.raises(Exception, match="synthetic: rendering needs a camera pose"):
+        load_config(path)
