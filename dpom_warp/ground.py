@@ -125,7 +125,9 @@ def angles_from_normal(normal: np.ndarray) -> tuple[float, float]:
 
 
 def _refine(points, normal, offset, options: GroundOptions):
-    """Weighted least squares of the floor on the points near (normal, offset), three times.
+    """Weighted least squares of the floor on the points near (normal, offset), iterated to
+    its fixed point and rounded to 1e-10, so that the slightly different planes Open3D's
+    multithreaded RANSAC returns from run to run give the same pose bit for bit.
 
     Only depth is noisy; a pixel's direction r = (x/z, y/z, 1) is exact. On the plane
     n . X + d = 0 a point z r satisfies 1/z = -(n . r) / d, which is linear in r, so the
@@ -141,7 +143,8 @@ def _refine(points, normal, offset, options: GroundOptions):
     a, b = options.noise
     z = points[:, 2]
     rays = points / z[:, None]
-    for _ in range(10):
+
+    def inliers(normal, offset):
         ray_dot = rays @ normal
         with np.errstate(divide="ignore"):
             plane_depth = np.where(ray_dot < 0, -offset / ray_dot, np.inf)
@@ -149,13 +152,24 @@ def _refine(points, normal, offset, options: GroundOptions):
         sigma = a + b * zp ** 2
         band = np.maximum(0.5 * options.distance_threshold, 3.0 * sigma)
         near = (np.abs(z - zp) < band) & (plane_depth <= options.depth_max)
+        return near, zp[near], sigma[near], band[near]
+
+    for _ in range(100):
+        near, zp, sigma, band = inliers(normal, offset)
         if near.sum() < 3:
             break
-        biweight = (1.0 - ((z[near] - zp[near]) / band[near]) ** 2) ** 2
-        w = np.sqrt(biweight * zp[near] ** 4 / sigma[near] ** 2)
+        biweight = (1.0 - ((z[near] - zp) / band) ** 2) ** 2
+        w = np.sqrt(biweight * zp ** 4 / sigma ** 2)
         coef, *_ = np.linalg.lstsq(rays[near] * w[:, None], w / z[near], rcond=None)
         scale = np.linalg.norm(coef)  # coef = -n / d
+        previous = normal, offset
         normal, offset = -coef / scale, float(1.0 / scale)
+        if np.abs(normal - previous[0]).max() < 1e-13 and abs(offset - previous[1]) < 1e-13:
+            break
+    normal = np.round(normal, 10)
+    normal /= np.linalg.norm(normal)
+    offset = round(offset, 10)
+    near = inliers(normal, offset)[0]
     rms = float(np.sqrt(np.mean((points[near] @ normal + offset) ** 2))) if near.any() else float("nan")
     return normal, offset, int(near.sum()), rms
 

@@ -38,6 +38,7 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
     Raises:
         InputError: naming the frames, when no floor plane is found in them.
     """
+    t = time.perf_counter()
     depths = [read_depth(f, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
               for f in files]
     try:
@@ -49,7 +50,8 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
     log(f"ground plane from {len(files)} {kind}{'s' if len(files) > 1 else ''}: camera "
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
         f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")
-    report = {**fit.report(), "rms_m": fit.rms_m, "frames": [str(f) for f in files]}
+    report = {**fit.report(), "rms_m": fit.rms_m, "frames": [str(f) for f in files],
+              "fit_s": time.perf_counter() - t}
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 
 

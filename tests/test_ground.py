@@ -160,3 +160,34 @@ def test_auto_pose_with_synthetic_scene_is_refused(tmp_path):
     path.write_text(yaml.safe_dump(cfg))
     with pytest.raises(Exception, match="synthetic: rendering needs a camera pose"):
         load_config(path)
+
+
+def test_run_with_auto_pose_from_background_frames(tmp_path, capsys):
+    from test_cli import small_config
+
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "given")]) == 0
+    given = json.load(open(tmp_path / "given" / "summary.json"))
+    cfg = yaml.safe_load(path.read_text())
+    cfg["camera"]["extrinsics"] = "auto"
+    del cfg["synthetic"]  # the frames are rendered; now pretend the pose is unknown
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "auto")]) == 0
+    assert "ground plane from 4 background frames" in capsys.readouterr().out
+    auto = json.load(open(tmp_path / "auto" / "summary.json"))
+    assert auto["ground_fit"]["camera_height"] == pytest.approx(2.2, abs=0.02)
+    assert auto["ground_fit"]["pitch_deg"] == pytest.approx(20.0, abs=0.5)
+    assert auto["ground_fit"]["frames"][0].endswith("background/0000.png")
+    assert auto["scores"]["tp"] >= given["scores"]["tp"] - 1
+
+
+def test_fit_is_repeatable_bit_for_bit():
+    """Open3D's multithreaded RANSAC differs from run to run; the refined pose must not."""
+    from dpom_warp.config import load_camera_file
+    from dpom_warp.io import read_depth
+
+    cam, scale = load_camera_file(REAL / "camera.yaml")
+    depth = read_depth(REAL / "depth_mm.png", scale, (480, 640))
+    poses = [fit_ground_frames([depth], cam).T_world_from_camera for _ in range(4)]
+    for p in poses[1:]:
+        assert np.array_equal(p, poses[0])
