@@ -43,7 +43,7 @@ def run_variant(args):
                         f"evaluation.ground_truth={cache}/ground_truth.json", "output.images=false"]
     cfg = load_config("configs/demo_people.yaml", sets)
     summary = run(cfg, str(Path(out) / slug / ("bg" if background else "floor")), "cpu",
-                  progress=False, log=lambda *_: None)
+                  progress=False, log=lambda *_: None, overwrite=True)
     s = summary["scores"]
     return name, {k: s[k] for k in ("moda", "precision", "recall", "mean_error_m", "n_gt")} | {
         "median_frame_s": summary["timings"]["median_infer_s"],

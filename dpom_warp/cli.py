@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 
 from .config import ConfigError, load_config
@@ -14,14 +15,15 @@ from .io import InputError
 
 
 def _run(args) -> int:
-    from .engine import ListOverflow
     from .pipeline import run
 
+    if args.overwrite and args.resume:
+        raise ConfigError("--overwrite and --resume: expected at most one of them")
     cfg = load_config(args.config, args.set)
-    try:
-        summary = run(cfg, args.output, args.device, progress=not args.no_progress)
-    except ListOverflow as e:
-        raise InputError(str(e)) from None
+    summary = run(cfg, args.output, args.device, progress=not args.no_progress,
+                  strict=args.strict, overwrite=args.overwrite, resume=args.resume)
+    if summary["skipped"]:
+        print(f"{len(summary['skipped'])} frame(s) skipped (reasons in summary.json)")
     t = summary["timings"]
     print(f"{summary['frames']} frames, {summary['detections']} detections; median "
           f"{1000 * t['median_infer_s']:.0f} ms per frame ({t['median_iterations']:.0f} iterations) "
@@ -63,6 +65,10 @@ def _fit_ground(args) -> int:
     return 0
 
 
+def _terminate(signum, frame):
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="dpom-warp", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -73,6 +79,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="override a config value, e.g. --set model.damping=0.2")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--strict", action="store_true", help="a bad frame is fatal instead of skipped")
+    p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty output folder")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run in its output folder, skipping finished frames")
     g = sub.add_parser("fit-ground", help="find the floor and the camera pose from depth frames")
     g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy) of the same camera")
     g.add_argument("--camera", required=True, help="camera YAML: width, height, intrinsics, depth_scale")
@@ -81,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="largest angle between the floor normal and the image's up (degrees)")
     g.add_argument("--depth-max", type=float, default=6.0, help="ignore readings beyond (metres)")
     args = parser.parse_args(argv)
+    signal.signal(signal.SIGTERM, _terminate)  # a kill unwinds like Ctrl-C: no partial files
     try:
         if args.command == "run":
             return _run(args)
@@ -90,7 +101,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("dpom-warp: interrupted", file=sys.stderr)
+        print("dpom-warp: interrupted; finished frames are kept, continue with --resume",
+              file=sys.stderr)
         return 130
     return 1
 

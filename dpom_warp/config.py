@@ -135,6 +135,7 @@ class Output:
 class EngineOptions:
     entries_per_pixel: float = 8.0
     max_entries: int | None = None
+    memory_gb: float | None = 8.0
 
 
 @dataclass
@@ -317,7 +318,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
 
     s = top.section("engine")
     engine = EngineOptions(entries_per_pixel=s.number("entries_per_pixel", 8.0, lo=0, lo_open=True),
-                           max_entries=s.number("max_entries", None, integer=True, lo=1))
+                           max_entries=s.number("max_entries", None, integer=True, lo=1),
+                           memory_gb=s.number("memory_gb", 8.0, lo=0, lo_open=True))
     s.done()
 
     synthetic, cache = None, None

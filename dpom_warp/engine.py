@@ -45,6 +45,18 @@ def pixel_model(params: ModelParams) -> K.PixelModel:
 
 
 INT32_MAX = 2**31 - 1  # list offsets are int32
+ENTRY_BYTES = 4 + 4 + 4 + 8  # location, object depth, Delta, B scratch
+PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32  # ray, depth, count, offset, Delta_bg, background
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6  # rect, normal, plane, area and five accumulators
+
+
+def memory_estimate(n_pixels: int, n_locations: int, entries: int) -> int:
+    """Bytes of device memory the engine holds for lists of `entries` entries."""
+    return n_pixels * PIXEL_BYTES + n_locations * LOCATION_BYTES + entries * ENTRY_BYTES
+
+
+class MemoryBudgetError(ValueError):
+    """The engine's buffers would not fit the memory budget; the message gives the estimate."""
 
 
 class ListOverflow(RuntimeError):
@@ -68,8 +80,10 @@ class Engine:
     """DPOM inference for one camera and grid on one Warp device.
 
     Buffers (per-pixel lists, accumulators) are allocated up front; the list capacity grows
-    (and says so in `grown`) only when a frame needs more entries than it holds, unless
-    `max_entries` caps it, in which case the frame is refused with ListOverflow.
+    (and says so in `grown`) only when a frame needs more entries than it holds, up to
+    `max_entries` and to what `memory_gb` allows; a frame that needs more is refused with
+    ListOverflow, and an engine whose first buffers already exceed the budget is refused
+    with MemoryBudgetError, before anything is allocated.
 
     Args:
         geometry: silhouettes, facing planes and rays (geometry.build_geometry).
@@ -77,15 +91,29 @@ class Engine:
         device: Warp device name ('cpu', 'cuda:0').
         entries_per_pixel: initial list capacity per pixel.
         max_entries: hard cap on the list capacity (None: no cap).
+        memory_gb: memory budget of the engine's buffers, GiB (None: no budget).
     """
 
     def __init__(self, geometry: Geometry, params: ModelParams, device: str = "cpu",
-                 entries_per_pixel: float = 8.0, max_entries: int | None = None):
+                 entries_per_pixel: float = 8.0, max_entries: int | None = None,
+                 memory_gb: float | None = None):
         self.geometry, self.params, self.device = geometry, params, device
         self.height, self.width = geometry.rays.shape[:2]
         self.n_pixels = self.height * self.width
         self.n_locations = len(geometry.rect)
-        self.max_entries = max_entries
+        cap = INT32_MAX if max_entries is None else min(max_entries, INT32_MAX)
+        if memory_gb is not None:
+            fixed = memory_estimate(self.n_pixels, self.n_locations, 0)
+            cap = min(cap, max(0, int((memory_gb * 2**30 - fixed) // ENTRY_BYTES)))
+            first = memory_estimate(self.n_pixels, self.n_locations,
+                                    max(1024, int(entries_per_pixel * self.n_pixels)))
+            if first > memory_gb * 2**30:
+                raise MemoryBudgetError(
+                    f"the engine needs at least {first / 2**30:.2f} GiB for {self.n_locations} "
+                    f"locations and {self.width}x{self.height} pixels "
+                    f"({entries_per_pixel:g} list entries per pixel), above the budget of "
+                    f"{memory_gb:g} GiB")
+        self.max_entries = cap
         self.grown: list[int] = []
         self.pm = pixel_model(params)
         with wp.ScopedDevice(device):
@@ -115,7 +143,7 @@ class Engine:
 
     # -- buffers -------------------------------------------------------------------------
     def _allocate_lists(self, capacity: int):
-        capacity = min(max(1024, capacity), self.max_entries or INT32_MAX, INT32_MAX)
+        capacity = min(max(1024, capacity), self.max_entries)
         with wp.ScopedDevice(self.device):
             self.entry_loc = wp.zeros(capacity, dtype=wp.int32)
             self.entry_mu = wp.zeros(capacity, dtype=wp.float32)
@@ -174,10 +202,11 @@ class Engine:
         wp.utils.array_scan(self.counts, self.offsets, inclusive=False)
         total = int(self.offsets[-1:].numpy()[0]) + int(self.counts[-1:].numpy()[0])
         if total > self.capacity:
-            cap = min(self.max_entries or INT32_MAX, INT32_MAX)
-            if total > cap or total < 0:
-                raise ListOverflow(f"frame needs {total} mask entries, above the cap of {cap} "
-                                   f"(engine.max_entries; coarsen the grid or raise the cap)")
+            if total > self.max_entries or total < 0:
+                raise ListOverflow(
+                    f"frame needs {total} mask entries ({total * ENTRY_BYTES / 2**30:.2f} GiB), "
+                    f"above the cap of {self.max_entries} (engine.max_entries, engine.memory_gb "
+                    f"and the int32 offsets); coarsen the grid or raise the cap")
             self.grown.append(total)
             self._allocate_lists(int(total * 1.25))
         self.counts.zero_()

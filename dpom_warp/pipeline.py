@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 import glob
+import json
 import platform
+import shutil
 import statistics
 import time
 from pathlib import Path
@@ -13,7 +15,7 @@ import numpy as np
 
 from .config import ConfigError, RunConfig
 from .detect import detect
-from .engine import Engine, resolve_device
+from .engine import Engine, ListOverflow, MemoryBudgetError, resolve_device
 from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
 from .ground import GroundFitError, fit_ground_frames
@@ -55,9 +57,86 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 
 
+RUN_STATE = "run.json"
+OUTPUTS = ("maps", "images", "frames", "detections.csv", "summary.json", RUN_STATE)
+
+
+def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> None:
+    """Make `out` ready: refuse a non-empty folder unless overwriting or resuming a run of
+    the same config; remove what an interrupted write left behind."""
+    state = {"config": _jsonable(resolved)}
+    if out.exists() and any(out.iterdir()):
+        if resume:
+            path = out / RUN_STATE
+            try:
+                before = json.loads(path.read_text())
+            except (OSError, json.JSONDecodeError):
+                raise ConfigError(f"--resume: {out} holds no resumable run ({RUN_STATE} missing "
+                                  f"or unreadable)") from None
+            if before != json.loads(json.dumps(state)):
+                diff = _first_difference(before.get("config", {}), state["config"])
+                raise ConfigError(f"--resume: {out} holds a run of another config ({diff}); "
+                                  f"expected the same config, or use --overwrite")
+        elif overwrite:
+            for name in OUTPUTS:
+                target = out / name
+                if target.is_dir():
+                    shutil.rmtree(target)
+                elif target.exists():
+                    target.unlink()
+        else:
+            raise ConfigError(f"output.dir: {out} is not empty; expected an empty or new folder "
+                              f"(use --overwrite to replace its results or --resume to continue)")
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in list(out.glob(".*")) + list(out.glob("*/.*")):  # temporary files of a kill
+        if stale.is_file():
+            stale.unlink()
+    write_json_atomic(out / RUN_STATE, state)
+
+
+def _first_difference(a, b, path=""):
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            if a.get(k) != b.get(k):
+                return _first_difference(a.get(k), b.get(k), f"{path}.{k}" if path else k)
+    return f"{path}: {a!r} then, {b!r} now"
+
+
+def check_frames(frames: list[Path], scale: float, shape, strict: bool) -> tuple[list[Path], list[dict]]:
+    """Read every frame once before any output is written. Returns the good frames and the
+    skipped ones with reasons; with `strict`, or when no frame is good, the first error."""
+    good, skipped = [], []
+    for f in frames:
+        try:
+            depth = read_depth(f, scale, shape)
+            if not np.any(depth > 0):
+                raise InputError(f"{f}: no depth readings (every pixel is 0)")
+            good.append(f)
+        except InputError as e:
+            if strict:
+                raise
+            skipped.append({"frame": f.name, "reason": str(e)})
+    if not good:
+        raise InputError(skipped[0]["reason"] + (f" (none of the {len(frames)} frames is usable)"
+                                                 if len(frames) > 1 else ""))
+    stems = [f.stem for f in good]
+    dup = next((s for s in stems if stems.count(s) > 1), None)
+    if dup:
+        raise ConfigError(f"input.frames: two frames share the name {dup!r} (outputs are named "
+                          f"by it); expected distinct names")
+    return good, skipped
+
+
 def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None,
-        progress: bool = True, log=print) -> dict:
-    """Run DPOM over the configured frames; returns the summary also written to summary.json."""
+        progress: bool = True, log=print, strict: bool = False, overwrite: bool = False,
+        resume: bool = False) -> dict:
+    """Run DPOM over the configured frames; returns the summary also written to summary.json.
+
+    A frame whose file is bad, or whose lists would exceed the memory budget, is reported
+    and skipped (listed in summary.json), unless `strict`. Each frame's outputs (map,
+    picture, then its record in frames/) are written atomically, so an interrupted run
+    leaves whole files and `resume` continues it to the same final files.
+    """
     t_start = time.perf_counter()
     out = Path(output_dir or cfg.output.dir)
     if cfg.synthetic is not None:
@@ -66,89 +145,135 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
         log(f"synthetic scene: {cfg.synthetic.frames} frames in {cfg.synthetic_cache} "
             f"({'checked' if cached else 'generated'} in {time.perf_counter() - t:.1f} s)")
-    frames = expand(cfg.inputs.frames, "input.frames")
-    bg_files = expand(cfg.inputs.background, "input.background") if cfg.inputs.background else []
     shape = (cfg.camera.height, cfg.camera.width)
     scale = cfg.inputs.depth_scale
-    for f in frames + bg_files:  # check every frame before writing anything (kept out of memory)
-        read_depth(f, scale, shape)
+    frames, skipped = check_frames(expand(cfg.inputs.frames, "input.frames"), scale, shape, strict)
+    bg_files = expand(cfg.inputs.background, "input.background") if cfg.inputs.background else []
+    bg_frames = [read_depth(f, scale, shape) for f in bg_files]  # a bad one is fatal
+    for item in skipped:
+        log(f"skipping {item['reason']}")
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
-    camera, ground = cfg.camera, None
-    if cfg.pose_auto:
-        camera, ground = fit_camera_pose(cfg, bg_files or frames[:cfg.ground_frames], log)
-
+    if truth is not None:
+        missing = [f.name for f in frames if f.name not in truth]
+        if missing:
+            raise InputError(f"{cfg.evaluation.ground_truth}: no ground truth for frame {missing[0]}")
     try:
         dev = resolve_device(device or cfg.device)
     except ValueError as e:
         raise ConfigError(str(e)) from None
+    camera, ground = cfg.camera, None
+    if cfg.pose_auto:
+        camera, ground = fit_camera_pose(cfg, bg_files or frames[:cfg.ground_frames], log)
+
     t = time.perf_counter()
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
-    engine = Engine(geometry, cfg.model, dev, cfg.engine.entries_per_pixel, cfg.engine.max_entries)
-    if bg_files:
-        engine.set_background_frames(np.stack([read_depth(f, scale, shape) for f in bg_files]))
+    try:
+        engine = Engine(geometry, cfg.model, dev, cfg.engine.entries_per_pixel,
+                        cfg.engine.max_entries, cfg.engine.memory_gb)
+    except MemoryBudgetError as e:
+        raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
+    if bg_frames:
+        engine.set_background_frames(np.stack(bg_frames))
         background = f"{len(bg_files)} background frames"
     else:
         background = "floor plane only"
+    del bg_frames
     t_setup = time.perf_counter() - t
+    prepare_output(out, cfg.resolved, overwrite, resume)
     log(f"device {dev}; {geometry.locations.shape[0]} locations {cfg.grid.shape}; "
         f"{len(frames)} frames; background: {background}")
 
-    rows, per_frame, det_xy = [CSV_HEADER], [], {}
-    iterator = frames
+    records = {}
+    todo = []
+    for f in frames:
+        record = out / "frames" / f"{f.stem}.json"
+        if resume and record.exists():
+            records[f.name] = json.loads(record.read_text())
+        else:
+            todo.append(f)
+    if resume:
+        log(f"resuming: {len(records)} frames already done, {len(todo)} to go")
+    iterator = todo
     if progress:
         from tqdm import tqdm
-        iterator = tqdm(frames, unit="frame", desc="dpom", leave=False)
+        iterator = tqdm(todo, unit="frame", desc="dpom", leave=False)
     for f in iterator:
-        t_read = time.perf_counter()
-        depth = read_depth(f, scale, shape)
-        t0 = time.perf_counter()
-        res = engine.infer(depth)
-        t1 = time.perf_counter()
-        rho_map = res.rho_star.reshape(cfg.grid.shape)
-        dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
-                      cfg.detection.nms_radius)
-        t2 = time.perf_counter()
-        write_npy_atomic(out / "maps" / f"{f.stem}.npy", rho_map.astype(np.float32))
-        if cfg.output.images:
-            from .render import frame_picture
-            frame_picture(out / "images" / f"{f.stem}.png", depth, rho_map, cfg.grid, dets,
-                          geometry.centre[:2], truth.get(f.name) if truth else None, f.name)
-        t3 = time.perf_counter()
-        rows += [f"{f.name},{d.x:.4f},{d.y:.4f},{d.z:.4f},{d.rho:.6f},{d.box[0]},{d.box[1]},"
-                 f"{d.box[2]},{d.box[3]}" for d in dets]
-        det_xy[f.name] = np.array([[d.x, d.y] for d in dets]).reshape(-1, 2)
-        per_frame.append({"frame": f.name, "detections": len(dets), "iterations": res.iterations,
-                          "entries": res.entries, "read_s": t0 - t_read, "infer_s": t1 - t0, "detect_s": t2 - t1,
-                          "write_s": t3 - t2, **{f"engine_{k}": v for k, v in res.timings.items()}})
+        try:
+            records[f.name] = process_frame(cfg, engine, geometry, f, out, truth)
+        except (InputError, ListOverflow) as e:
+            if strict:
+                raise InputError(str(e) if isinstance(e, InputError) else f"{f}: {e}") from None
+            reason = str(e) if isinstance(e, InputError) else f"{f}: {e}"
+            skipped.append({"frame": f.name, "reason": reason})
+            log(f"skipping {reason}")
+    done = [f for f in frames if f.name in records]
+    summary = summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground,
+                        engine.grown)
+    summary["timings"]["setup_s"] = t_setup
+    summary["timings"]["total_s"] = time.perf_counter() - t_start
+    write_json_atomic(out / "summary.json", _jsonable(summary))
+    return summary
+
+
+def process_frame(cfg: RunConfig, engine: Engine, geometry, f: Path, out: Path, truth) -> dict:
+    """Infer one frame and write its map, picture and record (the record last: a frame is
+    done when its record exists)."""
+    t_read = time.perf_counter()
+    depth = read_depth(f, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
+    t0 = time.perf_counter()
+    res = engine.infer(depth)
+    t1 = time.perf_counter()
+    rho_map = res.rho_star.reshape(cfg.grid.shape)
+    dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
+                  cfg.detection.nms_radius)
+    t2 = time.perf_counter()
+    write_npy_atomic(out / "maps" / f"{f.stem}.npy", rho_map.astype(np.float32))
+    if cfg.output.images:
+        from .render import frame_picture
+        frame_picture(out / "images" / f"{f.stem}.png", depth, rho_map, cfg.grid, dets,
+                      geometry.centre[:2], truth.get(f.name) if truth else None, f.name)
+    t3 = time.perf_counter()
+    record = {
+        "frame": f.name,
+        "rows": [f"{f.name},{d.x:.4f},{d.y:.4f},{d.z:.4f},{d.rho:.6f},{d.box[0]},{d.box[1]},"
+                 f"{d.box[2]},{d.box[3]}" for d in dets],
+        "xy": [[d.x, d.y] for d in dets],
+        "stats": {"frame": f.name, "detections": len(dets), "iterations": res.iterations,
+                  "entries": res.entries, "read_s": t0 - t_read, "infer_s": t1 - t0,
+                  "detect_s": t2 - t1, "write_s": t3 - t2,
+                  **{f"engine_{k}": v for k, v in res.timings.items()}},
+    }
+    write_json_atomic(out / "frames" / f"{f.stem}.json", record)
+    return record
+
+
+def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground, grown):
+    """detections.csv and the summary, from the frame records in frame order."""
+    rows = [CSV_HEADER] + [r for f in done for r in records[f.name]["rows"]]
     write_text_atomic(out / "detections.csv", "\n".join(rows) + "\n")
+    per_frame = [records[f.name]["stats"] for f in done]
 
     def median(key):
-        return statistics.median(p[key] for p in per_frame)
+        return statistics.median(p[key] for p in per_frame) if per_frame else float("nan")
 
     summary = {
         "config": cfg.resolved,
         "device": dev, "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
-        "background": background, "ground_fit": ground, "frames": len(frames),
-        "detections": sum(p["detections"] for p in per_frame),
-        "list_capacity_growth": engine.grown,
-        "timings": {"setup_s": t_setup, "total_s": time.perf_counter() - t_start,
-                    "median_read_s": median("read_s"), "median_infer_s": median("infer_s"),
+        "background": background, "ground_fit": ground, "frames": len(done),
+        "skipped": skipped, "detections": sum(p["detections"] for p in per_frame),
+        "list_capacity_growth": grown,
+        "timings": {"median_read_s": median("read_s"), "median_infer_s": median("infer_s"),
                     "median_lists_s": median("engine_lists_s"),
                     "median_iterations_s": median("engine_iterations_s"),
                     "median_detect_s": median("detect_s"), "median_write_s": median("write_s"),
                     "median_iterations": median("iterations")},
         "per_frame": per_frame,
     }
-    if truth is not None:
-        missing = [f.name for f in frames if f.name not in truth]
-        if missing:
-            raise InputError(f"{cfg.evaluation.ground_truth}: no ground truth for frame {missing[0]}")
-        scores = score_frames(det_xy, {f.name: truth[f.name] for f in frames},
-                              cfg.evaluation.match_distance, cfg.evaluation.hidden_visibility,
-                              geometry.centre[:2])
-        summary["scores"] = scores
-    summary["timings"]["total_s"] = time.perf_counter() - t_start
-    write_json_atomic(out / "summary.json", _jsonable(summary))
+    if truth is not None and done:
+        det_xy = {f.name: np.array(records[f.name]["xy"]).reshape(-1, 2) for f in done}
+        summary["scores"] = score_frames(det_xy, {f.name: truth[f.name] for f in done},
+                                         cfg.evaluation.match_distance,
+                                         cfg.evaluation.hidden_visibility, geometry.centre[:2])
     return summary
 
 

@@ -1,0 +1,267 @@
+"""Bad input, faults and long runs: each case gives one line naming the key or file, exit
+code 2, and no output; bad frames in a sequence are skipped and reported; interrupted runs
+resume to the same files; identical runs give identical bytes."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from PIL import Image
+
+from dpom_warp.cli import main
+from dpom_warp.io import write_depth_png
+
+from test_cli import small_config
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "five_people"
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """A rendered small sequence (6 frames) and its config, shared by the tests here."""
+    tmp = tmp_path_factory.mktemp("scene")
+    path = small_config(tmp)
+    cfg = yaml.safe_load(path.read_text())
+    cfg["synthetic"]["frames"] = 6
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp / "first")]) == 0
+    del cfg["synthetic"]  # the frames now exist; tests copy and damage them
+    return tmp, cfg
+
+
+def write_config(tmp_path, cfg, **sets):
+    cfg = json.loads(json.dumps(cfg))
+    for key, value in sets.items():
+        node = cfg
+        *parents, last = key.split("__")
+        for p in parents:
+            node = node.setdefault(p, {})
+        if value is DELETE:
+            node.pop(last, None)
+        else:
+            node[last] = value
+    cfg["output"]["dir"] = str(tmp_path / "out")
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+DELETE = object()
+
+
+def frames_with(tmp_path, scene_dir, bad_name, make):
+    """A copy of the frames folder with frame `bad_name` replaced by what `make` writes."""
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for f in sorted((scene_dir / "scene" / "frames").glob("*.png")):
+        (folder / f.name).write_bytes(f.read_bytes())
+    target = folder / bad_name
+    target.unlink(missing_ok=True)
+    make(target)
+    return folder
+
+
+def png8(p):
+    Image.fromarray(np.zeros((106, 128), np.uint8)).save(p)
+
+
+def png_rgb(p):
+    Image.fromarray(np.zeros((106, 128, 3), np.uint8)).save(p)
+
+
+def truncated(p):
+    src = sorted(p.parent.glob("*.png"))[0].read_bytes()
+    p.write_bytes(src[: len(src) // 3])
+
+
+def npy(values):
+    def make(p):
+        np.save(p.with_suffix(".npy"), values)
+    return make
+
+
+CONFIG_CASES = [
+    ({"grid__x": [1.0, -1.0, 0.2]}, "grid.x: expected min < max in [min, max, step], found 1.0 >= -1.0"),
+    ({"grid__y": [1.0, 6.0, -0.2]}, "grid.y: expected a step > 0 in [min, max, step], found -0.2"),
+    ({"grid__y": [1.0, 6.0, 0]}, "grid.y: expected a step > 0 in [min, max, step], found 0"),
+    ({"object__width": 8.0}, "object.width: expected at most the grid's x extent 5 m, found 8"),
+    ({"detection__threshold": 1.2}, "detection.threshold: expected a value < 1, found 1.2"),
+    ({"detection__threshold": 0}, "detection.threshold: expected a value > 0, found 0"),
+    ({"model__damping": "fast"}, "model.damping: expected a number, found 'fast'"),
+    ({"model__iterations": 10}, "model.iterations: unknown key"),
+    ({"camera__lens": "wide"}, "camera.lens: unknown key"),
+    ({"model__sensor_noise": [0.01]}, "model.sensor_noise: expected a list of 2 numbers"),
+    ({"model__sensor_noise": [-0.01, 0.001]}, "model.sensor_noise: expected [a, b] >= 0"),
+    ({"model__damping": 0.5, "model__damping_max": 0.3}, "model.damping_max: expected at least model.damping"),
+    ({"camera__intrinsics__fx": DELETE}, "camera.intrinsics.fx: required key is missing"),
+    ({"camera__intrinsics__cx": 400}, "camera.intrinsics.cx: expected a value <= 128, found 400"),
+    ({"camera__width": 160}, "expected 160x106 pixels (camera.width x camera.height), found 128x106"),
+    ({"camera__extrinsics": "guess"}, "camera.extrinsics: expected auto, {T_world_from_camera: 4x4}"),
+    ({"camera__extrinsics": {"T_world_from_camera": [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}},
+     "camera.extrinsics.T_world_from_camera: expected a rigid transform"),
+    ({"camera__ground__up": [0, 0, 0]}, "camera.ground.up: expected a non-zero direction"),
+    ({"device": "gpu"}, "device: expected auto, cpu, cuda or cuda:N, found 'gpu'"),
+    ({"engine__memory_gb": 0.001}, "engine.memory_gb: the engine needs at least"),
+    ({"input__frames": "/nonexistent/*.png"}, "input.frames: no files match '/nonexistent/*.png'"),
+    ({"evaluation__ground_truth": "/nonexistent/gt.json"}, "/nonexistent/gt.json: no such ground-truth file"),
+]
+
+
+@pytest.mark.parametrize("sets, message", CONFIG_CASES, ids=[m[:40] for _, m in CONFIG_CASES])
+def test_bad_config(tmp_path, capsys, scene, sets, message):
+    path = write_config(tmp_path, scene[1], **sets)
+    assert main(["run", str(path), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err
+    assert err.startswith("dpom-warp: error: ") and len(err.splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_yaml_syntax_and_top_level(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("device: cpu\ngrid: [unclosed\n")
+    assert main(["run", str(bad)]) == 2
+    assert "bad.yaml: not valid YAML at line" in capsys.readouterr().err
+    bad.write_text("- just\n- a list\n")
+    assert main(["run", str(bad)]) == 2
+    assert "expected a YAML mapping at the top, found list" in capsys.readouterr().err
+    assert main(["run", str(tmp_path / "missing.yaml")]) == 2
+    assert "missing.yaml: no such config file" in capsys.readouterr().err
+
+
+FRAME_CASES = [
+    ("0002.png", lambda p: p.write_bytes(b""), "0002.png: not a readable image"),
+    ("0002.png", truncated, "0002.png: not a readable image"),
+    ("0002.png", png8, "0002.png: expected a single-channel 16-bit depth PNG, found mode L"),
+    ("0002.png", png_rgb, "0002.png: expected a single-channel 16-bit depth PNG, found mode RGB"),
+    ("0002.png", lambda p: write_depth_png(p, np.ones((50, 60))), "0002.png: expected 128x106 pixels"),
+    ("0002.png", lambda p: write_depth_png(p, np.zeros((106, 128))), "0002.png: no depth readings"),
+    ("0002.npy", npy(np.full((106, 128), np.nan)), "0002.npy: depth has NaN or infinite values"),
+    ("0002.npy", npy(np.full((106, 128), np.inf)), "0002.npy: depth has NaN or infinite values"),
+    ("0002.npy", npy(-np.ones((106, 128))), "0002.npy: depth has negative values"),
+]
+
+
+@pytest.mark.parametrize("name, make, message", FRAME_CASES, ids=[m for *_, m in FRAME_CASES])
+def test_bad_frame_is_skipped_or_fatal_with_strict(tmp_path, capsys, scene, name, make, message):
+    folder = frames_with(tmp_path, scene[0], "0002.png", lambda p: None)
+    make(folder / name)
+    path = write_config(tmp_path, scene[1], input__frames=f"{folder}/*", evaluation__ground_truth=None)
+    assert main(["run", str(path), "--no-progress", "--strict"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+    assert main(["run", str(path), "--no-progress"]) == 0
+    assert "1 frame(s) skipped" in capsys.readouterr().out
+    summary = json.load(open(tmp_path / "out" / "summary.json"))
+    assert summary["frames"] == 5 and len(summary["skipped"]) == 1
+    assert summary["skipped"][0]["frame"] == name and message in summary["skipped"][0]["reason"]
+    assert not (tmp_path / "out" / "maps" / "0002.npy").exists()
+
+
+def test_every_frame_bad_is_an_error(tmp_path, capsys, scene):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in range(3):
+        png8(folder / f"{i}.png")
+    path = write_config(tmp_path, scene[1], input__frames=f"{folder}/*.png", evaluation__ground_truth=None)
+    assert main(["run", str(path), "--no-progress"]) == 2
+    assert "(none of the 3 frames is usable)" in capsys.readouterr().err
+
+
+def test_no_floor_with_auto_pose_names_the_frame(tmp_path, capsys, scene):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    write_depth_png(folder / "wall.png", np.full((106, 128), 2.0))
+    path = write_config(tmp_path, scene[1], input__frames=f"{folder}/*.png", input__background=None,
+                        camera__extrinsics="auto", evaluation__ground_truth=None)
+    assert main(["run", str(path), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "wall.png: no floor plane found" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_non_empty_output_needs_overwrite_or_resume(tmp_path, capsys, scene):
+    path = write_config(tmp_path, scene[1])
+    assert main(["run", str(path), "--no-progress"]) == 0
+    assert main(["run", str(path), "--no-progress"]) == 2
+    assert "is not empty; expected an empty or new folder (use --overwrite" in capsys.readouterr().err
+    (tmp_path / "out" / "maps" / "0000.npy").write_bytes(b"garbage")
+    assert main(["run", str(path), "--no-progress", "--overwrite"]) == 0
+    assert np.load(tmp_path / "out" / "maps" / "0000.npy").shape == (28, 25)
+    assert main(["run", str(path), "--no-progress", "--overwrite", "--resume"]) == 2
+    other = write_config(tmp_path, scene[1], detection__threshold=0.7)
+    assert main(["run", str(other), "--no-progress", "--resume"]) == 2
+    assert "holds a run of another config (detection.threshold: 0.5 then, 0.7 now)" in capsys.readouterr().err
+
+
+def test_identical_runs_give_identical_bytes(tmp_path, scene):
+    path = write_config(tmp_path, scene[1])
+    outs = []
+    for name in ("a", "b"):
+        assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / name)]) == 0
+        outs.append(tmp_path / name)
+    a, b = outs
+    assert (a / "detections.csv").read_bytes() == (b / "detections.csv").read_bytes()
+    maps = sorted(p.name for p in (a / "maps").iterdir())
+    assert len(maps) == 6
+    for m in maps:
+        assert (a / "maps" / m).read_bytes() == (b / "maps" / m).read_bytes()
+
+
+def test_interrupted_run_resumes_to_the_same_files(tmp_path, scene, monkeypatch, capsys):
+    from dpom_warp import pipeline
+
+    path = write_config(tmp_path, scene[1])
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "whole")]) == 0
+    real = pipeline.process_frame
+    calls = []
+
+    def interrupted(*args, **kwargs):
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "process_frame", interrupted)
+    assert main(["run", str(path), "--no-progress"]) == 130
+    assert "continue with --resume" in capsys.readouterr().err
+    out = tmp_path / "out"
+    assert len(list((out / "frames").glob("*.json"))) == 3 and not (out / "detections.csv").exists()
+    monkeypatch.setattr(pipeline, "process_frame", real)
+    assert main(["run", str(path), "--no-progress", "--resume"]) == 0
+    assert "resuming: 3 frames already done, 3 to go" in capsys.readouterr().out
+    whole = tmp_path / "whole"
+    assert (out / "detections.csv").read_bytes() == (whole / "detections.csv").read_bytes()
+    for m in (whole / "maps").iterdir():
+        assert (out / "maps" / m.name).read_bytes() == m.read_bytes()
+    a, b = (json.load(open(d / "summary.json")) for d in (out, whole))
+    assert a["scores"] == b["scores"] and a["frames"] == b["frames"] == 6
+
+
+def test_killed_run_leaves_whole_files_and_resumes(tmp_path, scene):
+    path = write_config(tmp_path, scene[1])
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "dpom_warp.cli", "run", str(path), "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not list((out / "frames").glob("*.json")) and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    if proc.returncode == 0:
+        pytest.skip("the run finished before the signal arrived")
+    assert proc.returncode == 130, err
+    assert not [p for p in out.rglob(".*") if p.is_file()]  # no temporary files left
+    for m in (out / "maps").glob("*.npy"):
+        assert np.load(m).shape == (28, 25)  # every written map is whole
+    assert main(["run", str(path), "--no-progress", "--resume"]) == 0
+    assert len(list((out / "maps").glob("*.npy"))) == 6
