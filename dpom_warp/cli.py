@@ -2,6 +2,7 @@
 
   dpom-warp run CONFIG [--output DIR] [--device D] [--set key.path=value ...]
   dpom-warp fit-ground DEPTH... --camera CAMERA.yaml [--output POSE.yaml]
+  dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
 """
 
 from __future__ import annotations
@@ -65,6 +66,28 @@ def _fit_ground(args) -> int:
     return 0
 
 
+def _eval(args) -> int:
+    from pathlib import Path
+
+    from .evaluate import evaluate_runs, markdown_table
+    from .io import write_json_atomic
+    from .pipeline import _jsonable
+
+    results = evaluate_runs([args.run] + args.compare, args.ground_truth, args.hidden_visibility,
+                            args.min_rho)
+    out = Path(args.output) if args.output else (Path(args.run) if Path(args.run).is_dir()
+                                                  else Path(args.run).parent)
+    write_json_atomic(out / "eval.json", _jsonable(results))
+    print(markdown_table(results))
+    print(f"\ncurves in {out / 'eval.json'}")
+    if args.plots:
+        from .plots import write_figures
+
+        made = write_figures(results, out / "plots")
+        print(f"figures: {', '.join(str(out / 'plots' / m) for m in made)}")
+    return 0
+
+
 def _terminate(signum, frame):
     raise KeyboardInterrupt
 
@@ -90,6 +113,18 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--max-angle", type=float, default=45.0,
                    help="largest angle between the floor normal and the image's up (degrees)")
     g.add_argument("--depth-max", type=float, default=6.0, help="ignore readings beyond (metres)")
+    e = sub.add_parser("eval", help="score runs (or detection CSVs) against ground truth: MODA "
+                                     "curves, precision-recall, plots")
+    e.add_argument("run", help="a dpom-warp run folder, or a detections CSV")
+    e.add_argument("--ground-truth", help="ground-truth JSON (default: the run's evaluation.ground_truth)")
+    e.add_argument("--compare", nargs="+", default=[], metavar="RUN_OR_CSV",
+                   help="more run folders or detections CSVs on the same plots and table")
+    e.add_argument("--plots", action="store_true", help="write PNG figures into OUTPUT/plots")
+    e.add_argument("--output", help="where eval.json and plots go (default: the run folder)")
+    e.add_argument("--hidden-visibility", type=float, default=0.1,
+                   help="people less visible than this are not penalised in the second protocol")
+    e.add_argument("--min-rho", type=float, default=0.05,
+                   help="lowest rho* re-detected from the maps for the threshold sweep")
     args = parser.parse_args(argv)
     signal.signal(signal.SIGTERM, _terminate)  # a kill unwinds like Ctrl-C: no partial files
     try:
@@ -97,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
             return _run(args)
         if args.command == "fit-ground":
             return _fit_ground(args)
+        if args.command == "eval":
+            return _eval(args)
     except (ConfigError, InputError) as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 2

@@ -116,6 +116,7 @@ class Evaluation:
     ground_truth: str | None = None
     match_distance: float = 0.5
     hidden_visibility: float = 0.1
+    plots: bool = False
 
 
 @dataclass(frozen=True)
@@ -248,6 +249,9 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         depth_max=g.number("depth_max", d.depth_max, lo=0, lo_open=True),
         min_inliers=g.number("min_inliers", d.min_inliers, integer=True, lo=3),
         stride=g.number("stride", d.stride, integer=True, lo=1),
+        max_planes=g.number("max_planes", d.max_planes, integer=True, lo=1),
+        voxel=g.number("voxel", d.voxel, lo=0, lo_open=True),
+        noise=g.numbers("noise", 2, d.noise),
     )
     ground_frames = g.number("frames", 5, integer=True, lo=1)
     if np.linalg.norm(ground.up) == 0:
@@ -309,7 +313,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     s = top.section("evaluation")
     evaluation = Evaluation(ground_truth=s.string("ground_truth", None, nullable=True),
                             match_distance=s.number("match_distance", 0.5, lo=0, lo_open=True),
-                            hidden_visibility=s.number("hidden_visibility", 0.1, lo=0, hi=1))
+                            hidden_visibility=s.number("hidden_visibility", 0.1, lo=0, hi=1),
+                            plots=s.boolean("plots", False))
     s.done()
 
     s = top.section("output")

@@ -11,15 +11,35 @@ from scipy.optimize import linear_sum_assignment
 from .io import InputError
 
 
+def assign(cost: np.ndarray, gate: float) -> list[tuple[int, int]]:
+    """Pairs (row, column) of a minimum-total-cost assignment (Hungarian), keeping only pairs
+    whose cost is at most `gate`; pairs above the gate never displace admissible ones."""
+    if cost.size == 0:
+        return []
+    big = 1e6 + 10.0 * float(np.abs(cost[np.isfinite(cost)]).max(initial=0.0))
+    rows, cols = linear_sum_assignment(np.where(cost <= gate, cost, big))
+    return [(int(r), int(c)) for r, c in zip(rows, cols) if cost[r, c] <= gate]
+
+
 def match(det_xy: np.ndarray, gt_xy: np.ndarray, max_distance: float) -> list[tuple[int, int]]:
     """Pairs (detection, ground truth) of a minimum-total-distance assignment, each pair closer
     than `max_distance` (ground-plane metres)."""
     if len(det_xy) == 0 or len(gt_xy) == 0:
         return []
-    d = np.linalg.norm(det_xy[:, None, :] - gt_xy[None, :, :], axis=2)
-    big = 1e6
-    rows, cols = linear_sum_assignment(np.where(d <= max_distance, d, big))
-    return [(int(r), int(c)) for r, c in zip(rows, cols) if d[r, c] <= max_distance]
+    return assign(np.linalg.norm(det_xy[:, None, :] - gt_xy[None, :, :], axis=2), max_distance)
+
+
+def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n, m) intersection over union of inclusive pixel boxes u0, v0, u1, v1."""
+    a = np.asarray(a, float).reshape(-1, 4)
+    b = np.asarray(b, float).reshape(-1, 4)
+    iw = np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0]) + 1
+    ih = np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1]) + 1
+    inter = np.clip(iw, 0, None) * np.clip(ih, 0, None)
+    area_a = (a[:, 2] - a[:, 0] + 1) * (a[:, 3] - a[:, 1] + 1)
+    area_b = (b[:, 2] - b[:, 0] + 1) * (b[:, 3] - b[:, 1] + 1)
+    union = area_a[:, None] + area_b[None, :] - inter
+    return np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)
 
 
 def score_frames(detections: dict[str, np.ndarray], truth: dict[str, list[dict]],
@@ -100,3 +120,254 @@ def load_ground_truth(path: str | Path) -> dict[str, list[dict]]:
                 raise InputError(f"{path}: frame {item['frame']}: expected objects with numeric x and y")
         out[str(item["frame"])] = item["objects"]
     return out
+
+
+# ---------------------------------------------------------------------------------------
+# Curves over thresholds: `dpom-warp eval`
+# ---------------------------------------------------------------------------------------
+
+DISTANCES = tuple(round(0.1 * i, 1) for i in range(1, 11))  # metres
+OVERLAPS = tuple(round(0.1 * i, 1) for i in range(1, 10))  # IoU
+
+
+class Detections:
+    """Scored detections of a sequence: frame name -> (n, 7) array x, y, rho, u0, v0, u1, v1."""
+
+    def __init__(self, name: str, frames: dict[str, np.ndarray]):
+        self.name = name
+        self.frames = {k: np.asarray(v, float).reshape(-1, 7) for k, v in frames.items()}
+
+    def at(self, frame: str, threshold: float) -> np.ndarray:
+        d = self.frames.get(frame, np.zeros((0, 7)))
+        return d[d[:, 2] >= threshold]
+
+    def scores(self) -> np.ndarray:
+        return np.concatenate([d[:, 2] for d in self.frames.values()] + [np.zeros(0)])
+
+    @property
+    def has_boxes(self) -> bool:
+        return all(np.all(d[:, 3:] >= 0) for d in self.frames.values())
+
+
+def counts(dets: Detections, truth: dict[str, list[dict]], threshold: float, plane: str,
+           gate: float, hidden_visibility: float = 0.0, penalise_hidden: bool = True) -> dict:
+    """CLEAR counts over a sequence at one detection threshold.
+
+    Args:
+        plane: 'ground' (match x, y within `gate` metres) or 'image' (match boxes with IoU at
+            least `gate`).
+        hidden_visibility, penalise_hidden: with penalise_hidden False, ground truth less
+            visible than hidden_visibility is left out: missing it is no error, and a
+            detection matched to it is neither right nor wrong.
+
+    Returns:
+        dict with tp, fp, fn, n_gt, moda, modp (mean overlap of matches: 1 - d / gate on the
+        ground, IoU in the image), precision, recall.
+    """
+    tp = fp = fn = n_gt = 0
+    overlap = 0.0
+    for frame, objs in truth.items():
+        det = dets.at(frame, threshold)
+        hidden = np.array([(not penalise_hidden) and o.get("visibility", 1.0) < hidden_visibility
+                           for o in objs], bool)
+        if plane == "ground":
+            gt = np.array([[o["x"], o["y"]] for o in objs], float).reshape(-1, 2)
+            cost = np.linalg.norm(det[:, None, :2] - gt[None, :, :], axis=2)
+            pairs = assign(cost, gate)
+            quality = [1.0 - cost[d, g] / gate for d, g in pairs]
+        else:
+            gt = np.array([o["bbox"] for o in objs], float).reshape(-1, 4)
+            iou = box_iou(det[:, 3:], gt)
+            pairs = assign(1.0 - iou, 1.0 - gate + 1e-12)
+            quality = [iou[d, g] for d, g in pairs]
+        on_hidden = sum(1 for _, g in pairs if hidden[g])
+        tp += len(pairs) - on_hidden
+        overlap += sum(q for q, (_, g) in zip(quality, pairs) if not hidden[g])
+        fp += len(det) - len(pairs)
+        matched = {g for _, g in pairs}
+        fn += sum(1 for g in range(len(gt)) if g not in matched and not hidden[g])
+        n_gt += int((~hidden).sum())
+    return {"threshold": threshold, "tp": tp, "fp": fp, "fn": fn, "n_gt": n_gt,
+            "moda": 1.0 - (fp + fn) / n_gt if n_gt else float("nan"),
+            "modp": overlap / tp if tp else float("nan"),
+            "precision": tp / (tp + fp) if tp + fp else float("nan"),
+            "recall": tp / n_gt if n_gt else float("nan")}
+
+
+def detection_thresholds(dets: Detections, n: int = 60) -> np.ndarray:
+    """Candidate detection thresholds: quantiles of the detections' scores (at most n)."""
+    s = np.unique(dets.scores())
+    if len(s) <= n:
+        return s
+    return np.unique(np.quantile(s, np.linspace(0, 1, n)))
+
+
+def moda_curve(dets, truth, plane, gates, hidden_visibility, penalise_hidden):
+    """MODA (with MODP, precision, recall) per gate, each at its best detection threshold."""
+    ths = detection_thresholds(dets)
+    curve = []
+    for gate in gates:
+        best = None
+        for t in ths:
+            c = counts(dets, truth, float(t), plane, gate, hidden_visibility, penalise_hidden)
+            if best is None or c["moda"] > best["moda"]:
+                best = c
+        curve.append({"gate": gate, **(best or counts(dets, truth, 1.1, plane, gate,
+                                                       hidden_visibility, penalise_hidden))})
+    return curve
+
+
+def pr_curve(dets, truth, plane, gate, hidden_visibility, penalise_hidden):
+    """Precision and recall at every detection threshold (high to low), and the average
+    precision (area under the precision envelope, all points)."""
+    points = [counts(dets, truth, float(t), plane, gate, hidden_visibility, penalise_hidden)
+              for t in np.unique(dets.scores())[::-1]]
+    points = [p for p in points if p["tp"] + p["fp"] > 0]
+    if not points or not points[0]["n_gt"]:
+        return {"points": [], "ap": float("nan")}
+    recall = np.array([0.0] + [p["recall"] for p in points])
+    precision = np.array([1.0] + [p["precision"] for p in points])
+    envelope = np.maximum.accumulate(precision[::-1])[::-1]
+    ap = float(np.sum((recall[1:] - recall[:-1]) * envelope[1:]))
+    return {"points": [{"threshold": p["threshold"], "precision": p["precision"],
+                        "recall": p["recall"]} for p in points], "ap": ap}
+
+
+def evaluate(dets: Detections, truth: dict[str, list[dict]], hidden_visibility: float = 0.1,
+             pr_distance: float = 0.5, pr_overlap: float = 0.4) -> dict:
+    """All curves of the paper for one detector, under both protocols."""
+    frames = {k: v for k, v in truth.items()}
+    image = dets.has_boxes and all("bbox" in o for objs in frames.values() for o in objs)
+    result = {"name": dets.name, "frames": len(frames),
+              "n_gt": sum(len(v) for v in frames.values())}
+    for protocol, penalise in (("penalise_hidden", True), ("ignore_hidden", False)):
+        r = {"moda_ground": moda_curve(dets, frames, "ground", DISTANCES, hidden_visibility, penalise),
+             "pr_ground": pr_curve(dets, frames, "ground", pr_distance, hidden_visibility, penalise)}
+        if image:
+            r["moda_image"] = moda_curve(dets, frames, "image", OVERLAPS, hidden_visibility, penalise)
+            r["pr_image"] = pr_curve(dets, frames, "image", pr_overlap, hidden_visibility, penalise)
+        result[protocol] = r
+    result.update(hidden_visibility=hidden_visibility, pr_distance=pr_distance, pr_overlap=pr_overlap)
+    return result
+
+
+def read_detections_csv(path: str | Path, name: str | None = None) -> Detections:
+    """Detections of any detector in the run's CSV form (frame,x,y,z,rho,u0,v0,u1,v1; the box
+    columns may be missing or -1)."""
+    import csv
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such detections file")
+    frames: dict[str, list] = {}
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        need = {"frame", "x", "y", "rho"}
+        if reader.fieldnames is None or not need <= set(reader.fieldnames):
+            raise InputError(f"{path}: expected a CSV header with frame, x, y, rho "
+                             f"(and u0, v0, u1, v1), found {reader.fieldnames}")
+        for n, row in enumerate(reader, start=2):
+            try:
+                box = [float(row.get(k) if row.get(k) not in (None, "") else -1) for k in ("u0", "v0", "u1", "v1")]
+                frames.setdefault(row["frame"], []).append(
+                    [float(row["x"]), float(row["y"]), float(row["rho"])] + box)
+            except ValueError:
+                raise InputError(f"{path}: line {n}: expected numbers in x, y, rho, u0..v1") from None
+    return Detections(name or path.stem, frames)
+
+
+def run_detections(run_dir: str | Path, min_rho: float = 0.05) -> tuple[Detections, dict]:
+    """Scored detections of a `dpom-warp run` folder, re-detected from its rho maps down to
+    `min_rho` (the CSV holds only those above the run's threshold), with the run's grid,
+    camera pose (fitted one included) and non-maximum suppression.
+
+    Returns:
+        (detections, the run's summary).
+    """
+    from .config import ConfigError, parse_config
+    from .detect import detect
+    from .geometry import build_geometry
+
+    run_dir = Path(run_dir)
+    try:
+        summary = json.loads((run_dir / "summary.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        raise InputError(f"{run_dir}: not a dpom-warp run folder (no readable summary.json)") from None
+    try:
+        cfg = parse_config(summary["config"])
+    except (ConfigError, KeyError) as e:
+        raise InputError(f"{run_dir}/summary.json: config does not parse ({e})") from None
+    camera = cfg.camera
+    if cfg.pose_auto:
+        import dataclasses
+
+        camera = dataclasses.replace(camera, T_world_from_camera=np.array(
+            summary["ground_fit"]["T_world_from_camera"], float))
+    geom = build_geometry(camera, cfg.grid, cfg.obj)
+    frames = {}
+    for item in summary["per_frame"]:
+        name = item["frame"]
+        path = run_dir / "maps" / f"{Path(name).stem}.npy"
+        try:
+            rho = np.load(path)
+        except (OSError, ValueError):
+            raise InputError(f"{path}: missing or unreadable occupancy map") from None
+        dets = detect(rho, geom.locations, geom.rect, min_rho, cfg.detection.nms_radius)
+        frames[name] = [[d.x, d.y, d.rho, *d.box] for d in dets]
+    return Detections(run_dir.name, frames), summary
+
+
+def markdown_table(results: list[dict]) -> str:
+    """One row per detector and protocol: the headline numbers of the curves."""
+
+    def at(curve, gate):
+        return next((c for c in curve or [] if abs(c["gate"] - gate) < 1e-9), None)
+
+    def f(x):
+        return "n/a" if x is None or x != x else f"{x:.3f}"
+
+    r0 = results[0]
+    lines = [f"| detector | protocol | MODA @ {r0['pr_distance']} m | MODP | precision | recall "
+             f"| threshold | AP @ {r0['pr_distance']} m | MODA @ IoU 0.5 | AP @ IoU {r0['pr_overlap']} |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        for protocol, label in (("penalise_hidden", "hidden penalised"),
+                                ("ignore_hidden", f"visibility < {r['hidden_visibility']:g} ignored")):
+            p = r[protocol]
+            g = at(p["moda_ground"], r["pr_distance"]) or {}
+            i = at(p.get("moda_image"), 0.5) or {}
+            lines.append(
+                f"| {r['name']} | {label} | {f(g.get('moda'))} | {f(g.get('modp'))} | "
+                f"{f(g.get('precision'))} | {f(g.get('recall'))} | {f(g.get('threshold'))} | "
+                f"{f(p['pr_ground']['ap'])} | {f(i.get('moda'))} | "
+                f"{f(p.get('pr_image', {}).get('ap'))} |")
+    return "\n".join(lines)
+
+
+def evaluate_runs(sources: list[str | Path], ground_truth: str | Path | None = None,
+                  hidden_visibility: float = 0.1, min_rho: float = 0.05) -> list[dict]:
+    """Evaluate run folders and detection CSVs against one ground truth (by default the first
+    run's evaluation.ground_truth). A run is scored on the frames it processed."""
+    results, truth = [], None
+    for src in sources:
+        src = Path(src)
+        if src.is_dir():
+            dets, summary = run_detections(src, min_rho)
+            if ground_truth is None:
+                ground_truth = summary["config"].get("evaluation", {}).get("ground_truth")
+                if ground_truth is None:
+                    raise InputError(f"{src}: the run had no evaluation.ground_truth; "
+                                     f"expected --ground-truth GT.json")
+            frames = list(dets.frames)
+        else:
+            dets, frames = read_detections_csv(src), None
+            if ground_truth is None:
+                raise InputError(f"{src}: expected --ground-truth GT.json for a CSV")
+        if truth is None:
+            truth = load_ground_truth(ground_truth)
+        sub = truth if frames is None else {k: truth[k] for k in frames if k in truth}
+        if frames is not None and len(sub) < len(frames):
+            missing = next(k for k in frames if k not in truth)
+            raise InputError(f"{ground_truth}: no ground truth for frame {missing} of {src}")
+        results.append(evaluate(dets, sub, hidden_visibility))
+    return results

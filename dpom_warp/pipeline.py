@@ -58,7 +58,7 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
 
 
 RUN_STATE = "run.json"
-OUTPUTS = ("maps", "images", "frames", "detections.csv", "summary.json", RUN_STATE)
+OUTPUTS = ("maps", "images", "frames", "plots", "detections.csv", "summary.json", "eval.json", RUN_STATE)
 
 
 def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> None:
@@ -212,6 +212,15 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     summary["timings"]["setup_s"] = t_setup
     summary["timings"]["total_s"] = time.perf_counter() - t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))
+    if truth is not None and done:  # the curves of `dpom-warp eval`, from the maps just written
+        from .evaluate import evaluate_runs
+
+        results = evaluate_runs([out], cfg.evaluation.ground_truth, cfg.evaluation.hidden_visibility)
+        write_json_atomic(out / "eval.json", _jsonable(results))
+        if cfg.evaluation.plots:
+            from .plots import write_figures
+
+            write_figures(results, out / "plots")
     return summary
 
 
