@@ -130,32 +130,47 @@ DISTANCES = tuple(round(0.1 * i, 1) for i in range(1, 11))  # metres
 OVERLAPS = tuple(round(0.1 * i, 1) for i in range(1, 10))  # IoU
 
 
+RHO, BOX = 3, slice(4, 8)  # columns of a detection row: x, y, z, rho, u0, v0, u1, v1
+
+
 class Detections:
-    """Scored detections of a sequence: frame name -> (n, 7) array x, y, rho, u0, v0, u1, v1."""
+    """Scored detections of a sequence: frame name -> (n, 8) array x, y, z (metres), rho,
+    u0, v0, u1, v1 (image box, -1 when unknown)."""
 
     def __init__(self, name: str, frames: dict[str, np.ndarray]):
         self.name = name
-        self.frames = {k: np.asarray(v, float).reshape(-1, 7) for k, v in frames.items()}
+        self.frames = {k: np.asarray(v, float).reshape(-1, 8) for k, v in frames.items()}
 
     def at(self, frame: str, threshold: float) -> np.ndarray:
-        d = self.frames.get(frame, np.zeros((0, 7)))
-        return d[d[:, 2] >= threshold]
+        d = self.frames.get(frame, np.zeros((0, 8)))
+        return d[d[:, RHO] >= threshold]
 
     def scores(self) -> np.ndarray:
-        return np.concatenate([d[:, 2] for d in self.frames.values()] + [np.zeros(0)])
+        return np.concatenate([d[:, RHO] for d in self.frames.values()] + [np.zeros(0)])
 
     @property
     def has_boxes(self) -> bool:
-        return all(np.all(d[:, 3:] >= 0) for d in self.frames.values())
+        return all(np.all(d[:, BOX] >= 0) for d in self.frames.values())
+
+
+def cube_iou(a: np.ndarray, b: np.ndarray, size) -> np.ndarray:
+    """(n, m) intersection over union of axis-aligned boxes of one `size` (w, d, h) centred
+    at the points a (n, 3) and b (m, 3)."""
+    size = np.asarray(size, float)
+    overlap = np.clip(size - np.abs(a[:, None, :] - b[None, :, :]), 0, None)
+    inter = overlap.prod(axis=2)
+    return inter / (2.0 * size.prod() - inter)
 
 
 def counts(dets: Detections, truth: dict[str, list[dict]], threshold: float, plane: str,
-           gate: float, hidden_visibility: float = 0.0, penalise_hidden: bool = True) -> dict:
+           gate: float, hidden_visibility: float = 0.0, penalise_hidden: bool = True,
+           cube_size=None) -> dict:
     """CLEAR counts over a sequence at one detection threshold.
 
     Args:
-        plane: 'ground' (match x, y within `gate` metres) or 'image' (match boxes with IoU at
-            least `gate`).
+        plane: 'ground' (match x, y within `gate` metres), 'space' (x, y, z within `gate`
+            metres), 'image' (image boxes with IoU at least `gate`) or 'cube' (object boxes of
+            `cube_size` around the centres with IoU at least `gate`).
         hidden_visibility, penalise_hidden: with penalise_hidden False, ground truth less
             visible than hidden_visibility is left out: missing it is no error, and a
             detection matched to it is neither right nor wrong.
@@ -170,14 +185,19 @@ def counts(dets: Detections, truth: dict[str, list[dict]], threshold: float, pla
         det = dets.at(frame, threshold)
         hidden = np.array([(not penalise_hidden) and o.get("visibility", 1.0) < hidden_visibility
                            for o in objs], bool)
-        if plane == "ground":
-            gt = np.array([[o["x"], o["y"]] for o in objs], float).reshape(-1, 2)
-            cost = np.linalg.norm(det[:, None, :2] - gt[None, :, :], axis=2)
+        if plane in ("ground", "space"):
+            n = 2 if plane == "ground" else 3
+            gt = np.array([[o["x"], o["y"], o.get("z", 0.0)][:n] for o in objs], float).reshape(-1, n)
+            cost = np.linalg.norm(det[:, None, :n] - gt[None, :, :], axis=2)
             pairs = assign(cost, gate)
             quality = [1.0 - cost[d, g] / gate for d, g in pairs]
         else:
-            gt = np.array([o["bbox"] for o in objs], float).reshape(-1, 4)
-            iou = box_iou(det[:, 3:], gt)
+            if plane == "image":
+                gt = np.array([o["bbox"] for o in objs], float).reshape(-1, 4)
+                iou = box_iou(det[:, BOX], gt)
+            else:
+                gt = np.array([[o["x"], o["y"], o.get("z", 0.0)] for o in objs], float).reshape(-1, 3)
+                iou = cube_iou(det[:, :3], gt, cube_size)
             pairs = assign(1.0 - iou, 1.0 - gate + 1e-12)
             quality = [iou[d, g] for d, g in pairs]
         on_hidden = sum(1 for _, g in pairs if hidden[g])
@@ -202,25 +222,27 @@ def detection_thresholds(dets: Detections, n: int = 60) -> np.ndarray:
     return np.unique(np.quantile(s, np.linspace(0, 1, n)))
 
 
-def moda_curve(dets, truth, plane, gates, hidden_visibility, penalise_hidden):
+def moda_curve(dets, truth, plane, gates, hidden_visibility, penalise_hidden, cube_size=None):
     """MODA (with MODP, precision, recall) per gate, each at its best detection threshold."""
     ths = detection_thresholds(dets)
     curve = []
     for gate in gates:
         best = None
         for t in ths:
-            c = counts(dets, truth, float(t), plane, gate, hidden_visibility, penalise_hidden)
+            c = counts(dets, truth, float(t), plane, gate, hidden_visibility, penalise_hidden,
+                       cube_size)
             if best is None or c["moda"] > best["moda"]:
                 best = c
         curve.append({"gate": gate, **(best or counts(dets, truth, 1.1, plane, gate,
-                                                       hidden_visibility, penalise_hidden))})
+                                                       hidden_visibility, penalise_hidden, cube_size))})
     return curve
 
 
-def pr_curve(dets, truth, plane, gate, hidden_visibility, penalise_hidden):
+def pr_curve(dets, truth, plane, gate, hidden_visibility, penalise_hidden, cube_size=None):
     """Precision and recall at every detection threshold (high to low), and the average
     precision (area under the precision envelope, all points)."""
-    points = [counts(dets, truth, float(t), plane, gate, hidden_visibility, penalise_hidden)
+    points = [counts(dets, truth, float(t), plane, gate, hidden_visibility, penalise_hidden,
+                     cube_size)
               for t in np.unique(dets.scores())[::-1]]
     points = [p for p in points if p["tp"] + p["fp"] > 0]
     if not points or not points[0]["n_gt"]:
@@ -234,20 +256,33 @@ def pr_curve(dets, truth, plane, gate, hidden_visibility, penalise_hidden):
 
 
 def evaluate(dets: Detections, truth: dict[str, list[dict]], hidden_visibility: float = 0.1,
-             pr_distance: float = 0.5, pr_overlap: float = 0.4) -> dict:
-    """All curves of the paper for one detector, under both protocols."""
+             pr_distance: float = 0.5, pr_overlap: float = 0.4, cube_size=None) -> dict:
+    """All curves of the paper for one detector, under both protocols.
+
+    With `cube_size` (the object box, for voxel grids) distances are 3D ('moda_space',
+    'pr_space' in place of the ground ones) and object boxes are matched by 3D overlap
+    ('moda_cube', 'pr_cube'), as in the paper's drone experiment.
+    """
     frames = {k: v for k, v in truth.items()}
     image = dets.has_boxes and all("bbox" in o for objs in frames.values() for o in objs)
     result = {"name": dets.name, "frames": len(frames),
               "n_gt": sum(len(v) for v in frames.values())}
+    dist = "ground" if cube_size is None else "space"
     for protocol, penalise in (("penalise_hidden", True), ("ignore_hidden", False)):
-        r = {"moda_ground": moda_curve(dets, frames, "ground", DISTANCES, hidden_visibility, penalise),
-             "pr_ground": pr_curve(dets, frames, "ground", pr_distance, hidden_visibility, penalise)}
+        r = {"moda_ground": moda_curve(dets, frames, dist, DISTANCES, hidden_visibility, penalise),
+             "pr_ground": pr_curve(dets, frames, dist, pr_distance, hidden_visibility, penalise)}
         if image:
             r["moda_image"] = moda_curve(dets, frames, "image", OVERLAPS, hidden_visibility, penalise)
             r["pr_image"] = pr_curve(dets, frames, "image", pr_overlap, hidden_visibility, penalise)
+        if cube_size is not None:
+            r["moda_cube"] = moda_curve(dets, frames, "cube", OVERLAPS, hidden_visibility, penalise,
+                                        cube_size)
+            r["pr_cube"] = pr_curve(dets, frames, "cube", pr_overlap, hidden_visibility, penalise,
+                                    cube_size)
         result[protocol] = r
-    result.update(hidden_visibility=hidden_visibility, pr_distance=pr_distance, pr_overlap=pr_overlap)
+    result.update(hidden_visibility=hidden_visibility, pr_distance=pr_distance,
+                  pr_overlap=pr_overlap, distance=dist,
+                  cube_size=None if cube_size is None else [float(s) for s in cube_size])
     return result
 
 
@@ -269,8 +304,9 @@ def read_detections_csv(path: str | Path, name: str | None = None) -> Detections
         for n, row in enumerate(reader, start=2):
             try:
                 box = [float(row.get(k) if row.get(k) not in (None, "") else -1) for k in ("u0", "v0", "u1", "v1")]
+                z = float(row.get("z") or 0.0)
                 frames.setdefault(row["frame"], []).append(
-                    [float(row["x"]), float(row["y"]), float(row["rho"])] + box)
+                    [float(row["x"]), float(row["y"]), z, float(row["rho"])] + box)
             except ValueError:
                 raise InputError(f"{path}: line {n}: expected numbers in x, y, rho, u0..v1") from None
     return Detections(name or path.stem, frames)
@@ -313,7 +349,7 @@ def run_detections(run_dir: str | Path, min_rho: float = 0.05) -> tuple[Detectio
         except (OSError, ValueError):
             raise InputError(f"{path}: missing or unreadable occupancy map") from None
         dets = detect(rho, geom.locations, geom.rect, min_rho, cfg.detection.nms_radius)
-        frames[name] = [[d.x, d.y, d.rho, *d.box] for d in dets]
+        frames[name] = [[d.x, d.y, d.z, d.rho, *d.box] for d in dets]
     return Detections(run_dir.name, frames), summary
 
 

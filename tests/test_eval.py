@@ -16,7 +16,7 @@ from test_cli import small_config
 
 
 def dets(frames):
-    return Detections("d", {k: np.array(v, float).reshape(-1, 7) for k, v in frames.items()})
+    return Detections("d", {k: np.array(v, float).reshape(-1, 8) for k, v in frames.items()})
 
 
 def test_box_iou_hand_computed():
@@ -36,9 +36,9 @@ TRUTH = {
 def test_counts_ground_with_ties_hidden_and_empty_frames():
     d = dets({
         # two detections 0.2 m from the same person: a tie; one matches, the other is false
-        "a": [[0.2, 0, 0.9, 0, 0, 9, 19], [-0.2, 0, 0.8, 0, 0, 9, 19], [2.1, 0, 0.7, 40, 0, 49, 19]],
+        "a": [[0.2, 0, 0, 0.9, 0, 0, 9, 19], [-0.2, 0, 0, 0.8, 0, 0, 9, 19], [2.1, 0, 0, 0.7, 40, 0, 49, 19]],
         "b": [],  # no detections: the person is missed
-        "empty": [[5, 5, 0.95, 0, 0, 1, 1]],  # a detection where nobody is
+        "empty": [[5, 5, 0, 0.95, 0, 0, 1, 1]],  # a detection where nobody is
     })
     c = counts(d, TRUTH, 0.5, "ground", 0.5)
     assert (c["tp"], c["fp"], c["fn"], c["n_gt"]) == (2, 2, 1, 3)
@@ -56,7 +56,7 @@ def test_counts_ground_with_ties_hidden_and_empty_frames():
 
 
 def test_counts_image_plane():
-    d = dets({"a": [[9, 9, 0.9, 0, 0, 9, 14], [9, 9, 0.9, 45, 0, 54, 19]], "b": [[9, 9, 0.6, 10, 0, 19, 19]]})
+    d = dets({"a": [[9, 9, 0, 0.9, 0, 0, 9, 14], [9, 9, 0, 0.9, 45, 0, 54, 19]], "b": [[9, 9, 0, 0.6, 10, 0, 19, 19]]})
     c = counts(d, TRUTH, 0.5, "image", 0.5)  # IoU 150/200 = 0.75, 50/150 = 0.33, 1.0
     assert (c["tp"], c["fp"], c["fn"]) == (2, 1, 1)
     assert c["modp"] == pytest.approx((0.75 + 1.0) / 2)
@@ -65,7 +65,7 @@ def test_counts_image_plane():
 
 def test_pr_curve_and_average_precision_hand_computed():
     truth = {"f": [{"x": 0, "y": 0}, {"x": 3, "y": 0}]}
-    d = dets({"f": [[0, 0, 0.9, 0, 0, 1, 1], [9, 9, 0.8, 0, 0, 1, 1], [3, 0, 0.7, 0, 0, 1, 1]]})
+    d = dets({"f": [[0, 0, 0, 0.9, 0, 0, 1, 1], [9, 9, 0, 0.8, 0, 0, 1, 1], [3, 0, 0, 0.7, 0, 0, 1, 1]]})
     pr = pr_curve(d, truth, "ground", 0.5, 0.0, True)
     assert [(p["precision"], p["recall"]) for p in pr["points"]] == [
         (1.0, 0.5), (0.5, 0.5), (pytest.approx(2 / 3), 1.0)]
@@ -80,7 +80,7 @@ def test_csv_reading_and_errors(tmp_path):
     p = tmp_path / "other.csv"
     p.write_text("frame,x,y,rho\na,0,0,0.9\n")
     d = read_detections_csv(p)
-    assert not d.has_boxes and d.frames["a"].shape == (1, 7)
+    assert not d.has_boxes and d.frames["a"].shape == (1, 8)
     p.write_text("frame,x,rho\na,0,0.9\n")
     with pytest.raises(InputError, match="expected a CSV header with frame, x, y, rho"):
         read_detections_csv(p)
@@ -105,7 +105,7 @@ def test_eval_command_on_a_run_and_a_csv(tmp_path, capsys):
     cands, summary = run_detections(out)
     rows = list(csv.DictReader(open(out / "detections.csv")))
     for frame, arr in cands.frames.items():
-        kept = arr[arr[:, 2] >= summary["config"]["detection"]["threshold"]]
+        kept = arr[arr[:, 3] >= summary["config"]["detection"]["threshold"]]
         mine = sorted((round(x, 4), round(y, 4)) for x, y in kept[:, :2])
         theirs = sorted((float(r["x"]), float(r["y"])) for r in rows if r["frame"] == frame)
         assert len(mine) == len(theirs)
@@ -136,3 +136,27 @@ def test_eval_errors(tmp_path, capsys):
     p.write_text("frame,x,y,rho\n")
     assert main(["eval", str(p)]) == 2
     assert "expected --ground-truth GT.json for a CSV" in capsys.readouterr().err
+
+
+def test_cube_overlap_and_3d_distance_hand_computed():
+    from dpom_warp.evaluate import cube_iou, evaluate
+
+    size = (0.4, 0.4, 0.12)
+    a = np.array([[0.0, 0.0, 1.0]])
+    b = np.array([[0.2, 0.0, 1.0], [0.0, 0.0, 1.06], [0.0, 0.0, 1.5]])
+    # half the width apart: 0.2 x 0.4 x 0.12 shared of 2 x 0.4 x 0.4 x 0.12 minus it
+    np.testing.assert_allclose(cube_iou(a, b, size), [[1 / 3, 1 / 3, 0.0]])
+    truth = {"f": [{"x": 0, "y": 0, "z": 1.0}, {"x": 2, "y": 0, "z": 2.0}]}
+    d = dets({"f": [[0.0, 0.0, 1.2, 0.9, -1, -1, -1, -1], [2.0, 0.0, 2.05, 0.8, -1, -1, -1, -1]]})
+    # in 3D the first detection is 0.2 m off (height), on the ground it would be exact
+    c = counts(d, truth, 0.5, "space", 0.15)
+    assert (c["tp"], c["fp"], c["fn"]) == (1, 1, 1)
+    assert counts(d, truth, 0.5, "ground", 0.15)["tp"] == 2
+    c = counts(d, truth, 0.5, "cube", 0.5, cube_size=size)  # IoU 0 and (0.07/0.17)
+    assert c["tp"] == 0
+    c = counts(d, truth, 0.5, "cube", 0.25, cube_size=size)
+    assert c["tp"] == 1 and c["modp"] == pytest.approx(0.07 / 0.17)
+    r = evaluate(d, truth, cube_size=size)
+    assert r["distance"] == "space" and "moda_cube" in r["penalise_hidden"]
+    assert [c["gate"] for c in r["penalise_hidden"]["moda_cube"]] == pytest.approx([0.1 * i for i in range(1, 10)])
+    assert r["penalise_hidden"]["moda_cube"][0]["tp"] == 1  # IoU >= 0.1
