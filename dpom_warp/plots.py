@@ -64,7 +64,8 @@ def write_figures(results: list[dict], folder) -> list[str]:
     """All figures for `results` into `folder`; returns their file names."""
     r0 = results[0]
     made = []
-    moda_figure(results, folder / "moda_ground.png", "moda_ground", "match distance on the ground (m)")
+    where = "on the ground" if r0.get("distance", "ground") == "ground" else "in 3D"
+    moda_figure(results, folder / "moda_ground.png", "moda_ground", f"match distance {where} (m)")
     made.append("moda_ground.png")
     pr_figure(results, folder / "pr_ground.png", "pr_ground", f"within {r0['pr_distance']} m")
     made.append("pr_ground.png")
@@ -72,4 +73,8 @@ def write_figures(results: list[dict], folder) -> list[str]:
         moda_figure(results, folder / "moda_image.png", "moda_image", "box overlap (IoU) in the image")
         pr_figure(results, folder / "pr_image.png", "pr_image", f"IoU >= {r0['pr_overlap']}")
         made += ["moda_image.png", "pr_image.png"]
+    if any("moda_cube" in r["penalise_hidden"] for r in results):
+        moda_figure(results, folder / "moda_cube.png", "moda_cube", "3D box overlap (IoU)")
+        pr_figure(results, folder / "pr_cube.png", "pr_cube", f"3D IoU >= {r0['pr_overlap']}")
+        made += ["moda_cube.png", "pr_cube.png"]
     return made
