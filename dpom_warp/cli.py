@@ -32,8 +32,8 @@ def _run(args) -> int:
     s = summary.get("scores")
     if s:
         print(f"MODA {s['moda']:.3f}  precision {s['precision']:.3f}  recall {s['recall']:.3f}  "
-              f"at {s['match_distance']} m ({s['n_gt']} people; MODA {s['moda_visible']:.3f} "
-              f"not penalising people less than {s['hidden_visibility']:.0%} visible)")
+              f"at {s['match_distance']} m ({s['n_gt']} in the ground truth; MODA "
+              f"{s['moda_visible']:.3f} not penalising those less than {s['hidden_visibility']:.0%} visible)")
     return 0
 
 

@@ -130,6 +130,7 @@ class Inputs:
 class Output:
     dir: str = "runs/out"
     images: bool = True
+    ply: bool = False
 
 
 @dataclass(frozen=True)
@@ -261,8 +262,13 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     camera = Camera(width, height, fx, fy, cx, cy, pose, distortion)
 
     s = top.section("grid")
-    mode = s.string("mode", "ground", choices=("ground",))
-    grid = Grid(x=_axis(s, "x"), y=_axis(s, "y"), mode=mode)
+    mode = s.string("mode", "ground", choices=("ground", "voxel"))
+    x_axis, y_axis = _axis(s, "x"), _axis(s, "y")
+    z_axis = _axis(s, "z", required=mode == "voxel")
+    if mode == "ground" and z_axis is not None:
+        raise ConfigError("grid.z: expected no z axis in ground mode (objects stand on the floor); "
+                          "use mode: voxel for a 3D grid")
+    grid = Grid(x=x_axis, y=y_axis, mode=mode, z=z_axis)
     s.done()
 
     s = top.section("object")
@@ -270,11 +276,14 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
                     height=s.number("height", 1.8, lo=0, lo_open=True),
                     depth=s.number("depth", None, lo=0, lo_open=True))
     s.done()
-    for axis, size in (("x", obj.width), ("y", obj.depth or obj.width)):
+    sizes = [("x", "width", obj.width), ("y", "depth" if obj.depth else "width", obj.depth or obj.width)]
+    if mode == "voxel":
+        sizes.append(("z", "height", obj.height))
+    for axis, key, size in sizes:
         lo, hi, _ = getattr(grid, axis)
         if size > hi - lo:
-            raise ConfigError(f"object.{'width' if axis == 'x' or obj.depth is None else 'depth'}: "
-                              f"expected at most the grid's {axis} extent {hi - lo:g} m, found {size:g}")
+            raise ConfigError(f"object.{key}: expected at most the grid's {axis} extent "
+                              f"{hi - lo:g} m, found {size:g}")
 
     s = top.section("model")
     d = ModelParams()
@@ -295,6 +304,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         check_every=s.number("check_every", d.check_every, integer=True, lo=1),
         missing_clip=s.number("missing_clip", d.missing_clip, lo=0, hi=0.5, lo_open=True, hi_open=True),
         background_outside_grid=s.boolean("background_outside_grid", d.background_outside_grid),
+        background_occludes=s.boolean("background_occludes", d.background_occludes),
+        occlusion_margin=s.number("occlusion_margin", d.occlusion_margin, lo=0),
     )
     if "damping_max" not in s.raw:  # default cap, never below the starting damping
         model = dataclasses.replace(model, damping_max=max(d.damping_max, model.damping))
@@ -318,7 +329,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     s.done()
 
     s = top.section("output")
-    output = Output(dir=s.string("dir", "runs/out"), images=s.boolean("images", True))
+    output = Output(dir=s.string("dir", "runs/out"), images=s.boolean("images", True),
+                    ply=s.boolean("ply", False))
     s.done()
 
     s = top.section("engine")
@@ -340,7 +352,10 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
             frames=s.number("frames", d.frames, integer=True, lo=1),
             background_frames=s.number("background_frames", d.background_frames, integer=True, lo=0),
             people=s.number("people", d.people, integer=True, lo=0),
+            kind=s.string("kind", d.kind, choices=("people", "drones")),
             area=s.numbers("area", 4, d.area),
+            altitude=s.numbers("altitude", 2, d.altitude),
+            obstacles=s.number("obstacles", d.obstacles, integer=True, lo=0),
             room=s.numbers("room", 5, d.room),
             furniture=s.number("furniture", d.furniture, integer=True, lo=0),
             step_m=s.number("step_m", d.step_m, lo=0),
@@ -360,7 +375,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
                    "extrinsics": pose_resolved, "distortion": list(distortion) if distortion else None,
                    "ground": {"frames": ground_frames, **{k: (list(v) if isinstance(v, tuple) else v)
                                                           for k, v in vars_of(ground).items()}}},
-        "grid": {"mode": mode, "x": list(grid.x), "y": list(grid.y)},
+        "grid": {"mode": mode, "x": list(grid.x), "y": list(grid.y),
+                 **({"z": list(grid.z)} if grid.z else {})},
         "object": {"width": obj.width, "height": obj.height, "depth": obj.depth},
         "model": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars_of(model).items()},
         "detection": vars_of(detection), "evaluation": vars_of(evaluation),

@@ -41,6 +41,8 @@ def pixel_model(params: ModelParams) -> K.PixelModel:
     pm.outlier_prob = params.outlier_prob
     pm.missing_prob = params.missing_prob
     pm.missing_clip = params.missing_clip
+    pm.background_occludes = int(params.background_occludes)
+    pm.occlusion_margin = params.occlusion_margin
     return pm
 
 
@@ -198,7 +200,7 @@ class Engine:
                   inputs=[self.depth, self.pm, self.bg, self.delta_bg])
         self.counts.zero_()
         wp.launch(K.mask_entries, dim=L, device=dev,
-                  inputs=[self.depth, self.geo, self.pm, 0] + self._list_arrays())
+                  inputs=[self.depth, self.geo, self.pm, self.bg, 0] + self._list_arrays())
         wp.utils.array_scan(self.counts, self.offsets, inclusive=False)
         total = int(self.offsets[-1:].numpy()[0]) + int(self.counts[-1:].numpy()[0])
         if total > self.capacity:
@@ -211,7 +213,7 @@ class Engine:
             self._allocate_lists(int(total * 1.25))
         self.counts.zero_()
         wp.launch(K.mask_entries, dim=L, device=dev,
-                  inputs=[self.depth, self.geo, self.pm, 1] + self._list_arrays())
+                  inputs=[self.depth, self.geo, self.pm, self.bg, 1] + self._list_arrays())
         wp.launch(K.sort_pixel_lists, dim=self.n_pixels, device=dev,
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta])
         return total

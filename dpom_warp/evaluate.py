@@ -48,8 +48,8 @@ def score_frames(detections: dict[str, np.ndarray], truth: dict[str, list[dict]]
     """MODA, precision and recall over a sequence.
 
     Args:
-        detections: frame name -> (n, 2) detected x, y.
-        truth: frame name -> ground-truth objects (dicts with x, y and optional visibility).
+        detections: frame name -> (n, 2) detected x, y, or (n, 3) x, y, z (3D distances).
+        truth: frame name -> ground-truth objects (dicts with x, y, optional z and visibility).
         max_distance: match gate, metres.
         hidden_visibility: ground truth whose visibility is below this is 'hidden'; the
             `*_visible` scores neither penalise missing it nor count a detection on it as false.
@@ -63,16 +63,17 @@ def score_frames(detections: dict[str, np.ndarray], truth: dict[str, list[dict]]
     tp = fp = fn = n_gt = 0
     tp_v = fp_v = fn_v = n_gt_v = 0
     errors, range_errors = [], []
+    dims = next((np.asarray(d).shape[-1] for d in detections.values() if np.asarray(d).ndim == 2), 2)
     for name, objs in truth.items():
-        det = np.asarray(detections.get(name, np.zeros((0, 2))), dtype=float).reshape(-1, 2)
-        gt = np.array([[o["x"], o["y"]] for o in objs], dtype=float).reshape(-1, 2)
+        det = np.asarray(detections.get(name, np.zeros((0, dims))), dtype=float).reshape(-1, dims)
+        gt = np.array([[o["x"], o["y"], o.get("z", 0.0)][:dims] for o in objs], dtype=float).reshape(-1, dims)
         hidden = np.array([o.get("visibility", 1.0) < hidden_visibility for o in objs], bool)
         pairs = match(det, gt, max_distance)
         matched_gt = {g for _, g in pairs}
         errors += [float(np.linalg.norm(det[d] - gt[g])) for d, g in pairs]
         if camera_xy is not None:
             c = np.asarray(camera_xy, float)
-            range_errors += [float(np.linalg.norm(det[d] - c) - np.linalg.norm(gt[g] - c))
+            range_errors += [float(np.linalg.norm(det[d, :2] - c) - np.linalg.norm(gt[g, :2] - c))
                              for d, g in pairs]
         tp += len(pairs)
         fp += len(det) - len(pairs)
@@ -312,13 +313,13 @@ def read_detections_csv(path: str | Path, name: str | None = None) -> Detections
     return Detections(name or path.stem, frames)
 
 
-def run_detections(run_dir: str | Path, min_rho: float = 0.05) -> tuple[Detections, dict]:
+def run_detections(run_dir: str | Path, min_rho: float = 0.05) -> tuple[Detections, dict, tuple | None]:
     """Scored detections of a `dpom-warp run` folder, re-detected from its rho maps down to
     `min_rho` (the CSV holds only those above the run's threshold), with the run's grid,
     camera pose (fitted one included) and non-maximum suppression.
 
     Returns:
-        (detections, the run's summary).
+        (detections, the run's summary, the object box (w, d, h) for voxel runs else None).
     """
     from .config import ConfigError, parse_config
     from .detect import detect
@@ -350,7 +351,10 @@ def run_detections(run_dir: str | Path, min_rho: float = 0.05) -> tuple[Detectio
             raise InputError(f"{path}: missing or unreadable occupancy map") from None
         dets = detect(rho, geom.locations, geom.rect, min_rho, cfg.detection.nms_radius)
         frames[name] = [[d.x, d.y, d.z, d.rho, *d.box] for d in dets]
-    return Detections(run_dir.name, frames), summary
+    cube = None
+    if cfg.grid.mode == "voxel":
+        cube = (cfg.obj.width, cfg.obj.depth or cfg.obj.width, cfg.obj.height)
+    return Detections(run_dir.name, frames), summary, cube
 
 
 def markdown_table(results: list[dict]) -> str:
@@ -387,8 +391,9 @@ def evaluate_runs(sources: list[str | Path], ground_truth: str | Path | None = N
     results, truth = [], None
     for src in sources:
         src = Path(src)
+        cube = None
         if src.is_dir():
-            dets, summary = run_detections(src, min_rho)
+            dets, summary, cube = run_detections(src, min_rho)
             if ground_truth is None:
                 ground_truth = summary["config"].get("evaluation", {}).get("ground_truth")
                 if ground_truth is None:
@@ -405,5 +410,5 @@ def evaluate_runs(sources: list[str | Path], ground_truth: str | Path | None = N
         if frames is not None and len(sub) < len(frames):
             missing = next(k for k in frames if k not in truth)
             raise InputError(f"{ground_truth}: no ground truth for frame {missing} of {src}")
-        results.append(evaluate(dets, sub, hidden_visibility))
+        results.append(evaluate(dets, sub, hidden_visibility, cube_size=cube))
     return results

@@ -31,6 +31,10 @@ class ModelParams:
         background_outside_grid: without background frames, a reading whose 3D point lies
             outside every object box (beyond the grid, or above the objects) is background at
             that depth, instead of broad; walls and ceiling then stop looking like objects.
+        background_occludes: a location does not claim a pixel where the (known) background
+            is clearly in front of it, mu_bg + occlusion_margin < mu_k (MODEL.md, eq. 4 orders
+            the background too): objects behind furniture are hidden, not contradicted.
+        occlusion_margin: metres.
     """
 
     prior: float = 0.01
@@ -49,6 +53,8 @@ class ModelParams:
     check_every: int = 5
     missing_clip: float = 0.01
     background_outside_grid: bool = True
+    background_occludes: bool = False
+    occlusion_margin: float = 0.1
 
     def damping_at(self, iteration: int) -> float:
         """lambda of iteration `iteration` (0-based)."""

@@ -58,7 +58,8 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
 
 
 RUN_STATE = "run.json"
-OUTPUTS = ("maps", "images", "frames", "plots", "detections.csv", "summary.json", "eval.json", RUN_STATE)
+OUTPUTS = ("maps", "images", "frames", "plots", "ply", "detections.csv", "summary.json", "eval.json",
+           RUN_STATE)
 
 
 def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> None:
@@ -241,12 +242,14 @@ def process_frame(cfg: RunConfig, engine: Engine, geometry, f: Path, out: Path, 
         from .render import frame_picture
         frame_picture(out / "images" / f"{f.stem}.png", depth, rho_map, cfg.grid, dets,
                       geometry.centre[:2], truth.get(f.name) if truth else None, f.name)
+    if cfg.output.ply:
+        write_ply(out / "ply", f.stem, depth, geometry, dets, cfg)
     t3 = time.perf_counter()
     record = {
         "frame": f.name,
         "rows": [f"{f.name},{d.x:.4f},{d.y:.4f},{d.z:.4f},{d.rho:.6f},{d.box[0]},{d.box[1]},"
                  f"{d.box[2]},{d.box[3]}" for d in dets],
-        "xy": [[d.x, d.y] for d in dets],
+        "xy": [[d.x, d.y, d.z] if cfg.grid.mode == "voxel" else [d.x, d.y] for d in dets],
         "stats": {"frame": f.name, "detections": len(dets), "iterations": res.iterations,
                   "entries": res.entries, "read_s": t0 - t_read, "infer_s": t1 - t0,
                   "detect_s": t2 - t1, "write_s": t3 - t2,
@@ -254,6 +257,28 @@ def process_frame(cfg: RunConfig, engine: Engine, geometry, f: Path, out: Path, 
     }
     write_json_atomic(out / "frames" / f"{f.stem}.json", record)
     return record
+
+
+def write_ply(folder: Path, stem: str, depth, geometry, dets, cfg: RunConfig):
+    """For Open3D's viewer: <stem>_points.ply (the frame's points, world metres) and
+    <stem>_boxes.ply (the detected object boxes as a mesh)."""
+    import open3d as o3d
+
+    from .io import atomic_path
+
+    ok = depth > 0
+    pts = geometry.centre + depth[ok][:, None].astype(np.float64) * geometry.rays[ok]
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    with atomic_path(folder / f"{stem}_points.ply") as tmp:
+        o3d.io.write_point_cloud(str(tmp), cloud)
+    boxes = o3d.geometry.TriangleMesh()
+    size = np.array([cfg.obj.width, cfg.obj.depth or cfg.obj.width, cfg.obj.height])
+    for d in dets:
+        b = o3d.geometry.TriangleMesh.create_box(*size)
+        lift = 0.0 if cfg.grid.mode == "ground" else size[2] / 2
+        boxes += b.translate(np.array([d.x, d.y, d.z - lift]) - np.array([size[0] / 2, size[1] / 2, 0]))
+    with atomic_path(folder / f"{stem}_boxes.ply") as tmp:
+        o3d.io.write_triangle_mesh(str(tmp), boxes)
 
 
 def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground, grown):
@@ -279,7 +304,8 @@ def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background
         "per_frame": per_frame,
     }
     if truth is not None and done:
-        det_xy = {f.name: np.array(records[f.name]["xy"]).reshape(-1, 2) for f in done}
+        dims = 3 if cfg.grid.mode == "voxel" else 2
+        det_xy = {f.name: np.array(records[f.name]["xy"]).reshape(-1, dims) for f in done}
         summary["scores"] = score_frames(det_xy, {f.name: truth[f.name] for f in done},
                                          cfg.evaluation.match_distance,
                                          cfg.evaluation.hidden_visibility, geometry.centre[:2])

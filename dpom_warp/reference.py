@@ -98,8 +98,9 @@ def background_delta(depth_m, bg: Background, params: ModelParams):
     return np.where(ok, d, 0.0)
 
 
-def mask_entries(depth_m, geom: Geometry, params: ModelParams):
-    """All (pixel, location) pairs with i in M_k (eq. 12, corrected sign).
+def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | None = None):
+    """All (pixel, location) pairs with i in M_k (eq. 12, corrected sign); with
+    params.background_occludes, not where the known background is clearly in front of k.
 
     Returns:
         pixel (int64 flat index), loc (int64), mu (float32 object depth), delta (float32 Delta_ki),
@@ -121,6 +122,10 @@ def mask_entries(depth_m, geom: Geometry, params: ModelParams):
             inlier = np.log1p(-params.outlier_prob) + gaussian_logpdf(z, mu, s)
         outlier = np.log(params.outlier_prob) - np.log(params.z_max)
         m = valid_reading(z, params) & (mu > 0) & (inlier > outlier)
+        if params.background_occludes and bg is not None:
+            b_mu = bg.mu[v0:v1 + 1, u0:u1 + 1]
+            known = bg.outlier[v0:v1 + 1, u0:u1 + 1] < 1
+            m &= ~(known & (b_mu + params.occlusion_margin < mu))
         vv, uu = np.nonzero(m)
         delta = np.log1p(-params.missing_prob) + np.logaddexp(outlier, inlier[m])
         out.append(((vv + v0) * w + (uu + u0), np.full(len(vv), k), mu[m], delta))
@@ -168,7 +173,7 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams):
         dict with rho (K,), rho_star (K,), evidence_share e_k (K,), iterations, entries.
     """
     K = len(geom.rect)
-    pixel, loc, _, delta = mask_entries(depth_m, geom, params)
+    pixel, loc, _, delta = mask_entries(depth_m, geom, params, bg)
     d_bg = background_delta(depth_m, bg, params).ravel()
     pix, valid, L, D = _padded_lists(pixel, loc, delta.astype(np.float64))
     dbg = d_bg[pix]

@@ -1,5 +1,6 @@
-"""Synthetic depth sequences: people (or other meshes) in a furnished room, rendered with
-Open3D's RaycastingScene from a pinhole camera, with sensor-like noise, and ground truth.
+"""Synthetic depth sequences: people walking, or quadcopters flying, in a furnished room,
+rendered with Open3D's RaycastingScene from a pinhole camera, with sensor-like noise, and
+ground truth.
 
 Everything is seeded: the same spec and camera give the same frames, bit for bit.
 """
@@ -17,7 +18,7 @@ import open3d as o3d
 from .geometry import Camera
 from .io import write_depth_png, write_json_atomic
 
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2  # 2: objects with no visible pixel are left out of the ground truth
 
 
 @dataclass(frozen=True)
@@ -28,8 +29,11 @@ class SceneSpec:
         seed: random seed of the whole sequence.
         frames: number of frames with people.
         background_frames: number of frames of the empty room.
-        people: number of people walking (fixed for the sequence).
-        area: (x_min, x_max, y_min, y_max) where people walk, world metres.
+        people: number of people walking, or of drones flying (fixed for the sequence).
+        kind: 'people' or 'drones'.
+        area: (x_min, x_max, y_min, y_max) where people walk or drones fly, world metres.
+        altitude: (z_min, z_max) of the drones' centres, metres.
+        obstacles: free-standing cabinets (1.6-1.9 m high) inside `area`, for drones to hide behind.
         room: (x_min, x_max, y_min, y_max, height) of the room's walls.
         furniture: number of furniture pieces placed in the room.
         step_m: distance a person walks between frames.
@@ -43,7 +47,10 @@ class SceneSpec:
     frames: int = 20
     background_frames: int = 10
     people: int = 5
+    kind: str = "people"
     area: tuple[float, float, float, float] = (-2.7, 2.7, 1.5, 6.7)
+    altitude: tuple[float, float] = (0.6, 2.1)
+    obstacles: int = 0
     room: tuple[float, float, float, float, float] = (-3.6, 3.6, -0.5, 8.0, 3.0)
     furniture: int = 4
     step_m: float = 0.3
@@ -121,6 +128,85 @@ def person_mesh(height: float, heading: float, phase: float, build: float = 1.0)
     rot = o3d.geometry.get_rotation_matrix_from_xyz((0, 0, heading - math.pi / 2))
     mesh.rotate(rot, center=(0, 0, 0))
     return mesh
+
+
+def drone_mesh(heading: float):
+    """A quadcopter centred at the origin: body, four arms, four rotors; 0.35 x 0.35 x 0.09 m."""
+    parts = [_box((0.16, 0.16, 0.06), (0, 0, 0))]
+    for a in np.deg2rad([45, 135, 225, 315]):
+        d = np.array([math.cos(a), math.sin(a), 0.0])
+        arm = _box((0.2, 0.03, 0.02), (0, 0, 0))
+        arm.rotate(o3d.geometry.get_rotation_matrix_from_xyz((0, 0, a)), center=(0, 0, 0))
+        parts.append(arm.translate(0.1 * d))
+        rotor = o3d.geometry.TriangleMesh.create_cylinder(radius=0.07, height=0.012, resolution=16)
+        parts.append(rotor.translate(0.15 * d + np.array([0, 0, 0.035])))
+    mesh = parts[0]
+    for p in parts[1:]:
+        mesh += p
+    mesh.rotate(o3d.geometry.get_rotation_matrix_from_xyz((0, 0, heading)), center=(0, 0, 0))
+    return mesh
+
+
+def obstacle_meshes(spec: SceneSpec, rng: np.random.Generator, footprints):
+    """Free-standing cabinets inside the flying area; returns meshes and their boxes
+    (x0, x1, y0, y1, height)."""
+    ax0, ax1, ay0, ay1 = spec.area
+    meshes, boxes = [], []
+    for _ in range(spec.obstacles):
+        for _ in range(200):
+            w, d, h = rng.uniform(0.6, 1.1), rng.uniform(0.4, 0.6), rng.uniform(1.6, 1.9)
+            cx, cy = rng.uniform(ax0 + 0.5, ax1 - 0.5), rng.uniform(ay0 + 0.8, ay1 - 1.0)
+            box = (cx - w / 2, cx + w / 2, cy - d / 2, cy + d / 2, h)
+            if all(box[1] < b[0] - 0.8 or box[0] > b[1] + 0.8 or box[3] < b[2] - 0.8 or box[2] > b[3] + 0.8
+                   for b in boxes + [(*f, 3.0) for f in footprints]):
+                break
+        boxes.append(box)
+        meshes.append(_box((w, d, h), (cx, cy, h / 2)))
+    return meshes, boxes
+
+
+def fly(spec: SceneSpec, camera: Camera, boxes, rng: np.random.Generator):
+    """Drones' (x, y, z, heading) per frame: a random flight that keeps each in view, clear of
+    the furniture (boxes x0, x1, y0, y1, height) and 0.6 m from the others."""
+    ax0, ax1, ay0, ay1 = spec.area
+    z0, z1 = spec.altitude
+
+    def clear(x, y, z):
+        return all(not (b[0] - 0.35 < x < b[1] + 0.35 and b[2] - 0.35 < y < b[3] + 0.35 and z < b[4] + 0.2)
+                   for b in boxes)
+
+    def in_view(x, y, z):
+        u, v, depth = camera.project(np.array([[x + dx, y, z + dz] for dx in (-0.2, 0.2) for dz in (-0.06, 0.06)]))
+        return bool(np.all(depth > 0.5) and np.all((u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)))
+
+    def ok(p, others):
+        x, y, z = p
+        return (ax0 <= x <= ax1 and ay0 <= y <= ay1 and z0 <= z <= z1 and clear(x, y, z)
+                and in_view(x, y, z) and all(np.linalg.norm(np.subtract(p, o[:3])) > 0.6 for o in others))
+
+    state = []
+    for _ in range(spec.people):
+        for _ in range(10000):
+            p = [rng.uniform(ax0, ax1), rng.uniform(ay0, ay1), rng.uniform(z0, z1)]
+            if ok(p, state):
+                break
+        else:
+            raise RuntimeError("synthetic: could not place every drone in view; enlarge 'area'")
+        state.append(p + [rng.uniform(0, 2 * math.pi), rng.normal(0, 0.3)])
+    frames = []
+    for _ in range(spec.frames):
+        frames.append([dict(x=s[0], y=s[1], z=s[2], heading=s[3]) for s in state])
+        for i, s in enumerate(state):
+            others = [q for j, q in enumerate(state) if j != i]
+            for attempt in range(50):
+                hd = s[3] + rng.normal(0, 0.4) + (0 if attempt < 5 else rng.uniform(-math.pi, math.pi))
+                climb = s[4] + rng.normal(0, 0.2) if attempt < 5 else rng.normal(0, 0.5)
+                step = spec.step_m * np.array([math.cos(hd), math.sin(hd), climb])
+                p = list(np.array(s[:3]) + step)
+                if ok(p, others):
+                    state[i] = p + [hd, float(np.clip(climb, -0.6, 0.6))]
+                    break
+    return frames
 
 
 def room_meshes(spec: SceneSpec, rng: np.random.Generator):
@@ -269,8 +355,14 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
                 return desc
         except json.JSONDecodeError:
             pass
+    if spec.kind not in ("people", "drones"):
+        raise ValueError(f"synthetic.kind: expected people or drones, found {spec.kind!r}")
     rng = np.random.default_rng(spec.seed)
     room, footprints = room_meshes(spec, rng)
+    boxes = [(*f, 3.0) for f in footprints]
+    if spec.obstacles:
+        extra, inside = obstacle_meshes(spec, rng, footprints)
+        room, boxes = room + extra, boxes + inside
     (out / "frames").mkdir(parents=True, exist_ok=True)
     (out / "background").mkdir(parents=True, exist_ok=True)
     static, _ = _scene(room)
@@ -278,10 +370,17 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
     for f in range(spec.background_frames):
         write_depth_png(out / "background" / f"{f:04d}.png", sensor_noise(t_static, spec, rng))
     truth = []
-    for f, people in enumerate(walk(spec, camera, footprints, rng)):
-        meshes = [person_mesh(p["height"], p["heading"], p["phase"], p["build"]) for p in people]
+    if spec.kind == "people":
+        sequence = walk(spec, camera, footprints, rng)
+    else:
+        sequence = fly(spec, camera, boxes, rng)
+    for f, people in enumerate(sequence):
+        if spec.kind == "people":
+            meshes = [person_mesh(p["height"], p["heading"], p["phase"], p["build"]) for p in people]
+        else:
+            meshes = [drone_mesh(p["heading"]) for p in people]
         for m, p in zip(meshes, people):
-            m.translate((p["x"], p["y"], 0.0))
+            m.translate((p["x"], p["y"], p.get("z", 0.0)))
         scene, ids = _scene(room + meshes)
         t, gid = render(scene, camera)
         name = f"{f:04d}.png"
@@ -291,13 +390,16 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
             alone, _ = _scene([m])
             ta, _ = render(alone, camera)
             full = np.isfinite(ta)
-            if not full.any():
+            visible = int((gid == pid).sum())
+            if visible == 0:  # out of view or wholly hidden: nothing in the image to find
                 continue
             vv, uu = np.nonzero(full)
-            objects.append({"x": round(p["x"], 4), "y": round(p["y"], 4), "z": 0.0,
-                            "height": round(p["height"], 3),
+            obj = {"x": round(p["x"], 4), "y": round(p["y"], 4), "z": round(p.get("z", 0.0), 4)}
+            if "height" in p:
+                obj["height"] = round(p["height"], 3)
+            objects.append({**obj,
                             "bbox": [int(uu.min()), int(vv.min()), int(uu.max()), int(vv.max())],
-                            "visibility": round(float((gid == pid).sum() / full.sum()), 4)})
+                            "visibility": round(visible / float(full.sum()), 4)})
         truth.append({"frame": name, "objects": objects})
     write_json_atomic(out / "ground_truth.json", truth)
     write_json_atomic(meta, desc)

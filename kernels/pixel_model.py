@@ -30,6 +30,8 @@ class PixelModel:
     outlier_prob: wp.float64
     missing_prob: wp.float64
     missing_clip: wp.float64
+    background_occludes: int  # 1: the known background in front of a location hides it
+    occlusion_margin: wp.float64
 
 
 @wp.func

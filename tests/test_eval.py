@@ -102,7 +102,8 @@ def test_eval_command_on_a_run_and_a_csv(tmp_path, capsys):
     out = tmp_path / "out"
     run_eval = json.load(open(out / "eval.json"))  # the run wrote the curves already
     # re-detected candidates at the run's threshold are exactly the CSV's detections
-    cands, summary = run_detections(out)
+    cands, summary, cube = run_detections(out)
+    assert cube is None  # a ground grid
     rows = list(csv.DictReader(open(out / "detections.csv")))
     for frame, arr in cands.frames.items():
         kept = arr[arr[:, 3] >= summary["config"]["detection"]["threshold"]]
