@@ -415,17 +415,21 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
     return out
 
 
-def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConfig:
-    """Read, override and validate a YAML run config."""
-    path = Path(path)
+def _read_yaml(path: Path, what: str):
     if not path.is_file():
-        raise ConfigError(f"{path}: no such config file")
+        raise ConfigError(f"{path}: no such {what}")
     try:
-        raw = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""
         raise ConfigError(f"{path}: not valid YAML{where} ({getattr(e, 'problem', e)})") from None
+
+
+def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConfig:
+    """Read, override and validate a YAML run config."""
+    path = Path(path)
+    raw = _read_yaml(path, "config file")
     if not isinstance(raw, dict):
         raise ConfigError(f"{path}: expected a YAML mapping at the top, found {_fmt(raw)}")
     try:
@@ -442,12 +446,7 @@ def load_camera_file(path: str | Path) -> tuple[Camera, float]:
         (camera with identity pose, depth_scale in metres per unit).
     """
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: no such camera file")
-    try:
-        raw = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: not valid YAML ({getattr(e, 'problem', e)})") from None
+    raw = _read_yaml(path, "camera file")
     try:
         s = _Section(raw, "")
         width = s.number("width", required=True, integer=True, lo=1)

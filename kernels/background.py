@@ -16,6 +16,21 @@ def log_theta(pm: PixelModel, z: wp.float64, mu: wp.float64, sigma: wp.float64,
     return wp.log(f64(1.0) - missing) + logaddexp(wp.log(outlier) - wp.log(pm.z_max), gauss)
 
 
+@wp.func
+def set_background(bg: wp.array2d(dtype=wp.float64), p: int, mu: wp.float64, sigma: wp.float64,
+                   missing: wp.float64, outlier: wp.float64):
+    bg[p, 0] = mu
+    bg[p, 1] = sigma
+    bg[p, 2] = missing
+    bg[p, 3] = outlier
+
+
+@wp.func
+def set_broad(bg: wp.array2d(dtype=wp.float64), p: int, missing: wp.float64):
+    """No idea of the depth: uniform over the sensor range (pi_out = 1)."""
+    set_background(bg, p, f64(0.0), f64(1.0), missing, f64(1.0))
+
+
 @wp.kernel(enable_backward=False)
 def background_delta(
     depth: wp.array2d(dtype=wp.float32),
@@ -56,14 +71,9 @@ def floor_background(
         if x[0] < bounds[0] or x[0] > bounds[1] or x[1] < bounds[2] or x[1] > bounds[3] or x[2] > bounds[5]:
             t = z
     if t > f64(0.0) and t <= pm.z_max:
-        bg[p, 0] = t
-        bg[p, 1] = sensor_sigma(pm, t)
-        bg[p, 3] = pm.outlier_prob
+        set_background(bg, p, t, sensor_sigma(pm, t), pm.missing_prob, pm.outlier_prob)
     else:
-        bg[p, 0] = f64(0.0)
-        bg[p, 1] = f64(1.0)
-        bg[p, 3] = f64(1.0)
-    bg[p, 2] = pm.missing_prob
+        set_broad(bg, p, pm.missing_prob)
 
 
 @wp.func
@@ -102,12 +112,9 @@ def background_from_frames(
         if is_reading(pm, z):
             scratch[p, n] = z
             n += 1
-    missing = f64(1.0) - f64(n) / f64(n_frames)
-    bg[p, 2] = wp.clamp(missing, pm.missing_clip, f64(1.0) - pm.missing_clip)
+    missing = wp.clamp(f64(1.0) - f64(n) / f64(n_frames), pm.missing_clip, f64(1.0) - pm.missing_clip)
     if n == 0:
-        bg[p, 0] = f64(0.0)
-        bg[p, 1] = f64(1.0)
-        bg[p, 3] = f64(1.0)
+        set_broad(bg, p, missing)
         return
     sort_row(scratch, p, n)
     mu = sorted_median(scratch, p, n)
@@ -115,6 +122,4 @@ def background_from_frames(
         scratch[p, i] = wp.abs(scratch[p, i] - mu)
     sort_row(scratch, p, n)
     mad = sorted_median(scratch, p, n)
-    bg[p, 0] = mu
-    bg[p, 1] = wp.max(f64(1.4826) * mad, sensor_sigma(pm, mu))
-    bg[p, 3] = pm.outlier_prob
+    set_background(bg, p, mu, wp.max(f64(1.4826) * mad, sensor_sigma(pm, mu)), missing, pm.outlier_prob)

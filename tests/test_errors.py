@@ -3,7 +3,6 @@ code 2, and no output; bad frames in a sequence are skipped and reported; interr
 resume to the same files; identical runs give identical bytes."""
 
 import json
-import os
 import signal
 import subprocess
 import sys

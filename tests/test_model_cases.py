@@ -49,6 +49,7 @@ def run_both(device, depth, geom, bg, params):
     got = engine.infer(depth.astype(np.float32))
     want = ref.mean_field(depth, geom, bg, params)
     np.testing.assert_allclose(got.rho, want["rho"], atol=1e-6)
+    assert got.entries == want["entries"]
     return got
 
 

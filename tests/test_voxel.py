@@ -12,19 +12,9 @@ from dpom_warp import reference as ref
 from dpom_warp.cli import main
 from dpom_warp.engine import Engine
 from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
-from dpom_warp.model import Background, ModelParams
+from dpom_warp.model import ModelParams
 
-from test_model_cases import H, W, toy_geometry, wall_background
-
-
-def run_both(device, depth, geom, bg, params):
-    engine = Engine(geom, params, device)
-    engine.set_background(bg)
-    got = engine.infer(depth.astype(np.float32))
-    want = ref.mean_field(depth, geom, bg, params)
-    np.testing.assert_allclose(got.rho, want["rho"], atol=1e-6)
-    assert got.entries == want["entries"]
-    return got
+from test_model_cases import H, W, run_both, toy_geometry, wall_background
 
 
 def cupboard_background():
