@@ -24,6 +24,7 @@ def _umask() -> int:
 
 
 _FILE_MODE = 0o666 & ~_umask()
+TEMP_MARK = ".tmp-"  # in the name of every temporary file, so a killed run's leftovers are found
 
 
 @contextmanager
@@ -31,7 +32,8 @@ def atomic_path(path: str | Path, suffix: str = ""):
     """Yield a temporary path beside `path`; on success it is renamed onto `path`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix, dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}{TEMP_MARK}", suffix=suffix or path.suffix,
+                               dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)

@@ -9,6 +9,7 @@ import platform
 import shutil
 import statistics
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,8 @@ from .engine import Engine, ListOverflow, MemoryBudgetError, resolve_device
 from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
 from .ground import GroundFitError, fit_ground_frames
-from .io import InputError, read_depth, write_json_atomic, write_npy_atomic, write_text_atomic
+from .io import (TEMP_MARK, InputError, read_depth, write_json_atomic, write_npy_atomic,
+                 write_text_atomic)
 from .synthetic import generate
 
 CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
@@ -89,9 +91,8 @@ def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> 
             raise ConfigError(f"output.dir: {out} is not empty; expected an empty or new folder "
                               f"(use --overwrite to replace its results or --resume to continue)")
     out.mkdir(parents=True, exist_ok=True)
-    for stale in list(out.glob(".*")) + list(out.glob("*/.*")):  # temporary files of a kill
-        if stale.is_file():
-            stale.unlink()
+    for stale in list(out.glob(f".*{TEMP_MARK}*")) + list(out.glob(f"*/.*{TEMP_MARK}*")):
+        stale.unlink()  # temporary files of a killed run
     write_json_atomic(out / RUN_STATE, state)
 
 
@@ -120,8 +121,7 @@ def check_frames(frames: list[Path], scale: float, shape, strict: bool) -> tuple
     if not good:
         raise InputError(skipped[0]["reason"] + (f" (none of the {len(frames)} frames is usable)"
                                                  if len(frames) > 1 else ""))
-    stems = [f.stem for f in good]
-    dup = next((s for s in stems if stems.count(s) > 1), None)
+    dup = next((s for s, n in Counter(f.stem for f in good).items() if n > 1), None)
     if dup:
         raise ConfigError(f"input.frames: two frames share the name {dup!r} (outputs are named "
                           f"by it); expected distinct names")
