@@ -41,20 +41,14 @@ def _fit_ground(args) -> int:
     import yaml
 
     from .config import load_camera_file
-    from .ground import GroundFitError, GroundOptions, fit_ground_frames
-    from .io import read_depth, write_text_atomic
+    from .ground import GroundOptions, fit_ground_files
+    from .io import write_text_atomic
 
     camera, scale = load_camera_file(args.camera)
-    shape = (camera.height, camera.width)
-    depths = [read_depth(f, scale, shape) for f in args.depth]
     options = GroundOptions(max_angle_deg=args.max_angle, depth_max=args.depth_max)
-    try:
-        fit = fit_ground_frames(depths, camera, options)
-    except GroundFitError as e:
-        which = args.depth[0] if len(args.depth) == 1 else f"{args.depth[0]} and {len(args.depth) - 1} more"
-        raise InputError(f"{which}: {e}") from None
+    fit = fit_ground_files(args.depth, camera, scale, options)
     report = fit.report()
-    text = (f"# dpom-warp fit-ground on {len(depths)} frame(s); paste under camera.extrinsics\n"
+    text = (f"# dpom-warp fit-ground on {len(args.depth)} frame(s); paste under camera.extrinsics\n"
             + yaml.safe_dump(report, default_flow_style=None, sort_keys=False))
     if args.output:
         write_text_atomic(args.output, text)

@@ -229,3 +229,20 @@ def fit_ground_frames(frames_m, camera: Camera, options: GroundOptions = GroundO
     # beyond depth_max too: the refinement selects points by the plane's depth, not theirs
     pts = [backproject(f, camera, 1.5 * options.depth_max, options.stride) for f in frames_m]
     return fit_ground(np.concatenate(pts) if pts else np.zeros((0, 3)), options)
+
+
+def fit_ground_files(files, camera: Camera, depth_scale: float,
+                     options: GroundOptions = GroundOptions()) -> GroundFit:
+    """`fit_ground_frames` on depth files.
+
+    Raises:
+        InputError: a bad file, or no floor in the files (the message names them).
+    """
+    from .io import InputError, read_depth
+
+    depths = [read_depth(f, depth_scale, (camera.height, camera.width)) for f in files]
+    try:
+        return fit_ground_frames(depths, camera, options)
+    except GroundFitError as e:
+        which = str(files[0]) if len(files) == 1 else f"{files[0]} and {len(files) - 1} more frames"
+        raise InputError(f"{which}: {e}") from None

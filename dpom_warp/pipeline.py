@@ -19,7 +19,7 @@ from .detect import detect
 from .engine import Engine, ListOverflow, MemoryBudgetError, resolve_device
 from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
-from .ground import GroundFitError, fit_ground_frames
+from .ground import fit_ground_files
 from .io import (TEMP_MARK, InputError, read_depth, write_json_atomic, write_npy_atomic,
                  write_text_atomic)
 from .synthetic import generate
@@ -43,13 +43,7 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
         InputError: naming the frames, when no floor plane is found in them.
     """
     t = time.perf_counter()
-    depths = [read_depth(f, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
-              for f in files]
-    try:
-        fit = fit_ground_frames(depths, cfg.camera, cfg.ground)
-    except GroundFitError as e:
-        which = str(files[0]) if len(files) == 1 else f"{files[0]} and {len(files) - 1} more frames"
-        raise InputError(f"{which}: {e}") from None
+    fit = fit_ground_files(files, cfg.camera, cfg.inputs.depth_scale, cfg.ground)
     kind = "background frame" if cfg.inputs.background else "frame"
     log(f"ground plane from {len(files)} {kind}{'s' if len(files) > 1 else ''}: camera "
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
