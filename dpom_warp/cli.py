@@ -21,8 +21,11 @@ def _run(args) -> int:
     if args.overwrite and args.resume:
         raise ConfigError("--overwrite and --resume: expected at most one of them")
     cfg = load_config(args.config, args.set)
+    if args.workers < 1:
+        raise ConfigError(f"--workers: expected a number >= 1, found {args.workers}")
     summary = run(cfg, args.output, args.device, progress=not args.no_progress,
-                  strict=args.strict, overwrite=args.overwrite, resume=args.resume)
+                  strict=args.strict, overwrite=args.overwrite, resume=args.resume,
+                  workers=args.workers)
     if summary["skipped"]:
         print(f"{len(summary['skipped'])} frame(s) skipped (reasons in summary.json)")
     t = summary["timings"]
@@ -97,6 +100,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="override a config value, e.g. --set model.damping=0.2")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--strict", action="store_true", help="a bad frame is fatal instead of skipped")
+    p.add_argument("--workers", type=int, default=1,
+                   help="process frames in this many processes (Warp runs CPU kernels on one thread)")
     p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty output folder")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in its output folder, skipping finished frames")

@@ -124,13 +124,15 @@ def check_frames(frames: list[Path], scale: float, shape, strict: bool) -> tuple
 
 def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None,
         progress: bool = True, log=print, strict: bool = False, overwrite: bool = False,
-        resume: bool = False) -> dict:
+        resume: bool = False, workers: int = 1) -> dict:
     """Run DPOM over the configured frames; returns the summary also written to summary.json.
 
     A frame whose file is bad, or whose lists would exceed the memory budget, is reported
     and skipped (listed in summary.json), unless `strict`. Each frame's outputs (map,
     picture, then its record in frames/) are written atomically, so an interrupted run
-    leaves whole files and `resume` continues it to the same final files.
+    leaves whole files and `resume` continues it to the same final files. With `workers` > 1
+    frames are processed by that many processes, each with its own engine (Warp runs CPU
+    kernels on one thread), giving the same files.
     """
     t_start = time.perf_counter()
     out = Path(output_dir or cfg.output.dir)
@@ -188,19 +190,22 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
             todo.append(f)
     if resume:
         log(f"resuming: {len(records)} frames already done, {len(todo)} to go")
-    iterator = todo
-    if progress:
-        from tqdm import tqdm
-        iterator = tqdm(todo, unit="frame", desc="dpom", leave=False)
-    for f in iterator:
-        try:
-            records[f.name] = process_frame(cfg, engine, geometry, f, out, truth)
-        except (InputError, ListOverflow) as e:
+    if workers > 1 and len(todo) > 1:
+        outcomes = _process_in_workers(cfg, camera, bg_files, engine, todo, out, truth, workers,
+                                       progress)
+    else:
+        outcomes = _process_here(cfg, engine, geometry, todo, out, truth, progress)
+    try:
+        for f, record, error in outcomes:
+            if error is None:
+                records[f.name] = record
+                continue
             if strict:
-                raise InputError(str(e) if isinstance(e, InputError) else f"{f}: {e}") from None
-            reason = str(e) if isinstance(e, InputError) else f"{f}: {e}"
-            skipped.append({"frame": f.name, "reason": reason})
-            log(f"skipping {reason}")
+                raise InputError(error)
+            skipped.append({"frame": f.name, "reason": error})
+            log(f"skipping {error}")
+    finally:
+        outcomes.close()  # stops the worker pool at once on an error or Ctrl-C
     done = [f for f in frames if f.name in records]
     summary = summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground,
                         engine.grown)
@@ -217,6 +222,82 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
 
             write_figures(results, out / "plots")
     return summary
+
+
+def _attempt(cfg, engine, geometry, f, out, truth):
+    """(frame, record, None) or (frame, None, reason) for a frame that cannot be processed."""
+    try:
+        return f, process_frame(cfg, engine, geometry, f, out, truth), None
+    except InputError as e:
+        return f, None, str(e)
+    except ListOverflow as e:
+        return f, None, f"{f}: {e}"
+
+
+def _process_here(cfg, engine, geometry, todo, out, truth, progress):
+    iterator = todo
+    if progress:
+        from tqdm import tqdm
+        iterator = tqdm(todo, unit="frame", desc="dpom", leave=False)
+    for f in iterator:
+        yield _attempt(cfg, engine, geometry, f, out, truth)
+
+
+_worker = {}
+
+
+def _worker_start(cfg, camera, bg_files, device, cache_dir):
+    """Process-pool initializer: a private copy of the kernel cache, then an engine."""
+    import atexit
+    import os
+    import tempfile
+
+    own = Path(tempfile.mkdtemp(prefix="dpom-warp-cache-"))
+    atexit.register(shutil.rmtree, own, True)
+    shutil.copytree(cache_dir, own, dirs_exist_ok=True)
+    os.environ["WARP_CACHE_PATH"] = str(own)
+    import warp as wp
+
+    wp.config.kernel_cache_dir = str(own)
+    geometry = build_geometry(camera, cfg.grid, cfg.obj)
+    engine = Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel,
+                    cfg.engine.max_entries, cfg.engine.memory_gb)
+    if bg_files:
+        shape = (camera.height, camera.width)
+        engine.set_background_frames(np.stack([read_depth(f, cfg.inputs.depth_scale, shape)
+                                               for f in bg_files]))
+    _worker.update(cfg=cfg, engine=engine, geometry=geometry)
+
+
+def _worker_frame(f, out, truth):
+    w = _worker
+    return _attempt(w["cfg"], w["engine"], w["geometry"], f, out, truth)
+
+
+def _process_in_workers(cfg, camera, bg_files, engine, todo, out, truth, workers, progress):
+    """Frames in a pool of processes ('spawn': no Warp state is forked). The main engine
+    first runs an empty frame, which compiles every kernel into the cache; each worker copies
+    the cache and only loads them."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    import warp as wp
+
+    engine.infer(np.zeros((camera.height, camera.width), np.float32))
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_worker_start,
+                               initargs=(cfg, camera, bg_files, engine.device,
+                                         wp.config.kernel_cache_dir))
+    try:
+        futures = [pool.submit(_worker_frame, f, out, truth) for f in todo]
+        iterator = futures
+        if progress:
+            from tqdm import tqdm
+            iterator = tqdm(futures, unit="frame", desc=f"dpom x{workers}", leave=False)
+        for fut in iterator:
+            yield fut.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def process_frame(cfg: RunConfig, engine: Engine, geometry, f: Path, out: Path, truth) -> dict:

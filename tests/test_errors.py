@@ -264,3 +264,14 @@ def test_killed_run_leaves_whole_files_and_resumes(tmp_path, scene):
         assert np.load(m).shape == (28, 25)  # every written map is whole
     assert main(["run", str(path), "--no-progress", "--resume"]) == 0
     assert len(list((out / "maps").glob("*.npy"))) == 6
+
+
+def test_workers_give_the_same_files(tmp_path, scene):
+    path = write_config(tmp_path, scene[1])
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "one")]) == 0
+    assert main(["run", str(path), "--no-progress", "--workers", "2", "--output", str(tmp_path / "two")]) == 0
+    one, two = tmp_path / "one", tmp_path / "two"
+    assert (one / "detections.csv").read_bytes() == (two / "detections.csv").read_bytes()
+    for m in (one / "maps").iterdir():
+        assert (two / "maps" / m.name).read_bytes() == m.read_bytes()
+    assert json.load(open(two / "summary.json"))["scores"] == json.load(open(one / "summary.json"))["scores"]
