@@ -180,19 +180,19 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
     Planes are peeled off the downsampled cloud with Open3D's RANSAC, largest first. Floor
     candidates have enough inliers, a normal within `max_angle_deg` of `up` and the camera on
     their upper side; among them the lowest (largest camera height) wins, so table tops and
-    shelves lose to the floor, and walls are too steep to compete. The winner is refined by
-    least squares on the full cloud.
+    shelves lose to the floor, and walls are too steep to compete. The winner is refined on
+    the full cloud by the regression of `_refine`.
 
     Raises:
         GroundFitError: no candidate (too little floor visible, or none near `up`).
     """
     pts = np.asarray(points, dtype=np.float64)
     pts = pts[np.isfinite(pts).all(1)]
-    if (pts[:, 2] <= options.depth_max).sum() < options.min_inliers:
-        raise GroundFitError(f"too few depth readings for a floor ({len(pts)} points within "
+    in_range = pts[pts[:, 2] <= options.depth_max]
+    if len(in_range) < options.min_inliers:
+        raise GroundFitError(f"too few depth readings for a floor ({len(in_range)} points within "
                              f"{options.depth_max} m, need at least {options.min_inliers})")
     o3d.utility.random.seed(seed)
-    in_range = pts[pts[:, 2] <= options.depth_max]
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(in_range)).voxel_down_sample(options.voxel)
     up = np.asarray(options.up, dtype=np.float64)
     up /= np.linalg.norm(up)
