@@ -136,6 +136,11 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, InputError) as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 2
+    except RuntimeError as e:  # pipeline.WorkerError
+        if type(e).__name__ != "WorkerError":
+            raise
+        print(f"dpom-warp: error: {e}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("dpom-warp: interrupted; finished frames are kept, continue with --resume",
               file=sys.stderr)

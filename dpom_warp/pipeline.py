@@ -27,6 +27,10 @@ from .synthetic import generate
 CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
 
 
+class WorkerError(RuntimeError):
+    """A worker process of --workers died (killed, out of memory); one line says so."""
+
+
 def expand(pattern: str, key: str) -> list[Path]:
     files = sorted(Path(p) for p in glob.glob(pattern))
     files = [f for f in files if f.is_file()]
@@ -254,11 +258,9 @@ def _worker_start(cfg, camera, bg_files, device, cache_dir):
 
     own = Path(tempfile.mkdtemp(prefix="dpom-warp-cache-"))
     atexit.register(shutil.rmtree, own, True)
-    shutil.copytree(cache_dir, own, dirs_exist_ok=True)
+    # Warp keeps its modules under WARP_CACHE_PATH/<version>, read when it initialises
+    shutil.copytree(cache_dir, own / Path(cache_dir).name, dirs_exist_ok=True)
     os.environ["WARP_CACHE_PATH"] = str(own)
-    import warp as wp
-
-    wp.config.kernel_cache_dir = str(own)
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
     engine = Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel,
                     cfg.engine.max_entries, cfg.engine.memory_gb)
@@ -266,7 +268,9 @@ def _worker_start(cfg, camera, bg_files, device, cache_dir):
         shape = (camera.height, camera.width)
         engine.set_background_frames(np.stack([read_depth(f, cfg.inputs.depth_scale, shape)
                                                for f in bg_files]))
-    _worker.update(cfg=cfg, engine=engine, geometry=geometry)
+    import warp as wp
+
+    _worker.update(cfg=cfg, engine=engine, geometry=geometry, cache=wp.config.kernel_cache_dir)
 
 
 def _worker_frame(f, out, truth):
@@ -280,6 +284,7 @@ def _process_in_workers(cfg, camera, bg_files, engine, todo, out, truth, workers
     the cache and only loads them."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
 
     import warp as wp
 
@@ -295,7 +300,11 @@ def _process_in_workers(cfg, camera, bg_files, engine, todo, out, truth, workers
             from tqdm import tqdm
             iterator = tqdm(futures, unit="frame", desc=f"dpom x{workers}", leave=False)
         for fut in iterator:
-            yield fut.result()
+            try:
+                yield fut.result()
+            except BrokenProcessPool as e:
+                raise WorkerError(f"--workers: a worker process died ({e}); finished frames are "
+                                  f"kept, continue with --resume") from None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
 
