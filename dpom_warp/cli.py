@@ -12,7 +12,7 @@ import signal
 import sys
 
 from .config import ConfigError, load_config
-from .io import InputError
+from .io import InputError, WorkerError
 
 
 def _run(args) -> int:
@@ -136,9 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, InputError) as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 2
-    except RuntimeError as e:  # pipeline.WorkerError
-        if type(e).__name__ != "WorkerError":
-            raise
+    except WorkerError as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

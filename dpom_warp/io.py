@@ -17,6 +17,10 @@ class InputError(ValueError):
     """Bad input file or value; the message is one line naming the file."""
 
 
+class WorkerError(RuntimeError):
+    """A worker process of `run --workers` died (killed, out of memory); one line says so."""
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

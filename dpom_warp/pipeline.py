@@ -20,15 +20,12 @@ from .engine import Engine, ListOverflow, MemoryBudgetError, resolve_device
 from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
 from .ground import fit_ground_files
-from .io import (TEMP_MARK, InputError, read_depth, write_json_atomic, write_npy_atomic,
-                 write_text_atomic)
+from .io import (TEMP_MARK, InputError, WorkerError, read_depth, write_json_atomic,
+                 write_npy_atomic, write_text_atomic)
 from .synthetic import generate
 
 CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
 
-
-class WorkerError(RuntimeError):
-    """A worker process of --workers died (killed, out of memory); one line says so."""
 
 
 def expand(pattern: str, key: str) -> list[Path]:
