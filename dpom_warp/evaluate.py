@@ -60,43 +60,38 @@ def score_frames(detections: dict[str, np.ndarray], truth: dict[str, list[dict]]
         dict with n_gt, tp, fp, fn, moda, precision, recall, mean localisation error of matched
         detections, and the same scores with hidden people not penalised.
     """
-    tp = fp = fn = n_gt = 0
-    tp_v = fp_v = fn_v = n_gt_v = 0
-    errors, range_errors = [], []
     dims = next((np.asarray(d).shape[-1] for d in detections.values() if np.asarray(d).ndim == 2), 2)
+    rows = {}
+    for name, det in detections.items():  # as Detections rows: x, y, z, rho = 1, no box
+        det = np.asarray(det, dtype=float).reshape(-1, dims)
+        rows[name] = np.column_stack([det, np.zeros((len(det), 3 - dims)), np.ones(len(det)),
+                                      -np.ones((len(det), 4))])
+    dets = Detections("run", rows)
+    plane = "ground" if dims == 2 else "space"
+    every = counts(dets, truth, 0.0, plane, max_distance)
+    visible = counts(dets, truth, 0.0, plane, max_distance, hidden_visibility, penalise_hidden=False)
+    errors, range_errors = [], []
     for name, objs in truth.items():
-        det = np.asarray(detections.get(name, np.zeros((0, dims))), dtype=float).reshape(-1, dims)
+        det = dets.at(name, 0.0)[:, :dims]
         gt = np.array([[o["x"], o["y"], o.get("z", 0.0)][:dims] for o in objs], dtype=float).reshape(-1, dims)
-        hidden = np.array([o.get("visibility", 1.0) < hidden_visibility for o in objs], bool)
         pairs = match(det, gt, max_distance)
-        matched_gt = {g for _, g in pairs}
         errors += [float(np.linalg.norm(det[d] - gt[g])) for d, g in pairs]
         if camera_xy is not None:
             c = np.asarray(camera_xy, float)
             range_errors += [float(np.linalg.norm(det[d, :2] - c) - np.linalg.norm(gt[g, :2] - c))
                              for d, g in pairs]
-        tp += len(pairs)
-        fp += len(det) - len(pairs)
-        fn += len(gt) - len(pairs)
-        n_gt += len(gt)
-        tp_v += sum(1 for _, g in pairs if not hidden[g])
-        fp_v += len(det) - len(pairs)
-        fn_v += sum(1 for g in range(len(gt)) if g not in matched_gt and not hidden[g])
-        n_gt_v += int((~hidden).sum())
 
-    def ratio(a, b):
-        return float(a / b) if b else float("nan")
+    def mean(x):
+        return float(np.mean(x)) if x else float("nan")
 
     return {
-        "frames": len(truth), "n_gt": n_gt, "tp": tp, "fp": fp, "fn": fn,
-        "moda": 1.0 - ratio(fp + fn, n_gt) if n_gt else float("nan"),
-        "precision": ratio(tp, tp + fp), "recall": ratio(tp, n_gt),
-        "mean_error_m": float(np.mean(errors)) if errors else float("nan"),
+        "frames": len(truth), "n_gt": every["n_gt"], "tp": every["tp"], "fp": every["fp"],
+        "fn": every["fn"], "moda": every["moda"], "precision": every["precision"],
+        "recall": every["recall"], "mean_error_m": mean(errors),
         "median_error_m": float(np.median(errors)) if errors else float("nan"),
-        "mean_range_error_m": float(np.mean(range_errors)) if range_errors else float("nan"),
-        "n_gt_visible": n_gt_v,
-        "moda_visible": 1.0 - ratio(fp_v + fn_v, n_gt_v) if n_gt_v else float("nan"),
-        "recall_visible": ratio(tp_v, n_gt_v),
+        "mean_range_error_m": mean(range_errors),
+        "n_gt_visible": visible["n_gt"], "moda_visible": visible["moda"],
+        "recall_visible": visible["recall"],
         "match_distance": max_distance, "hidden_visibility": hidden_visibility,
     }
 
