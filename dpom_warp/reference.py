@@ -7,6 +7,8 @@ rounds them the same way; everything else is float64.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from .geometry import Geometry
@@ -75,12 +77,10 @@ def background_from_frames(frames_m: np.ndarray, params: ModelParams) -> Backgro
     ok = valid_reading(frames, params)
     n_ok = ok.sum(axis=0)
     data = np.where(ok, frames, np.nan)
-    with np.errstate(all="ignore"):
-        import warnings
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            mu = np.nanmedian(data, axis=0)
-            mad = np.nanmedian(np.abs(data - mu[None]), axis=0)
+    with warnings.catch_warnings():  # pixels never read are all-NaN slices: handled below
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mu = np.nanmedian(data, axis=0)
+        mad = np.nanmedian(np.abs(data - mu[None]), axis=0)
     seen = n_ok > 0
     mu = np.where(seen, mu, 0.0)
     sigma = np.where(seen, np.maximum(1.4826 * np.nan_to_num(mad), params.sensor_sigma(mu)), 1.0)
