@@ -68,7 +68,6 @@ def time_scene(cfg, depth, bg, device, repeats):
     """Per-stage medians of one frame on `device`."""
     import warp as wp
 
-    from dpom_warp import kernels as K
     from dpom_warp.engine import Engine, memory_estimate
     from dpom_warp.geometry import build_geometry
 
@@ -78,11 +77,7 @@ def time_scene(cfg, depth, bg, device, repeats):
     warm = engine.infer(depth)
 
     def one_iteration():
-        wp.launch(K.evidence_pass, dim=engine.n_pixels, device=device,
-                  inputs=[engine.offsets, engine.counts, engine.entry_loc, engine.entry_delta,
-                          engine.delta_bg, engine.rho, engine.behind, engine.evidence])
-        wp.launch(K.update_rho, dim=engine.n_locations, device=device,
-                  inputs=[0.0, 0.1, 0, engine.evidence, engine.rho, engine.max_change])
+        engine.iterate(0, 0.0, 0.1)
         wp.synchronize_device(device)
 
     stages = {

@@ -218,6 +218,15 @@ class Engine:
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta])
         return total
 
+    def iterate(self, it: int, logit_prior: float, damping: float):
+        """One mean-field iteration over the built lists: evidence pass, then damped update
+        (recording max |rho_new - rho| as max_change[it])."""
+        wp.launch(K.evidence_pass, dim=self.n_pixels, device=self.device,
+                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
+                          self.delta_bg, self.rho, self.behind, self.evidence])
+        wp.launch(K.update_rho, dim=self.n_locations, device=self.device,
+                  inputs=[logit_prior, damping, it, self.evidence, self.rho, self.max_change])
+
     def infer(self, depth_m: np.ndarray) -> FrameResult:
         """Occupancy probabilities of one depth frame (metres, 0 = no reading)."""
         p, dev = self.params, self.device
@@ -232,11 +241,7 @@ class Engine:
         lists = [self.offsets, self.counts, self.entry_loc]
         iterations = 0
         for it in range(p.max_iterations):
-            wp.launch(K.evidence_pass, dim=self.n_pixels, device=dev,
-                      inputs=lists + [self.entry_delta, self.delta_bg, self.rho, self.behind,
-                                      self.evidence])
-            wp.launch(K.update_rho, dim=self.n_locations, device=dev,
-                      inputs=[logit_prior, p.damping_at(it), it, self.evidence, self.rho, self.max_change])
+            self.iterate(it, logit_prior, p.damping_at(it))
             iterations = it + 1
             if (it + 1) % p.check_every == 0 and self.max_change[it:it + 1].numpy()[0] < p.tolerance:
                 break
