@@ -50,11 +50,27 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8  # location, object depth, Delta, B scratch
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32  # ray, depth, count, offset, Delta_bg, background
 LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6  # rect, normal, plane, area and five accumulators
+PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
 
-def memory_estimate(n_pixels: int, n_locations: int, entries: int) -> int:
-    """Bytes of device memory the engine holds for lists of `entries` entries."""
-    return n_pixels * PIXEL_BYTES + n_locations * LOCATION_BYTES + entries * ENTRY_BYTES
+def memory_estimate(n_pixels: int, n_locations: int, entries: int, pairs: int = 0) -> int:
+    """Bytes of device memory the engine holds for lists of `entries` entries and a tile
+    index of `pairs` (location, tile) pairs."""
+    return (n_pixels * PIXEL_BYTES + n_locations * LOCATION_BYTES + entries * ENTRY_BYTES
+            + pairs * PAIR_BYTES)
+
+
+def tile_pairs(rect: np.ndarray, tile: int, tiles_x: int) -> tuple[np.ndarray, np.ndarray]:
+    """(location, tile) of every tile that each silhouette rectangle overlaps (int32)."""
+    rect = np.asarray(rect, dtype=np.int64)
+    t0 = rect[:, :2] // tile
+    n_uv = np.where((rect[:, 2:] >= rect[:, :2]).all(1, keepdims=True), rect[:, 2:] // tile - t0 + 1, 0)
+    per_loc = n_uv[:, 0] * n_uv[:, 1]
+    loc = np.repeat(np.arange(len(rect)), per_loc)
+    local = np.arange(len(loc)) - np.repeat(np.cumsum(per_loc) - per_loc, per_loc)
+    tx = t0[loc, 0] + local % n_uv[loc, 0]
+    ty = t0[loc, 1] + local // n_uv[loc, 0]
+    return loc.astype(np.int32), (ty * tiles_x + tx).astype(np.int32)
 
 
 class MemoryBudgetError(ValueError):
@@ -92,23 +108,29 @@ class Engine:
         params: model and inference parameters.
         device: Warp device name ('cpu', 'cuda:0').
         entries_per_pixel: initial list capacity per pixel.
+        tile: edge in pixels of the image tiles of the static mask index (kernels.masks).
         max_entries: hard cap on the list capacity (None: no cap).
         memory_gb: memory budget of the engine's buffers, GiB (None: no budget).
     """
 
     def __init__(self, geometry: Geometry, params: ModelParams, device: str = "cpu",
                  entries_per_pixel: float = 8.0, max_entries: int | None = None,
-                 memory_gb: float | None = None):
+                 memory_gb: float | None = None, tile: int = 8):
+        if min(params.sensor_noise) < 0:
+            raise ValueError(f"sensor_noise: expected [a, b] >= 0, found {list(params.sensor_noise)}")
         self.geometry, self.params, self.device = geometry, params, device
         self.height, self.width = geometry.rays.shape[:2]
         self.n_pixels = self.height * self.width
         self.n_locations = len(geometry.rect)
+        self.tile, tiles_x = tile, -(-self.width // tile)
+        self.n_tiles = tiles_x * -(-self.height // tile)
+        pair_loc, pair_tile = tile_pairs(geometry.rect, tile, tiles_x)
         cap = INT32_MAX if max_entries is None else min(max_entries, INT32_MAX)
         if memory_gb is not None:
-            fixed = memory_estimate(self.n_pixels, self.n_locations, 0)
+            fixed = memory_estimate(self.n_pixels, self.n_locations, 0, len(pair_loc))
             cap = min(cap, max(0, int((memory_gb * 2**30 - fixed) // ENTRY_BYTES)))
             first = memory_estimate(self.n_pixels, self.n_locations,
-                                    max(1024, int(entries_per_pixel * self.n_pixels)))
+                                    max(1024, int(entries_per_pixel * self.n_pixels)), len(pair_loc))
             if first > memory_gb * 2**30:
                 raise MemoryBudgetError(
                     f"the engine needs at least {first / 2**30:.2f} GiB for {self.n_locations} "
@@ -140,8 +162,34 @@ class Engine:
             self.share = wp.zeros(L, dtype=wp.float64)
             self.rho_star = wp.zeros(L, dtype=wp.float64)
             self.max_change = wp.zeros(max(1, params.max_iterations), dtype=wp.float64)
+        self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
         self._allocate_lists(int(entries_per_pixel * P))
         self.set_floor_background()
+
+    def _tile_index(self, pair_loc, pair_tile, tiles_x) -> K.TileIndex:
+        """Depth bounds of every (location, tile) pair, sorted by tile then lo (kernels.masks)."""
+        with wp.ScopedDevice(self.device):
+            lo = wp.zeros(len(pair_loc), dtype=wp.float64)
+            hi = wp.zeros(len(pair_loc), dtype=wp.float64)
+            if len(pair_loc):
+                wp.launch(K.pair_depth_bounds, dim=len(pair_loc),
+                          inputs=[self.geo, self.pm, self.tile, tiles_x, wp.array(pair_loc),
+                                  wp.array(pair_tile), lo, hi])
+            lo, hi = lo.numpy(), hi.numpy()
+            keep = hi >= lo
+            order = np.lexsort((lo[keep], pair_tile[keep]))
+            tile_of, lo, hi = pair_tile[keep][order], lo[keep][order], hi[keep][order]
+            span = np.zeros(self.n_tiles)
+            np.maximum.at(span, tile_of, hi - lo)
+            t = K.TileIndex()
+            t.size, t.tiles_x = self.tile, tiles_x
+            t.start = wp.array(np.searchsorted(tile_of, np.arange(self.n_tiles + 1)).astype(np.int32))
+            t.loc = wp.array(pair_loc[keep][order], dtype=wp.int32)
+            t.lo = wp.array(lo, dtype=wp.float64)
+            t.hi = wp.array(hi, dtype=wp.float64)
+            t.span = wp.array(span, dtype=wp.float64)
+        self.n_pairs = len(lo)
+        return t
 
     # -- buffers -------------------------------------------------------------------------
     def _allocate_lists(self, capacity: int):
@@ -152,10 +200,6 @@ class Engine:
             self.entry_delta = wp.zeros(capacity, dtype=wp.float32)
             self.behind = wp.zeros(capacity, dtype=wp.float64)
         self.capacity = capacity
-
-    def _list_arrays(self):
-        return [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu,
-                self.entry_delta]
 
     # -- background ----------------------------------------------------------------------
     def set_floor_background(self):
@@ -192,15 +236,16 @@ class Engine:
     # -- one frame -----------------------------------------------------------------------
     def build_lists(self, depth_m: np.ndarray) -> int:
         """Masks, Delta and depth-sorted per-pixel lists of one frame; returns the entry count."""
-        dev, L = self.device, self.n_locations
+        dev = self.device
         self.depth.assign(np.ascontiguousarray(depth_m, dtype=np.float32))
         if self.floor_mode and self.params.background_outside_grid:
             self._floor_background(self.depth, 1)
         wp.launch(K.background_delta, dim=(self.height, self.width), device=dev,
                   inputs=[self.depth, self.pm, self.bg, self.delta_bg])
-        self.counts.zero_()
-        wp.launch(K.mask_entries, dim=L, device=dev,
-                  inputs=[self.depth, self.geo, self.pm, self.bg, 0] + self._list_arrays())
+        lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
+        inputs = [self.depth, self.geo, self.pm, self.bg, self.tiles]
+        shape = (self.height, self.width)
+        wp.launch(K.pixel_entries, dim=shape, device=dev, inputs=inputs + [0] + lists)
         wp.utils.array_scan(self.counts, self.offsets, inclusive=False)
         total = int(self.offsets[-1:].numpy()[0]) + int(self.counts[-1:].numpy()[0])
         if total > self.capacity:
@@ -211,11 +256,8 @@ class Engine:
                     f"and the int32 offsets); coarsen the grid or raise the cap")
             self.grown.append(total)
             self._allocate_lists(int(total * 1.25))
-        self.counts.zero_()
-        wp.launch(K.mask_entries, dim=L, device=dev,
-                  inputs=[self.depth, self.geo, self.pm, self.bg, 1] + self._list_arrays())
-        wp.launch(K.sort_pixel_lists, dim=self.n_pixels, device=dev,
-                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta])
+            lists[2:] = [self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
+        wp.launch(K.pixel_entries, dim=shape, device=dev, inputs=inputs + [1] + lists)
         return total
 
     def iterate(self, it: int, logit_prior: float, damping: float):

@@ -6,6 +6,7 @@ engine and the NumPy reference, so both paths see exactly the same geometry.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -212,7 +213,8 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
     corners = obj.corners(locs, grid.mode)
     u, v, z = camera.project(corners)
     in_front = np.all(z > 1e-6, axis=1)
-    with np.errstate(invalid="ignore"):
+    with warnings.catch_warnings():  # boxes (partly) behind the camera: all-NaN rows, no silhouette
+        warnings.simplefilter("ignore", RuntimeWarning)
         u0 = np.ceil(np.nanmin(np.where(in_front[:, None], u, np.nan), axis=1))
         u1 = np.floor(np.nanmax(np.where(in_front[:, None], u, np.nan), axis=1))
         v0 = np.ceil(np.nanmin(np.where(in_front[:, None], v, np.nan), axis=1))

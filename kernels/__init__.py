@@ -1,20 +1,19 @@
 """Warp kernels of DPOM, one file per step (installed as `dpom_warp.kernels`).
 
 - `pixel_model`: the pixel distributions of eq. 11 as `@wp.func`s and the parameter structs.
-- `masks`: masks M_k and Delta_ki (eq. 12), counted then filled into per-pixel lists.
-- `lists`: depth sort of each pixel's list, location id breaking ties.
+- `masks`: masks M_k and Delta_ki (eq. 12) through a static tile index, counted then filled
+  into per-pixel lists kept in depth order (location id breaking ties).
 - `mean_field`: the exclusive-form mean-field evidence pass, damped update, soft threshold.
 - `background`: background distributions from background frames or from the floor plane.
 """
 
 from .background import background_delta, background_from_frames, floor_background
-from .lists import sort_pixel_lists
-from .masks import mask_entries
+from .masks import TileIndex, pair_depth_bounds, pixel_entries
 from .mean_field import evidence_pass, soft_threshold, transparency_pass, update_rho
 from .pixel_model import GeometryArrays, PixelModel
 
 __all__ = [
-    "GeometryArrays", "PixelModel", "background_delta", "background_from_frames",
-    "evidence_pass", "floor_background", "mask_entries", "soft_threshold", "sort_pixel_lists",
+    "GeometryArrays", "PixelModel", "TileIndex", "background_delta", "background_from_frames",
+    "evidence_pass", "floor_background", "pair_depth_bounds", "pixel_entries", "soft_threshold",
     "transparency_pass", "update_rho",
 ]

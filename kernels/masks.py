@@ -1,15 +1,45 @@
-"""Masks M_k and Delta_ki (MODEL.md eq. 11-12), written into per-pixel lists.
+"""Masks M_k and Delta_ki (MODEL.md eq. 12, 11), built per pixel into depth-sorted lists.
 
-One kernel serves both passes of the list build: with `fill == 0` it counts each pixel's
-entries; with `fill == 1` it writes them at `offsets[pixel] + atomic cursor`. With
-`background_occludes`, a location does not claim a pixel whose known background is clearly
-in front of it.
+Scanning every silhouette costs the sum of the silhouette areas (tens of millions of pixel
+tests for a 0.1 m grid) per frame. Instead, each pixel asks only the locations that can claim
+its reading, through a static index built once per camera and grid:
+
+- the image is cut into square tiles; for every (location k, tile t) whose silhouette
+  rectangle overlaps t, `pair_depth_bounds` scans the overlap once and records the depth
+  interval [lo, hi] outside which no reading z can pass k's mask test there:
+  lo = min mu - W, hi = max mu + W, where W is the largest half-width of the test
+  ((z - mu)^2 < 2 s^2 (c - log s), c = log(1 - pi_out) - log(sqrt(2 pi)) - log(pi_out / z_max))
+  over the object sigmas s of the overlap, plus a small slack for rounding;
+- pairs are sorted by tile, then lo; each tile keeps the longest interval it holds (span).
+
+Per frame, `pixel_entries` finds in its tile the pairs with lo in [z - span, z] by binary
+search and runs the exact mask test of the reference on those with z <= hi. The candidates are
+a superset of the mask by construction, so the lists are the same as a scan of every
+silhouette. With `fill == 0` the kernel writes each pixel's count; with `fill == 1` it writes
+the entries into the pixel's slice at `offsets[p]`, keeping it sorted by (mu, location id) as
+it goes (insertion, no atomics). With `background_occludes`, a location does not claim a pixel
+whose known background is clearly in front of it.
 """
 
 import warp as wp
 
-from .pixel_model import GeometryArrays, PixelModel, f64, facing_plane_depth, gaussian_logpdf, is_reading
-from .pixel_model import logaddexp, object_sigma
+from .pixel_model import LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, facing_plane_depth, gaussian_logpdf
+from .pixel_model import is_reading, logaddexp, object_sigma
+
+EMPTY = wp.constant(wp.float64(1.0e300))
+
+
+@wp.struct
+class TileIndex:
+    """For each image tile, the locations whose silhouette overlaps it, with depth bounds."""
+
+    size: int  # tile edge, pixels
+    tiles_x: int  # tiles per image row
+    start: wp.array(dtype=wp.int32)  # first pair of each tile (n_tiles + 1)
+    loc: wp.array(dtype=wp.int32)  # location of each pair, sorted by tile, then lo
+    lo: wp.array(dtype=wp.float64)  # a reading below lo cannot pass the pair's mask test
+    hi: wp.array(dtype=wp.float64)  # nor one above hi
+    span: wp.array(dtype=wp.float64)  # longest hi - lo of each tile
 
 
 @wp.func
@@ -18,12 +48,68 @@ def hidden_by_background(pm: PixelModel, bg: wp.array2d(dtype=wp.float64), p: in
     return pm.background_occludes == 1 and bg[p, 3] < f64(1.0) and bg[p, 0] + pm.occlusion_margin < mu
 
 
+@wp.func
+def test_half_width(pm: PixelModel, s: wp.float64) -> wp.float64:
+    """Half-width W of the mask test at object sigma s: (z - mu)^2 < W^2 (0: nothing passes)."""
+    q = pm.log_inlier_weight - LOG_SQRT_2PI - pm.log_outlier - wp.log(s)
+    if q > f64(0.0):
+        return s * wp.sqrt(f64(2.0) * q)
+    return f64(0.0)
+
+
 @wp.kernel(enable_backward=False)
-def mask_entries(
+def pair_depth_bounds(
+    geo: GeometryArrays,
+    pm: PixelModel,
+    size: int,
+    tiles_x: int,
+    pair_loc: wp.array(dtype=wp.int32),
+    pair_tile: wp.array(dtype=wp.int32),
+    lo: wp.array(dtype=wp.float64),
+    hi: wp.array(dtype=wp.float64),
+):
+    """Depth interval of each (location, tile) pair; lo = EMPTY where nothing can pass."""
+    i = wp.tid()
+    k = pair_loc[i]
+    t = pair_tile[i]
+    r = geo.rect[k]
+    u0 = wp.max(r[0], (t % tiles_x) * size)
+    u1 = wp.min(r[2], (t % tiles_x) * size + size - 1)
+    v0 = wp.max(r[1], (t / tiles_x) * size)
+    v1 = wp.min(r[3], (t / tiles_x) * size + size - 1)
+    mu_min = EMPTY
+    mu_max = f64(0.0)
+    for v in range(v0, v1 + 1):
+        for u in range(u0, u1 + 1):
+            mu = facing_plane_depth(geo.rays[v, u], geo.normal[k], geo.plane[k])
+            if mu > f64(0.0):
+                mu_min = wp.min(mu_min, mu)
+                mu_max = wp.max(mu_max, mu)
+    lo[i] = EMPTY
+    hi[i] = -EMPTY
+    if mu_min < EMPTY:
+        # W(s) rises up to s* = exp(c - 1/2) and falls after: its largest value over the
+        # sigmas of [mu_min, mu_max] (sigma grows with mu) is at s* clamped to their range.
+        s_star = wp.exp(pm.log_inlier_weight - LOG_SQRT_2PI - pm.log_outlier - f64(0.5))
+        w = test_half_width(pm, wp.clamp(s_star, object_sigma(pm, mu_min), object_sigma(pm, mu_max)))
+        if w > f64(0.0):
+            slack = f64(1.0e-6) * (f64(1.0) + mu_max + w)
+            lo[i] = mu_min - w - slack
+            hi[i] = mu_max + w + slack
+
+
+@wp.func
+def entry_before(mu_a: wp.float32, k_a: wp.int32, mu_b: wp.float32, k_b: wp.int32) -> bool:
+    return mu_a < mu_b or (mu_a == mu_b and k_a < k_b)
+
+
+@wp.kernel(enable_backward=False)
+def pixel_entries(
     depth: wp.array2d(dtype=wp.float32),
     geo: GeometryArrays,
     pm: PixelModel,
     bg: wp.array2d(dtype=wp.float64),
+    tiles: TileIndex,
     fill: int,
     offsets: wp.array(dtype=wp.int32),
     counts: wp.array(dtype=wp.int32),
@@ -32,24 +118,48 @@ def mask_entries(
     entry_mu: wp.array(dtype=wp.float32),
     entry_delta: wp.array(dtype=wp.float32),
 ):
-    k = wp.tid()
-    r = geo.rect[k]
-    width = depth.shape[1]
-    n = geo.normal[k]
-    plane = geo.plane[k]
-    for v in range(r[1], r[3] + 1):
-        for u in range(r[0], r[2] + 1):
-            z = f64(depth[v, u])
-            if is_reading(pm, z):
-                mu = facing_plane_depth(geo.rays[v, u], n, plane)
-                if mu > f64(0.0):
-                    inlier = pm.log_inlier_weight + gaussian_logpdf(z, mu, object_sigma(pm, mu))
-                    p = v * width + u
-                    if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
-                        slot = wp.atomic_add(counts, p, 1)
-                        if fill == 1:
-                            e = offsets[p] + slot
-                            if e < capacity:
+    v, u = wp.tid()
+    p = v * depth.shape[1] + u
+    z = f64(depth[v, u])
+    n = int(0)
+    if is_reading(pm, z):
+        t = (v / tiles.size) * tiles.tiles_x + u / tiles.size
+        first = tiles.start[t]
+        last = tiles.start[t + 1]
+        key = z - tiles.span[t]
+        while first < last:  # first pair with lo >= z - span: earlier ones end before z
+            mid = (first + last) / 2
+            if tiles.lo[mid] < key:
+                first = mid + 1
+            else:
+                last = mid
+        last = tiles.start[t + 1]
+        d = geo.rays[v, u]
+        e0 = int(0)
+        if fill == 1:
+            e0 = offsets[p]
+        j = first
+        while j < last and tiles.lo[j] <= z:
+            if z <= tiles.hi[j]:
+                k = tiles.loc[j]
+                r = geo.rect[k]
+                if u >= r[0] and u <= r[2] and v >= r[1] and v <= r[3]:
+                    mu = facing_plane_depth(d, geo.normal[k], geo.plane[k])
+                    if mu > f64(0.0):
+                        inlier = pm.log_inlier_weight + gaussian_logpdf(z, mu, object_sigma(pm, mu))
+                        if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
+                            if fill == 1 and e0 + n < capacity:
+                                mu32 = wp.float32(mu)
+                                e = e0 + n
+                                while e > e0 and entry_before(mu32, k, entry_mu[e - 1], entry_loc[e - 1]):
+                                    entry_loc[e] = entry_loc[e - 1]
+                                    entry_mu[e] = entry_mu[e - 1]
+                                    entry_delta[e] = entry_delta[e - 1]
+                                    e -= 1
                                 entry_loc[e] = k
-                                entry_mu[e] = wp.float32(mu)
+                                entry_mu[e] = mu32
                                 entry_delta[e] = wp.float32(pm.log_reading + logaddexp(pm.log_outlier, inlier))
+                            n += 1
+            j += 1
+    if fill == 0:
+        counts[p] = n

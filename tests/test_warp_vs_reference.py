@@ -5,6 +5,8 @@ import pytest
 
 from dpom_warp import reference as ref
 from dpom_warp.engine import Engine
+from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
+from dpom_warp.model import ModelParams
 
 from scenes import random_scene
 
@@ -31,19 +33,43 @@ def test_rho_matches_reference(device, seed):
     assert got.rho.max() > 0.5, "no location became occupied: the comparison is not exercised"
 
 
-def test_sorted_lists_match_reference(device):
-    geom, params, depth, _ = random_scene(11)
-    engine = Engine(geom, params, device)
-    total = engine.build_lists(depth)
-    pixel, loc, mu, delta = ref.mask_entries(depth, geom, params)
-    assert total == len(pixel) > 0
-    counts = engine.counts.numpy()
-    offsets = engine.offsets.numpy()
-    np.testing.assert_array_equal(np.bincount(pixel, minlength=len(counts)), counts)
+def lists_as_entries(engine):
+    """(pixel, loc, mu, delta) of the engine's lists, in list order."""
+    counts, offsets = engine.counts.numpy(), engine.offsets.numpy()
     order = np.concatenate([np.arange(o, o + c) for o, c in zip(offsets, counts) if c])
-    np.testing.assert_array_equal(engine.entry_loc.numpy()[order], loc)
-    np.testing.assert_array_equal(engine.entry_mu.numpy()[order], mu)
-    np.testing.assert_allclose(engine.entry_delta.numpy()[order], delta, rtol=1e-6, atol=1e-6)
+    pixel = np.repeat(np.arange(len(counts)), counts)
+    return pixel, engine.entry_loc.numpy()[order], engine.entry_mu.numpy()[order], engine.entry_delta.numpy()[order]
+
+
+def distorted_voxel_scene(seed):
+    """A rolled camera with lens distortion over a voxel grid whose first rows reach under and
+    behind the camera, objects that hide each other, background occluding some voxels."""
+    rng = np.random.default_rng(seed)
+    cam = Camera(56, 44, 40.0, 41.0, 27.0, 22.5, pose_from_angles(1.6, 25.0, 5.0, 10.0),
+                 distortion=(-0.25, 0.08, 0.001, -0.002, -0.01))
+    grid = Grid(x=(-1.5, 1.5, 0.25), y=(-0.5, 4.0, 0.25), mode="voxel", z=(0.2, 2.0, 0.3))
+    geom = build_geometry(cam, grid, ObjectBox(0.3, 0.2))
+    params = ModelParams(sigma_object=0.05, background_occludes=True)
+    depth = (rng.uniform(0.5, 5.0, (44, 56)) * (rng.random((44, 56)) > 0.05)).astype(np.float32)
+    return geom, params, depth
+
+
+@pytest.mark.parametrize("tile", [1, 5, 8, 64])
+def test_sorted_lists_match_reference(device, tile):
+    """The tile index finds exactly the reference's masks, in its order, whatever the tile."""
+    for geom, params, depth, bg in [random_scene(11)[:3] + (None,), distorted_voxel_scene(tile) + (None,)]:
+        engine = Engine(geom, params, device, tile=tile)
+        if params.background_occludes:
+            frames = np.stack([np.roll(depth, 3 * i, axis=1) for i in range(3)])
+            engine.set_background_frames(frames)
+            bg = ref.background_from_frames(frames, params)
+        total = engine.build_lists(depth)
+        want = ref.mask_entries(depth, geom, params, bg)
+        assert total == len(want[0]) > 100
+        got = lists_as_entries(engine)
+        for a, b in zip(got[:3], want[:3]):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_allclose(got[3], want[3], rtol=1e-6, atol=1e-6)
 
 
 def test_background_kernels_match_reference(device):
