@@ -1,4 +1,5 @@
-"""The Warp inference engine: buffers allocated once per camera and grid, one call per frame."""
+"""The Warp inference engine: buffers allocated once per camera and grid, one call per frame
+(or per batch of frames)."""
 
 from __future__ import annotations
 
@@ -50,6 +51,7 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8  # location, object depth, Delta, B scratch
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32  # ray, depth, count, offset, Delta_bg, background
 LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6  # rect, normal, plane, area and five accumulators
+# (per frame of a batch: pixel and location bytes count once per frame)
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
 
@@ -103,39 +105,54 @@ class Engine:
     ListOverflow, and an engine whose first buffers already exceed the budget is refused
     with MemoryBudgetError, before anything is allocated.
 
+    With `batch` > 1, `infer_batch` runs up to `batch` frames through every launch (their
+    pixels and locations side by side); each frame stops at its own iteration, so every
+    frame's result is the one `infer` gives it alone. With `graph`, the iteration loop is
+    captured once as a graph (a CUDA graph on a GPU; Warp replays CPU graphs too) and replayed
+    for every frame or batch: max_iterations launches, no host sync, converged frames skipped.
+
     Args:
         geometry: silhouettes, facing planes and rays (geometry.build_geometry).
         params: model and inference parameters.
         device: Warp device name ('cpu', 'cuda:0').
         entries_per_pixel: initial list capacity per pixel.
-        tile: edge in pixels of the image tiles of the static mask index (kernels.masks).
         max_entries: hard cap on the list capacity (None: no cap).
         memory_gb: memory budget of the engine's buffers, GiB (None: no budget).
+        tile: edge in pixels of the image tiles of the static mask index (kernels.masks).
+        batch: frames per launch.
+        graph: capture the iteration loop as a graph (None: on CUDA devices only).
     """
 
     def __init__(self, geometry: Geometry, params: ModelParams, device: str = "cpu",
                  entries_per_pixel: float = 8.0, max_entries: int | None = None,
-                 memory_gb: float | None = None, tile: int = 8):
+                 memory_gb: float | None = None, tile: int = 8, batch: int = 1,
+                 graph: bool | None = None):
         if min(params.sensor_noise) < 0:
             raise ValueError(f"sensor_noise: expected [a, b] >= 0, found {list(params.sensor_noise)}")
+        if batch < 1 or tile < 1:
+            raise ValueError(f"batch and tile: expected integers >= 1, found {batch} and {tile}")
         self.geometry, self.params, self.device = geometry, params, device
         self.height, self.width = geometry.rays.shape[:2]
         self.n_pixels = self.height * self.width
         self.n_locations = len(geometry.rect)
+        self.batch = batch
+        self.graph = wp.get_device(device).is_cuda if graph is None else graph
+        self._graph, self._graph_lists = None, None
         self.tile, tiles_x = tile, -(-self.width // tile)
         self.n_tiles = tiles_x * -(-self.height // tile)
         pair_loc, pair_tile = tile_pairs(geometry.rect, tile, tiles_x)
+        P, L = batch * self.n_pixels, batch * self.n_locations
         cap = INT32_MAX if max_entries is None else min(max_entries, INT32_MAX)
         if memory_gb is not None:
-            fixed = memory_estimate(self.n_pixels, self.n_locations, 0, len(pair_loc))
+            fixed = memory_estimate(P, L, 0, len(pair_loc))
             cap = min(cap, max(0, int((memory_gb * 2**30 - fixed) // ENTRY_BYTES)))
-            first = memory_estimate(self.n_pixels, self.n_locations,
-                                    max(1024, int(entries_per_pixel * self.n_pixels)), len(pair_loc))
+            first = memory_estimate(P, L, max(1024, int(entries_per_pixel * P)), len(pair_loc))
             if first > memory_gb * 2**30:
                 raise MemoryBudgetError(
                     f"the engine needs at least {first / 2**30:.2f} GiB for {self.n_locations} "
                     f"locations and {self.width}x{self.height} pixels "
-                    f"({entries_per_pixel:g} list entries per pixel), above the budget of "
+                    f"({entries_per_pixel:g} list entries per pixel"
+                    f"{f', {batch} frames a batch' if batch > 1 else ''}), above the budget of "
                     f"{memory_gb:g} GiB")
         self.max_entries = cap
         self.grown: list[int] = []
@@ -150,8 +167,7 @@ class Engine:
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
             self.centre = wp.vec3d(*(float(c) for c in geometry.centre))
-            P, L = self.n_pixels, self.n_locations
-            self.depth = wp.zeros((self.height, self.width), dtype=wp.float32)
+            self.depth = wp.zeros((batch, self.height, self.width), dtype=wp.float32)
             self.counts = wp.zeros(P, dtype=wp.int32)
             self.offsets = wp.zeros(P, dtype=wp.int32)
             self.delta_bg = wp.zeros(P, dtype=wp.float64)
@@ -161,7 +177,9 @@ class Engine:
             self.visible = wp.zeros(L, dtype=wp.float64)
             self.share = wp.zeros(L, dtype=wp.float64)
             self.rho_star = wp.zeros(L, dtype=wp.float64)
-            self.max_change = wp.zeros(max(1, params.max_iterations), dtype=wp.float64)
+            self.max_change = wp.zeros((batch, max(1, params.max_iterations)), dtype=wp.float64)
+            self.done = wp.zeros(batch, dtype=wp.int32)
+            self.iterations = wp.zeros(batch, dtype=wp.int32)
         self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
         self._allocate_lists(int(entries_per_pixel * P))
         self.set_floor_background()
@@ -201,16 +219,21 @@ class Engine:
             self.behind = wp.zeros(capacity, dtype=wp.float64)
         self.capacity = capacity
 
+    def memory_bytes(self) -> int:
+        """Bytes the engine's buffers hold now (memory_estimate of its sizes)."""
+        return memory_estimate(self.batch * self.n_pixels, self.batch * self.n_locations,
+                               self.capacity, self.n_pairs)
+
     # -- background ----------------------------------------------------------------------
     def set_floor_background(self):
         """Use the floor-only background of MODEL.md (no background frames); with
         params.background_outside_grid it is completed from each frame (see reference)."""
         self.floor_mode = True
-        self._floor_background(self.depth, 0)
+        self._floor_background(0)
 
-    def _floor_background(self, depth, outside_is_static: int):
-        wp.launch(K.floor_background, dim=(self.height, self.width), device=self.device,
-                  inputs=[self.geo.rays, self.centre, depth, self.bounds, outside_is_static,
+    def _floor_background(self, outside_is_static: int):
+        wp.launch(K.floor_background, dim=self.depth.shape, device=self.device,
+                  inputs=[self.geo.rays, self.centre, self.depth, self.bounds, outside_is_static,
                           self.pm, self.bg])
 
     def set_background_frames(self, frames_m: np.ndarray):
@@ -220,32 +243,45 @@ class Engine:
             f = wp.array(frames, dtype=wp.float32)
             scratch = wp.zeros((self.n_pixels, frames.shape[0]), dtype=wp.float64)
             wp.launch(K.background_from_frames, dim=(self.height, self.width),
-                      inputs=[f, self.pm, scratch, self.bg])
+                      inputs=[f, self.pm, scratch, self.batch, self.bg])
         self.floor_mode = False
 
     def set_background(self, bg: Background):
         """Use a given per-pixel background distribution (arrays of shape (H, W))."""
         self.floor_mode = False
         b = np.stack([bg.mu, bg.sigma, bg.missing, bg.outlier], -1).reshape(self.n_pixels, 4)
-        self.bg.assign(np.ascontiguousarray(b, dtype=np.float64))
+        self.bg.assign(np.ascontiguousarray(np.tile(b, (self.batch, 1)), dtype=np.float64))
 
-    def background(self) -> Background:
-        b = self.bg.numpy().reshape(self.height, self.width, 4)
+    def background(self, frame: int = 0) -> Background:
+        """The background distribution of frame `frame` of the last batch (arrays (H, W))."""
+        b = self.bg.numpy()[frame * self.n_pixels:(frame + 1) * self.n_pixels]
+        b = b.reshape(self.height, self.width, 4)
         return Background(mu=b[..., 0], sigma=b[..., 1], missing=b[..., 2], outlier=b[..., 3])
 
-    # -- one frame -----------------------------------------------------------------------
+    # -- one frame or one batch ----------------------------------------------------------
+    def _frames(self, depth_m: np.ndarray) -> np.ndarray:
+        """(batch, H, W) float32 of one (H, W) frame or of up to `batch` frames, zero-padded."""
+        d = np.asarray(depth_m, dtype=np.float32)
+        d = d[None] if d.ndim == 2 else d
+        if d.ndim != 3 or d.shape[1:] != (self.height, self.width) or not 1 <= len(d) <= self.batch:
+            raise ValueError(f"depth: expected (H, W) or (n <= {self.batch}, H, W) with H, W = "
+                             f"{self.height}, {self.width}, found {d.shape}")
+        if len(d) < self.batch:
+            d = np.concatenate([d, np.zeros((self.batch - len(d),) + d.shape[1:], np.float32)])
+        return np.ascontiguousarray(d)
+
     def build_lists(self, depth_m: np.ndarray) -> int:
-        """Masks, Delta and depth-sorted per-pixel lists of one frame; returns the entry count."""
+        """Masks, Delta and depth-sorted per-pixel lists of a frame (H, W) or of up to `batch`
+        frames (n, H, W); returns the number of entries."""
         dev = self.device
-        self.depth.assign(np.ascontiguousarray(depth_m, dtype=np.float32))
+        self.depth.assign(self._frames(depth_m))
         if self.floor_mode and self.params.background_outside_grid:
-            self._floor_background(self.depth, 1)
-        wp.launch(K.background_delta, dim=(self.height, self.width), device=dev,
+            self._floor_background(1)
+        wp.launch(K.background_delta, dim=self.depth.shape, device=dev,
                   inputs=[self.depth, self.pm, self.bg, self.delta_bg])
         lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
-        inputs = [self.depth, self.geo, self.pm, self.bg, self.tiles]
-        shape = (self.height, self.width)
-        wp.launch(K.pixel_entries, dim=shape, device=dev, inputs=inputs + [0] + lists)
+        inputs = [self.depth, self.geo, self.pm, self.bg, self.tiles, self.n_locations]
+        wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev, inputs=inputs + [0] + lists)
         wp.utils.array_scan(self.counts, self.offsets, inclusive=False)
         total = int(self.offsets[-1:].numpy()[0]) + int(self.counts[-1:].numpy()[0])
         if total > self.capacity:
@@ -257,47 +293,81 @@ class Engine:
             self.grown.append(total)
             self._allocate_lists(int(total * 1.25))
             lists[2:] = [self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
-        wp.launch(K.pixel_entries, dim=shape, device=dev, inputs=inputs + [1] + lists)
+        wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev, inputs=inputs + [1] + lists)
         return total
 
     def iterate(self, it: int, logit_prior: float, damping: float):
         """One mean-field iteration over the built lists: evidence pass, then damped update
-        (recording max |rho_new - rho| as max_change[it])."""
-        wp.launch(K.evidence_pass, dim=self.n_pixels, device=self.device,
+        (recording max |rho_new - rho| as max_change[frame, it]) of the frames not done."""
+        wp.launch(K.evidence_pass, dim=self.batch * self.n_pixels, device=self.device,
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
-                          self.delta_bg, self.rho, self.behind, self.evidence])
-        wp.launch(K.update_rho, dim=self.n_locations, device=self.device,
-                  inputs=[logit_prior, damping, it, self.evidence, self.rho, self.max_change])
+                          self.delta_bg, self.rho, self.behind, self.evidence, self.n_pixels,
+                          self.done])
+        wp.launch(K.update_rho, dim=self.batch * self.n_locations, device=self.device,
+                  inputs=[logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
+                          self.done, self.max_change, self.iterations])
+
+    def _check(self, it: int):
+        wp.launch(K.check_converged, dim=self.batch, device=self.device,
+                  inputs=[it, self.params.tolerance, self.max_change, self.done])
+
+    def _iterate_all(self, logit_prior: float):
+        """The whole loop: up to max_iterations, each frame stopping at its first check
+        (every check_every iterations) whose largest change is below the tolerance."""
+        p = self.params
+        for it in range(p.max_iterations):
+            self.iterate(it, logit_prior, p.damping_at(it))
+            if (it + 1) % p.check_every == 0:
+                self._check(it)
+                if not self.graph and self.done.numpy().all():
+                    break
+
+    def _run_loop(self, logit_prior: float):
+        if not self.graph:
+            self._iterate_all(logit_prior)
+            return
+        lists = (self.entry_loc.ptr, self.capacity)
+        if self._graph is None or self._graph_lists != lists:  # new list buffers: new graph
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._iterate_all(logit_prior)
+            self._graph, self._graph_lists = capture.graph, lists
+        wp.capture_launch(self._graph)
 
     def infer(self, depth_m: np.ndarray) -> FrameResult:
         """Occupancy probabilities of one depth frame (metres, 0 = no reading)."""
+        return self.infer_batch(np.asarray(depth_m)[None])[0]
+
+    def infer_batch(self, depths_m: np.ndarray) -> list[FrameResult]:
+        """Occupancy of up to `batch` frames (n, H, W) at once; one result per frame, each
+        equal to what `infer` gives that frame alone. Timings are the batch's."""
         p, dev = self.params, self.device
+        n = len(depths_m)
         t0 = time.perf_counter()
-        entries = self.build_lists(depth_m)
+        self.build_lists(depths_m)
+        counts = self.counts.numpy().reshape(self.batch, self.n_pixels)
         wp.synchronize_device(dev)
         t1 = time.perf_counter()
         self.rho.fill_(p.prior)
         self.evidence.zero_()
         self.max_change.zero_()
-        logit_prior = math.log(p.prior) - math.log1p(-p.prior)
-        lists = [self.offsets, self.counts, self.entry_loc]
-        iterations = 0
-        for it in range(p.max_iterations):
-            self.iterate(it, logit_prior, p.damping_at(it))
-            iterations = it + 1
-            if (it + 1) % p.check_every == 0 and self.max_change[it:it + 1].numpy()[0] < p.tolerance:
-                break
+        self.iterations.zero_()
+        self.done.assign(np.arange(self.batch, dtype=np.int32) >= n)  # padding frames: done
+        self._run_loop(math.log(p.prior) - math.log1p(-p.prior))
         wp.synchronize_device(dev)
         t2 = time.perf_counter()
         self.visible.zero_()
-        wp.launch(K.transparency_pass, dim=self.n_pixels, device=dev, inputs=lists + [self.rho, self.visible])
-        wp.launch(K.soft_threshold, dim=self.n_locations, device=dev,
+        wp.launch(K.transparency_pass, dim=self.batch * self.n_pixels, device=dev,
+                  inputs=[self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
+        wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
                   inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.share, self.rho_star])
-        result = FrameResult(
-            rho=self.rho.numpy().copy(), rho_star=self.rho_star.numpy().copy(),
-            evidence_share=self.share.numpy().copy(), iterations=iterations, entries=entries,
-            max_change=self.max_change.numpy()[:iterations].copy())
+        L = self.n_locations
+        rho, rho_star, share = (a.numpy().reshape(self.batch, L) for a in (self.rho, self.rho_star, self.share))
+        iterations, max_change = self.iterations.numpy(), self.max_change.numpy()
         t3 = time.perf_counter()
-        result.timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2,
-                          "total_s": t3 - t0}
-        return result
+        timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2, "total_s": t3 - t0}
+        if self.batch > 1:
+            timings["batch"] = n
+        return [FrameResult(rho=rho[f].copy(), rho_star=rho_star[f].copy(), evidence_share=share[f].copy(),
+                            iterations=int(iterations[f]), entries=int(counts[f].sum()),
+                            max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings))
+                for f in range(n)]

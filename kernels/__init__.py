@@ -9,11 +9,12 @@
 
 from .background import background_delta, background_from_frames, floor_background
 from .masks import TileIndex, pair_depth_bounds, pixel_entries
-from .mean_field import evidence_pass, soft_threshold, transparency_pass, update_rho
+from .mean_field import check_converged, evidence_pass, soft_threshold, transparency_pass, update_rho
 from .pixel_model import GeometryArrays, PixelModel
 
 __all__ = [
     "GeometryArrays", "PixelModel", "TileIndex", "background_delta", "background_from_frames",
+    "check_converged",
     "evidence_pass", "floor_background", "pair_depth_bounds", "pixel_entries", "soft_threshold",
     "transparency_pass", "update_rho",
 ]

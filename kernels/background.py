@@ -1,7 +1,7 @@
 """Background pixel distributions theta_bg,i (MODEL.md) and their Delta_bg,i.
 
-Parameters per pixel live in a (H*W, 4) float64 array: mu, sigma, pi_inf, pi_out
-(pi_out = 1 is a broad, uniform distribution over the sensor range).
+Parameters per pixel live in a (B*H*W, 4) float64 array, one block per frame of a batch:
+mu, sigma, pi_inf, pi_out (pi_out = 1 is a broad, uniform distribution over the sensor range).
 """
 
 import warp as wp
@@ -33,14 +33,14 @@ def set_broad(bg: wp.array2d(dtype=wp.float64), p: int, missing: wp.float64):
 
 @wp.kernel(enable_backward=False)
 def background_delta(
-    depth: wp.array2d(dtype=wp.float32),
+    depth: wp.array3d(dtype=wp.float32),
     pm: PixelModel,
     bg: wp.array2d(dtype=wp.float64),
     delta_bg: wp.array(dtype=wp.float64),
 ):
-    v, u = wp.tid()
-    p = v * depth.shape[1] + u
-    z = f64(depth[v, u])
+    b, v, u = wp.tid()
+    p = (b * depth.shape[1] + v) * depth.shape[2] + u
+    z = f64(depth[b, v, u])
     if is_reading(pm, z):
         delta_bg[p] = log_theta(pm, z, bg[p, 0], bg[p, 1], bg[p, 2], bg[p, 3])
     else:
@@ -51,7 +51,7 @@ def background_delta(
 def floor_background(
     rays: wp.array2d(dtype=wp.vec3d),
     centre: wp.vec3d,
-    depth: wp.array2d(dtype=wp.float32),
+    depth: wp.array3d(dtype=wp.float32),
     bounds: wp.array(dtype=wp.float64),
     outside_is_static: int,
     pm: PixelModel,
@@ -59,13 +59,13 @@ def floor_background(
 ):
     """Floor-only background: the ray's hit on z = 0 within range, else broad; with
     `outside_is_static`, a reading whose point no object box can reach is background there."""
-    v, u = wp.tid()
-    p = v * rays.shape[1] + u
+    b, v, u = wp.tid()
+    p = (b * rays.shape[0] + v) * rays.shape[1] + u
     d = rays[v, u]
     t = f64(-1.0)
     if d[2] < f64(-1.0e-12):
         t = -centre[2] / d[2]
-    z = f64(depth[v, u])
+    z = f64(depth[b, v, u])
     if outside_is_static == 1 and is_reading(pm, z):
         x = centre + z * d
         if x[0] < bounds[0] or x[0] > bounds[1] or x[1] < bounds[2] or x[1] > bounds[3] or x[2] > bounds[5]:
@@ -100,9 +100,11 @@ def background_from_frames(
     frames: wp.array3d(dtype=wp.float32),
     pm: PixelModel,
     scratch: wp.array2d(dtype=wp.float64),
+    copies: int,
     bg: wp.array2d(dtype=wp.float64),
 ):
-    """mu = median of readings, sigma = max(1.4826 MAD, sensor noise), pi_inf = missing share."""
+    """mu = median of readings, sigma = max(1.4826 MAD, sensor noise), pi_inf = missing share;
+    written into the first `copies` blocks of bg (the frames of a batch share it)."""
     v, u = wp.tid()
     n_frames = frames.shape[0]
     p = v * frames.shape[2] + u
@@ -113,13 +115,16 @@ def background_from_frames(
             scratch[p, n] = z
             n += 1
     missing = wp.clamp(f64(1.0) - f64(n) / f64(n_frames), pm.missing_clip, f64(1.0) - pm.missing_clip)
+    pixels = frames.shape[1] * frames.shape[2]
     if n == 0:
-        set_broad(bg, p, missing)
+        for c in range(copies):
+            set_broad(bg, c * pixels + p, missing)
         return
     sort_row(scratch, p, n)
     mu = sorted_median(scratch, p, n)
     for i in range(n):
         scratch[p, i] = wp.abs(scratch[p, i] - mu)
     sort_row(scratch, p, n)
-    mad = sorted_median(scratch, p, n)
-    set_background(bg, p, mu, wp.max(f64(1.4826) * mad, sensor_sigma(pm, mu)), missing, pm.outlier_prob)
+    sigma = wp.max(f64(1.4826) * sorted_median(scratch, p, n), sensor_sigma(pm, mu))
+    for c in range(copies):
+        set_background(bg, c * pixels + p, mu, sigma, missing, pm.outlier_prob)

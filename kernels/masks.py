@@ -17,8 +17,9 @@ search and runs the exact mask test of the reference on those with z <= hi. The 
 a superset of the mask by construction, so the lists are the same as a scan of every
 silhouette. With `fill == 0` the kernel writes each pixel's count; with `fill == 1` it writes
 the entries into the pixel's slice at `offsets[p]`, keeping it sorted by (mu, location id) as
-it goes (insertion, no atomics). With `background_occludes`, a location does not claim a pixel
-whose known background is clearly in front of it.
+it goes (insertion, no atomics). Frames of a batch are blocks of pixels and of locations: the
+entries of frame b name location b * n_locations + k. With `background_occludes`, a location
+does not claim a pixel whose known background is clearly in front of it.
 """
 
 import warp as wp
@@ -105,11 +106,12 @@ def entry_before(mu_a: wp.float32, k_a: wp.int32, mu_b: wp.float32, k_b: wp.int3
 
 @wp.kernel(enable_backward=False)
 def pixel_entries(
-    depth: wp.array2d(dtype=wp.float32),
+    depth: wp.array3d(dtype=wp.float32),
     geo: GeometryArrays,
     pm: PixelModel,
     bg: wp.array2d(dtype=wp.float64),
     tiles: TileIndex,
+    n_locations: int,
     fill: int,
     offsets: wp.array(dtype=wp.int32),
     counts: wp.array(dtype=wp.int32),
@@ -118,9 +120,9 @@ def pixel_entries(
     entry_mu: wp.array(dtype=wp.float32),
     entry_delta: wp.array(dtype=wp.float32),
 ):
-    v, u = wp.tid()
-    p = v * depth.shape[1] + u
-    z = f64(depth[v, u])
+    b, v, u = wp.tid()
+    p = (b * depth.shape[1] + v) * depth.shape[2] + u
+    z = f64(depth[b, v, u])
     n = int(0)
     if is_reading(pm, z):
         t = (v / tiles.size) * tiles.tiles_x + u / tiles.size
@@ -150,13 +152,14 @@ def pixel_entries(
                         if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
                             if fill == 1 and e0 + n < capacity:
                                 mu32 = wp.float32(mu)
+                                kb = b * n_locations + k
                                 e = e0 + n
-                                while e > e0 and entry_before(mu32, k, entry_mu[e - 1], entry_loc[e - 1]):
+                                while e > e0 and entry_before(mu32, kb, entry_mu[e - 1], entry_loc[e - 1]):
                                     entry_loc[e] = entry_loc[e - 1]
                                     entry_mu[e] = entry_mu[e - 1]
                                     entry_delta[e] = entry_delta[e - 1]
                                     e -= 1
-                                entry_loc[e] = k
+                                entry_loc[e] = kb
                                 entry_mu[e] = mu32
                                 entry_delta[e] = wp.float32(pm.log_reading + logaddexp(pm.log_outlier, inlier))
                             n += 1

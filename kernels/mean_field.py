@@ -3,6 +3,11 @@
 For pixel i with depth-sorted list k_1..k_n, r_j = rho_{k_j}, D_j = Delta_{k_j,i}:
 T_j = prod_{m<j} (1 - r_m);  B_n = Delta_bg,i,  B_j = r_{j+1} D_{j+1} + (1 - r_{j+1}) B_{j+1};
 pixel i adds T_j (D_j - B_j) to the evidence of k_j (float64 accumulators).
+
+Frames of a batch are blocks of P pixels and L locations. Each frame stops on its own:
+`check_converged` marks a frame done when its largest change of the iteration is below the
+tolerance, and the evidence pass and the update then leave it alone, so a batch (and a loop
+captured once as a graph, with no host sync) gives every frame what it would get alone.
 """
 
 import warp as wp
@@ -28,10 +33,12 @@ def evidence_pass(
     rho: wp.array(dtype=wp.float64),
     behind: wp.array(dtype=wp.float64),
     evidence: wp.array(dtype=wp.float64),
+    pixels: int,
+    done: wp.array(dtype=wp.int32),
 ):
     p = wp.tid()
     n = counts[p]
-    if n == 0:
+    if n == 0 or done[p / pixels] != 0:
         return
     start = offsets[p]
     # back to front: B_j, the expected log-likelihood of what lies behind entry j
@@ -56,14 +63,35 @@ def update_rho(
     iteration: int,
     evidence: wp.array(dtype=wp.float64),
     rho: wp.array(dtype=wp.float64),
-    max_change: wp.array(dtype=wp.float64),
+    locations: int,
+    done: wp.array(dtype=wp.int32),
+    max_change: wp.array2d(dtype=wp.float64),
+    iterations: wp.array(dtype=wp.int32),
 ):
-    """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence); clears the evidence."""
-    k = wp.tid()
-    rho_new = sigmoid(logit_prior + evidence[k])
-    wp.atomic_max(max_change, iteration, wp.abs(rho_new - rho[k]))
-    rho[k] = (f64(1.0) - damping) * rho[k] + damping * rho_new
-    evidence[k] = f64(0.0)
+    """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence); clears the evidence;
+    max_change[frame, iteration] = max |rho_new - rho|; iterations[frame] counts the updates."""
+    i = wp.tid()
+    f = i / locations
+    if done[f] != 0:
+        return
+    rho_new = sigmoid(logit_prior + evidence[i])
+    wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
+    rho[i] = (f64(1.0) - damping) * rho[i] + damping * rho_new
+    evidence[i] = f64(0.0)
+    if i % locations == 0:
+        iterations[f] = iteration + 1
+
+
+@wp.kernel(enable_backward=False)
+def check_converged(
+    iteration: int,
+    tolerance: wp.float64,
+    max_change: wp.array2d(dtype=wp.float64),
+    done: wp.array(dtype=wp.int32),
+):
+    f = wp.tid()
+    if done[f] == 0 and max_change[f, iteration] < tolerance:
+        done[f] = 1
 
 
 @wp.kernel(enable_backward=False)
@@ -94,10 +122,12 @@ def soft_threshold(
     share: wp.array(dtype=wp.float64),
     rho_star: wp.array(dtype=wp.float64),
 ):
-    """Eq. 13 with the corrected sign: rho* = sigmoid(alpha e + beta) rho, e = visible / |S_k|."""
+    """Eq. 13 with the corrected sign: rho* = sigmoid(alpha e + beta) rho, e = visible / |S_k|
+    (area holds the L locations of one frame; the arrays hold the frames of a batch)."""
     k = wp.tid()
-    if area[k] > f64(0.0):
-        e = visible[k] / area[k]
+    a = area[k % area.shape[0]]
+    if a > f64(0.0):
+        e = visible[k] / a
         share[k] = e
         rho_star[k] = sigmoid(alpha * e + beta) * rho[k]
     else:

@@ -124,3 +124,48 @@ def test_floor_background_per_frame_matches_reference(device, outside):
     np.testing.assert_allclose(got.rho, want["rho"], atol=1e-6)
     static = (bg.outlier < 1) & (depth > 0) & ~np.isclose(bg.mu, ref.floor_background(geom, params).mu)
     assert static.any() == outside  # the slabs' tops or the far floor are out of every box
+
+
+def batch_frames(seed, n):
+    """n different frames over one random scene's geometry (its depth, shifted and thinned)."""
+    geom, params, depth, frames = random_scene(seed)
+    rng = np.random.default_rng(seed)
+    out = [depth]
+    for i in range(1, n):
+        d = np.roll(depth, 2 * i, axis=1) * (rng.random(depth.shape) > 0.1 * i)
+        out.append(d.astype(np.float32))
+    return geom, params, np.stack(out), frames
+
+
+@pytest.mark.parametrize("graph", [False, True])
+def test_batch_gives_each_frame_its_own_result(device, graph):
+    """Frames run side by side (and the loop as a replayed graph) stop at their own iteration
+    and get exactly what they get alone; a short batch is padded."""
+    geom, params, depths, frames = batch_frames(4, 3)
+    alone = Engine(geom, params, device)
+    alone.set_background_frames(frames)
+    want = [alone.infer(d) for d in depths]
+    assert len({w.iterations for w in want}) > 1, "frames should converge at different iterations"
+    engine = Engine(geom, params, device, batch=4, graph=graph)
+    engine.set_background_frames(frames)
+    for n in (3, 2):
+        got = engine.infer_batch(depths[:n])
+        assert len(got) == n
+        for g, w in zip(got, want):
+            assert (g.iterations, g.entries) == (w.iterations, w.entries)
+            np.testing.assert_allclose(g.rho, w.rho, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(g.rho_star, w.rho_star, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(g.max_change, w.max_change, rtol=0, atol=1e-12)
+
+
+def test_graph_is_recaptured_when_the_lists_grow(device):
+    geom, params, depth, _ = random_scene(5)
+    want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
+    engine = Engine(geom, params, device, entries_per_pixel=0.01, graph=True)
+    small = engine.infer(np.zeros_like(depth))  # captured with the first, small lists
+    assert small.entries == 0 and engine.grown == []
+    np.testing.assert_allclose(small.rho, params.prior, rtol=1e-12)  # no reading, no evidence
+    got = engine.infer(depth)
+    assert engine.grown == [want["entries"]]
+    assert got.iterations == want["iterations"]
+    np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
