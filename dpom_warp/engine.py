@@ -137,6 +137,7 @@ class Engine:
         self.n_locations = len(geometry.rect)
         self.batch = batch
         self.graph = wp.get_device(device).is_cuda if graph is None else graph
+        self.local_scratch = 0 if wp.get_device(device).is_cuda else 1  # see kernels.evidence_pass
         self._graph, self._graph_lists = None, None
         self.tile, tiles_x = tile, -(-self.width // tile)
         self.n_tiles = tiles_x * -(-self.height // tile)
@@ -302,7 +303,7 @@ class Engine:
         wp.launch(K.evidence_pass, dim=self.batch * self.n_pixels, device=self.device,
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
                           self.delta_bg, self.rho, self.behind, self.evidence, self.n_pixels,
-                          self.done])
+                          self.done, self.local_scratch])
         wp.launch(K.update_rho, dim=self.batch * self.n_locations, device=self.device,
                   inputs=[logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
                           self.done, self.max_change, self.iterations])

@@ -169,3 +169,16 @@ def test_graph_is_recaptured_when_the_lists_grow(device):
     assert engine.grown == [want["entries"]]
     assert got.iterations == want["iterations"]
     np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
+
+
+def test_evidence_scratch_on_stack_or_global_agree(device):
+    """Both scratch paths of the evidence pass (stack on CPU, global array on GPUs and for
+    long lists) give the reference's result."""
+    geom, params, depth, _ = random_scene(2)
+    want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
+    for local in (0, 1):
+        engine = Engine(geom, params, device)
+        engine.local_scratch = local
+        got = engine.infer(depth)
+        assert got.iterations == want["iterations"]
+        np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
