@@ -1,6 +1,6 @@
 """Kernel benchmarks: time per stage on standard scenes, Warp against the NumPy reference.
 
-    python -m bench [--device cpu] [--repeats 5] [--reference] [--sweep] [--output runs/bench]
+    python -m bench [--device cpu] [--repeats 5] [--batch 4] [--reference] [--sweep] [--output runs/bench]
 
 Scenes (rendered once into .cache/bench/, seeded):
 - kinect_v2: 512x424, people, 6 x 6.5 m ground grid at 0.1 m (the people demo);
@@ -8,6 +8,9 @@ Scenes (rendered once into .cache/bench/, seeded):
 - drones: 512x424, 4 x 4.5 x 2.4 m voxel grid at 0.1 m (the drone demo's room).
 Each Warp figure is the median of `--repeats` runs after a warm-up run (which compiles the
 kernels and sizes the lists); the NumPy reference, with --reference, runs once on kinect_v2.
+Whole frames are timed three ways: the iteration loop driven from Python (a host check every
+check_every iterations), the loop replayed as a captured graph (no host sync), and `--batch`
+different frames of the scene in one engine call (time per frame = batch time / batch).
 --sweep also times whole frames against the number of locations (grid step) and the image
 resolution on kinect_v2, and plots both.
 """
@@ -64,16 +67,33 @@ def load_scene(name, extra=()):
     return cfg, depth, bg
 
 
-def time_scene(cfg, depth, bg, device, repeats):
-    """Per-stage medians of one frame on `device`."""
+def scene_frames(name, n):
+    """(frames (n, H, W), background frames) of an n-frame sequence of a standard scene
+    (rendered once into .cache/bench/<name>_seq)."""
+    from dpom_warp.io import read_depth
+    from dpom_warp.pipeline import expand
+
+    cache = f".cache/bench/{name}_seq"
+    cfg, _, bg = load_scene(name, [f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
+                                   f"input.background={cache}/background/*.png", f"synthetic.frames={n}"])
+    shape = (cfg.camera.height, cfg.camera.width)
+    files = expand(cfg.inputs.frames, "input.frames")[:n]
+    return np.stack([read_depth(f, cfg.inputs.depth_scale, shape) for f in files]), bg
+
+
+def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
+    """Per-stage medians of one frame on `device`; with batch > 1 also the frames of
+    `sequence` = (frames (batch, H, W), their background frames) in one engine call."""
     import warp as wp
 
-    from dpom_warp.engine import Engine, memory_estimate
+    from dpom_warp.engine import Engine
     from dpom_warp.geometry import build_geometry
 
     geom = build_geometry(cfg.camera, cfg.grid, cfg.obj)
-    engine = Engine(geom, cfg.model, device, cfg.engine.entries_per_pixel)
+    t = time.perf_counter()
+    engine = Engine(geom, cfg.model, device, cfg.engine.entries_per_pixel, graph=False)
     engine.set_background_frames(bg)
+    setup = time.perf_counter() - t
     warm = engine.infer(depth)
 
     def one_iteration():
@@ -85,14 +105,28 @@ def time_scene(cfg, depth, bg, device, repeats):
             lambda: (engine.set_background_frames(bg), wp.synchronize_device(device)), repeats),
         "masks, Delta, lists, sort": median_time(
             lambda: (engine.build_lists(depth), wp.synchronize_device(device)), repeats),
-        "one iteration": median_time(one_iteration, repeats),
-        "whole frame": median_time(lambda: engine.infer(depth), repeats),
     }
-    return {"image": [cfg.camera.width, cfg.camera.height], "grid": list(cfg.grid.shape),
-            "locations": int(cfg.grid.size), "mask_entries": warm.entries,
-            "iterations": warm.iterations,
-            "engine_memory_mb": memory_estimate(engine.n_pixels, engine.n_locations, engine.capacity) / 2**20,
-            "median_s": stages}, geom, warm
+    engine.done.zero_()  # after infer every frame is done and the pass would skip it
+    stages["one iteration"] = median_time(one_iteration, repeats)
+    stages["whole frame"] = median_time(lambda: engine.infer(depth), repeats)
+    engine.graph = True
+    engine.infer(depth)  # captures the graph
+    stages["whole frame, graph"] = median_time(lambda: engine.infer(depth), repeats)
+    result = {"image": [cfg.camera.width, cfg.camera.height], "grid": list(cfg.grid.shape),
+              "locations": int(cfg.grid.size), "mask_entries": warm.entries,
+              "iterations": warm.iterations, "engine_setup_s": setup,
+              "engine_memory_mb": engine.memory_bytes() / 2**20, "median_s": stages}
+    if batch > 1:
+        del engine
+        frames, seq_bg = sequence
+        many = Engine(geom, cfg.model, device, cfg.engine.entries_per_pixel, batch=batch)
+        many.set_background_frames(seq_bg)
+        got = many.infer_batch(frames)
+        stages["per frame, batched"] = median_time(lambda: many.infer_batch(frames), repeats) / batch
+        result.update(batch=batch, batch_iterations=[r.iterations for r in got],
+                      batch_memory_mb=many.memory_bytes() / 2**20,
+                      frames_per_s_batched=1.0 / stages["per frame, batched"])
+    return result, geom, warm
 
 
 def sweep(device, repeats, out):
@@ -138,6 +172,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--batch", type=int, default=4, help="frames per engine call for the batched figure (1: none)")
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     ap.add_argument("--reference", action="store_true", help="also time the NumPy reference on kinect_v2 (slow)")
     ap.add_argument("--sweep", action="store_true", help="time against locations and resolution, with a plot")
@@ -153,15 +188,17 @@ def main():
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)
     result = {"machine": f"{platform.machine()}, {platform.node()}", "device": device,
-              "python": platform.python_version(), "warp": wp.__version__, "repeats": a.repeats,
-              "scenes": {}}
-    lines = [f"Machine: {result['machine']}; device {device}; Warp {wp.__version__}; "
-             f"median of {a.repeats} runs after a warm-up", "",
+              "device_name": wp.get_device(device).name, "python": platform.python_version(),
+              "warp": wp.__version__, "repeats": a.repeats, "scenes": {}}
+    lines = [f"Machine: {result['machine']}; device {device} ({result['device_name']}); Warp "
+             f"{wp.__version__}; median of {a.repeats} runs after a warm-up", "",
              "| scene | image | locations | mask entries | iterations | engine MB | background | "
-             "masks+lists | one iteration | whole frame |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "masks+lists | one iteration | whole frame | with graph | batched, per frame |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name in a.scenes:
         cfg, depth, bg = load_scene(name)
-        r, geom, warm = time_scene(cfg, depth, bg, device, a.repeats)
+        sequence = scene_frames(name, a.batch) if a.batch > 1 else None
+        r, geom, warm = time_scene(cfg, depth, bg, device, a.repeats, a.batch, sequence)
         if a.reference and name == "kinect_v2":
             params = dataclasses.replace(cfg.model)
             t = time.perf_counter()
@@ -174,7 +211,9 @@ def main():
         lines.append(f"| {name} | {r['image'][0]}x{r['image'][1]} | {r['locations']} | {r['mask_entries']} | "
                      f"{r['iterations']} | {r['engine_memory_mb']:.0f} | {1000 * m['background model (kernel)']:.0f} ms | "
                      f"{1000 * m['masks, Delta, lists, sort']:.0f} ms | {1000 * m['one iteration']:.1f} ms | "
-                     f"{1000 * m['whole frame']:.0f} ms |")
+                     f"{1000 * m['whole frame']:.0f} ms | {1000 * m['whole frame, graph']:.0f} ms | "
+                     + (f"{1000 * m['per frame, batched']:.0f} ms (x{a.batch}, {r['frames_per_s_batched']:.1f} fps) |"
+                        if a.batch > 1 else "- |"))
         print(lines[-1], flush=True)
     v2 = result["scenes"].get("kinect_v2", {})
     if "speedup_vs_reference" in v2:
