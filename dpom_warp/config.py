@@ -138,6 +138,8 @@ class EngineOptions:
     entries_per_pixel: float = 8.0
     max_entries: int | None = None
     memory_gb: float | None = 8.0
+    batch: int = 1
+    graph: str = "auto"
 
 
 @dataclass
@@ -336,7 +338,9 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     s = top.section("engine")
     engine = EngineOptions(entries_per_pixel=s.number("entries_per_pixel", 8.0, lo=0, lo_open=True),
                            max_entries=s.number("max_entries", None, integer=True, lo=1),
-                           memory_gb=s.number("memory_gb", 8.0, lo=0, lo_open=True))
+                           memory_gb=s.number("memory_gb", 8.0, lo=0, lo_open=True),
+                           batch=s.number("batch", 1, integer=True, lo=1),
+                           graph=s.string("graph", "auto", choices=("auto", "on", "off")))
     s.done()
 
     synthetic, cache = None, None

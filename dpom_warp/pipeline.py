@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import glob
+import itertools
 import json
 import platform
 import shutil
@@ -167,7 +168,8 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
     try:
         engine = Engine(geometry, cfg.model, dev, cfg.engine.entries_per_pixel,
-                        cfg.engine.max_entries, cfg.engine.memory_gb)
+                        cfg.engine.max_entries, cfg.engine.memory_gb, batch=cfg.engine.batch,
+                        graph={"auto": None, "on": True, "off": False}[cfg.engine.graph])
     except MemoryBudgetError as e:
         raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
     if bg_frames:
@@ -236,12 +238,39 @@ def _attempt(cfg, engine, geometry, f, out, truth):
 
 
 def _process_here(cfg, engine, geometry, todo, out, truth, progress):
-    iterator = todo
+    iterator = iter(todo)
     if progress:
         from tqdm import tqdm
-        iterator = tqdm(todo, unit="frame", desc="dpom", leave=False)
-    for f in iterator:
-        yield _attempt(cfg, engine, geometry, f, out, truth)
+        iterator = iter(tqdm(todo, unit="frame", desc="dpom", leave=False))
+    while chunk := list(itertools.islice(iterator, engine.batch)):
+        if len(chunk) == 1:
+            yield _attempt(cfg, engine, geometry, chunk[0], out, truth)
+        else:
+            yield from _attempt_batch(cfg, engine, geometry, chunk, out, truth)
+
+
+def _attempt_batch(cfg, engine, geometry, files, out, truth):
+    """_attempt for the frames of one engine batch; frames that cannot be read are reported
+    alone, and a batch whose lists overflow is retried frame by frame."""
+    read = []
+    for f in files:
+        try:
+            t = time.perf_counter()
+            read.append((f, read_frame(cfg, f), time.perf_counter() - t))
+        except InputError as e:
+            yield f, None, str(e)
+    if len(read) < 2:
+        yield from (_attempt(cfg, engine, geometry, f, out, truth) for f, _, _ in read)
+        return
+    t0 = time.perf_counter()
+    try:
+        results = engine.infer_batch(np.stack([depth for _, depth, _ in read]))
+    except ListOverflow:
+        yield from (_attempt(cfg, engine, geometry, f, out, truth) for f, _, _ in read)
+        return
+    share = (time.perf_counter() - t0) / len(read)
+    for (f, depth, read_s), res in zip(read, results):
+        yield f, finish_frame(cfg, geometry, f, depth, res, out, truth, read_s, share), None
 
 
 _worker = {}
@@ -306,13 +335,23 @@ def _process_in_workers(cfg, camera, bg_files, engine, todo, out, truth, workers
         pool.shutdown(wait=True, cancel_futures=True)
 
 
+def read_frame(cfg: RunConfig, f: Path) -> np.ndarray:
+    return read_depth(f, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
+
+
 def process_frame(cfg: RunConfig, engine: Engine, geometry, f: Path, out: Path, truth) -> dict:
-    """Infer one frame and write its map, picture and record (the record last: a frame is
-    done when its record exists)."""
+    """Infer one frame and write its map, picture and record (finish_frame)."""
     t_read = time.perf_counter()
-    depth = read_depth(f, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
+    depth = read_frame(cfg, f)
     t0 = time.perf_counter()
     res = engine.infer(depth)
+    return finish_frame(cfg, geometry, f, depth, res, out, truth, t0 - t_read, time.perf_counter() - t0)
+
+
+def finish_frame(cfg: RunConfig, geometry, f: Path, depth, res, out: Path, truth, read_s: float,
+                 infer_s: float) -> dict:
+    """Detections of an inferred frame; writes its map, picture and record (the record last:
+    a frame is done when its record exists). `infer_s` is the frame's share of a batch."""
     t1 = time.perf_counter()
     rho_map = res.rho_star.reshape(cfg.grid.shape)
     dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
@@ -332,7 +371,7 @@ def process_frame(cfg: RunConfig, engine: Engine, geometry, f: Path, out: Path, 
                  f"{d.box[2]},{d.box[3]}" for d in dets],
         "xy": [[d.x, d.y, d.z] if cfg.grid.mode == "voxel" else [d.x, d.y] for d in dets],
         "stats": {"frame": f.name, "detections": len(dets), "iterations": res.iterations,
-                  "entries": res.entries, "read_s": t0 - t_read, "infer_s": t1 - t0,
+                  "entries": res.entries, "read_s": read_s, "infer_s": infer_s,
                   "detect_s": t2 - t1, "write_s": t3 - t2,
                   **{f"engine_{k}": v for k, v in res.timings.items()}},
     }

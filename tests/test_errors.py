@@ -275,3 +275,26 @@ def test_workers_give_the_same_files(tmp_path, scene):
     for m in (one / "maps").iterdir():
         assert (two / "maps" / m.name).read_bytes() == m.read_bytes()
     assert json.load(open(two / "summary.json"))["scores"] == json.load(open(one / "summary.json"))["scores"]
+
+
+@pytest.mark.parametrize("graph", ["off", "on"])
+def test_batches_give_the_same_files_and_skip_bad_frames(tmp_path, scene, graph):
+    """engine.batch: frames go through the engine several at a time (with the loop replayed as
+    a graph or not); a bad frame in a batch is skipped alone and the others are unchanged."""
+    folder = frames_with(tmp_path, scene[0], "0002.png", truncated)
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    one = write_config(tmp_path / "a", scene[1], input__frames=f"{folder}/*")
+    many = write_config(tmp_path / "b", scene[1], input__frames=f"{folder}/*", engine__batch=4,
+                        engine__graph=graph)
+    assert main(["run", str(one), "--no-progress"]) == 0
+    assert main(["run", str(many), "--no-progress"]) == 0
+    a, b = tmp_path / "a" / "out", tmp_path / "b" / "out"
+    assert (a / "detections.csv").read_bytes() == (b / "detections.csv").read_bytes()
+    maps = sorted(m.name for m in (a / "maps").iterdir())
+    assert len(maps) == 5 and maps == sorted(m.name for m in (b / "maps").iterdir())
+    for m in maps:
+        assert (b / "maps" / m).read_bytes() == (a / "maps" / m).read_bytes()
+    summary = json.load(open(b / "summary.json"))
+    assert [s["frame"] for s in summary["skipped"]] == ["0002.png"]
+    assert summary["scores"] == json.load(open(a / "summary.json"))["scores"]
