@@ -51,7 +51,7 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8  # location, object depth, Delta, B scratch
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32  # ray, depth, count, offset, Delta_bg, background
 LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6  # rect, normal, plane, area and five accumulators
-# (per frame of a batch: pixel and location bytes count once per frame)
+# A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
 
@@ -288,7 +288,7 @@ class Engine:
         if total > self.capacity:
             if total > self.max_entries or total < 0:
                 raise ListOverflow(
-                    f"frame needs {total} mask entries ({total * ENTRY_BYTES / 2**30:.2f} GiB), "
+                    f"{'batch' if self.batch > 1 else 'frame'} needs {total} mask entries ({total * ENTRY_BYTES / 2**30:.2f} GiB), "
                     f"above the cap of {self.max_entries} (engine.max_entries, engine.memory_gb "
                     f"and the int32 offsets); coarsen the grid or raise the cap")
             self.grown.append(total)
