@@ -287,8 +287,9 @@ class Engine:
         total = int(self.offsets[-1:].numpy()[0]) + int(self.counts[-1:].numpy()[0])
         if total > self.capacity:
             if total > self.max_entries or total < 0:
+                what = "batch" if self.batch > 1 else "frame"
                 raise ListOverflow(
-                    f"{'batch' if self.batch > 1 else 'frame'} needs {total} mask entries ({total * ENTRY_BYTES / 2**30:.2f} GiB), "
+                    f"{what} needs {total} mask entries ({total * ENTRY_BYTES / 2**30:.2f} GiB), "
                     f"above the cap of {self.max_entries} (engine.max_entries, engine.memory_gb "
                     f"and the int32 offsets); coarsen the grid or raise the cap")
             self.grown.append(total)
@@ -361,8 +362,8 @@ class Engine:
                   inputs=[self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
         wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
                   inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.share, self.rho_star])
-        L = self.n_locations
-        rho, rho_star, share = (a.numpy().reshape(self.batch, L) for a in (self.rho, self.rho_star, self.share))
+        rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
+                                for a in (self.rho, self.rho_star, self.share))
         iterations, max_change = self.iterations.numpy(), self.max_change.numpy()
         t3 = time.perf_counter()
         timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2, "total_s": t3 - t0}

@@ -3,7 +3,8 @@
 - `pixel_model`: the pixel distributions of eq. 11 as `@wp.func`s and the parameter structs.
 - `masks`: masks M_k and Delta_ki (eq. 12) through a static tile index, counted then filled
   into per-pixel lists kept in depth order (location id breaking ties).
-- `mean_field`: the exclusive-form mean-field evidence pass, damped update, soft threshold.
+- `mean_field`: the exclusive-form mean-field evidence pass, damped update, on-device
+  convergence check (batches, graphs), soft threshold.
 - `background`: background distributions from background frames or from the floor plane.
 """
 
@@ -14,7 +15,6 @@ from .pixel_model import GeometryArrays, PixelModel
 
 __all__ = [
     "GeometryArrays", "PixelModel", "TileIndex", "background_delta", "background_from_frames",
-    "check_converged",
-    "evidence_pass", "floor_background", "pair_depth_bounds", "pixel_entries", "soft_threshold",
-    "transparency_pass", "update_rho",
+    "check_converged", "evidence_pass", "floor_background", "pair_depth_bounds", "pixel_entries",
+    "soft_threshold", "transparency_pass", "update_rho",
 ]

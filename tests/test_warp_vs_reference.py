@@ -38,7 +38,8 @@ def lists_as_entries(engine):
     counts, offsets = engine.counts.numpy(), engine.offsets.numpy()
     order = np.concatenate([np.arange(o, o + c) for o, c in zip(offsets, counts) if c])
     pixel = np.repeat(np.arange(len(counts)), counts)
-    return pixel, engine.entry_loc.numpy()[order], engine.entry_mu.numpy()[order], engine.entry_delta.numpy()[order]
+    return (pixel, engine.entry_loc.numpy()[order], engine.entry_mu.numpy()[order],
+            engine.entry_delta.numpy()[order])
 
 
 def distorted_voxel_scene(seed):
