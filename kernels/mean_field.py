@@ -44,9 +44,12 @@ def evidence_pass(
     """With `local` (CPU), lists of up to LOCAL_ENTRIES keep D_j - B_j and 1 - r_j on the
     stack, in cache, instead of the global scratch `behind` (~15 % faster on one CPU thread);
     longer lists, and every list on a GPU (where a big stack spills), use `behind`."""
-    p = wp.tid()
+    f, i = wp.tid()  # frame, pixel
+    if done[f] != 0:
+        return
+    p = f * pixels + i
     n = counts[p]
-    if n == 0 or done[p / pixels] != 0:
+    if n == 0:
         return
     start = offsets[p]
     b = delta_bg[p]  # B_n: what lies behind the last entry
@@ -91,15 +94,15 @@ def update_rho(
 ):
     """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence); clears the evidence;
     max_change[frame, iteration] = max |rho_new - rho|; iterations[frame] counts the updates."""
-    i = wp.tid()
-    f = i / locations
+    f, k = wp.tid()  # frame, location
     if done[f] != 0:
         return
+    i = f * locations + k
     rho_new = sigmoid(logit_prior + evidence[i])
     wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
     rho[i] = (f64(1.0) - damping) * rho[i] + damping * rho_new
     evidence[i] = f64(0.0)
-    if i % locations == 0:
+    if k == 0:
         iterations[f] = iteration + 1
 
 
