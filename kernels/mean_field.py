@@ -27,8 +27,9 @@ LOCAL_ENTRIES = 128  # lists up to this long keep their scratch in registers / s
 LocalScratch = wp.types.vector(length=LOCAL_ENTRIES, dtype=wp.float64)
 
 
-@wp.kernel(enable_backward=False)
-def evidence_pass(
+@wp.func
+def pixel_evidence(
+    p: int,
     offsets: wp.array(dtype=wp.int32),
     counts: wp.array(dtype=wp.int32),
     entry_loc: wp.array(dtype=wp.int32),
@@ -37,20 +38,10 @@ def evidence_pass(
     rho: wp.array(dtype=wp.float64),
     behind: wp.array(dtype=wp.float64),
     evidence: wp.array(dtype=wp.float64),
-    pixels: int,
-    done: wp.array(dtype=wp.int32),
     local: int,
 ):
-    """With `local` (CPU), lists of up to LOCAL_ENTRIES keep D_j - B_j and 1 - r_j on the
-    stack, in cache, instead of the global scratch `behind` (~15 % faster on one CPU thread);
-    longer lists, and every list on a GPU (where a big stack spills), use `behind`."""
-    f, i = wp.tid()  # frame, pixel
-    if done[f] != 0:
-        return
-    p = f * pixels + i
+    """Adds pixel p's T_j (D_j - B_j) to the evidence of each of its entries."""
     n = counts[p]
-    if n == 0:
-        return
     start = offsets[p]
     b = delta_bg[p]  # B_n: what lies behind the last entry
     if local != 0 and n <= LOCAL_ENTRIES:
@@ -67,17 +58,44 @@ def evidence_pass(
         for j in range(n):  # front to back: T_j and the evidence T_j (D_j - B_j)
             wp.atomic_add(evidence, entry_loc[start + j], t * excess[j])
             t = t * clear[j]
-        return
-    for jj in range(n):
-        j = start + n - 1 - jj
-        behind[j] = b
-        r = rho[entry_loc[j]]
-        b = r * f64(entry_delta[j]) + (f64(1.0) - r) * b
-    t = f64(1.0)
-    for j in range(start, start + n):
-        k = entry_loc[j]
-        wp.atomic_add(evidence, k, t * (f64(entry_delta[j]) - behind[j]))
-        t = t * (f64(1.0) - rho[k])
+    else:
+        for jj in range(n):
+            j = start + n - 1 - jj
+            behind[j] = b
+            r = rho[entry_loc[j]]
+            b = r * f64(entry_delta[j]) + (f64(1.0) - r) * b
+        t = f64(1.0)
+        for j in range(start, start + n):
+            k = entry_loc[j]
+            wp.atomic_add(evidence, k, t * (f64(entry_delta[j]) - behind[j]))
+            t = t * (f64(1.0) - rho[k])
+
+
+@wp.kernel(enable_backward=False)
+def evidence_pass(
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    entry_loc: wp.array(dtype=wp.int32),
+    entry_delta: wp.array(dtype=wp.float32),
+    delta_bg: wp.array(dtype=wp.float64),
+    rho: wp.array(dtype=wp.float64),
+    behind: wp.array(dtype=wp.float64),
+    evidence: wp.array(dtype=wp.float64),
+    pixels: int,
+    done: wp.array(dtype=wp.int32),
+    local: int,
+):
+    """One thread per pixel position, for each frame of the batch not done. With `local`
+    (CPU), lists of up to LOCAL_ENTRIES keep D_j - B_j and 1 - r_j on the stack, in cache,
+    instead of the global scratch `behind` (~15 % faster on one CPU thread); longer lists,
+    and every list on a GPU (where a big stack spills), use `behind`. (A 2D launch over
+    (frame, pixel) would cost an integer division per thread on the CPU.)"""
+    i = wp.tid()
+    for f in range(done.shape[0]):
+        p = f * pixels + i
+        if done[f] == 0 and counts[p] > 0:
+            pixel_evidence(p, offsets, counts, entry_loc, entry_delta, delta_bg, rho, behind,
+                           evidence, local)
 
 
 @wp.kernel(enable_backward=False)
@@ -93,17 +111,18 @@ def update_rho(
     iterations: wp.array(dtype=wp.int32),
 ):
     """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence); clears the evidence;
-    max_change[frame, iteration] = max |rho_new - rho|; iterations[frame] counts the updates."""
-    f, k = wp.tid()  # frame, location
-    if done[f] != 0:
-        return
-    i = f * locations + k
-    rho_new = sigmoid(logit_prior + evidence[i])
-    wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
-    rho[i] = (f64(1.0) - damping) * rho[i] + damping * rho_new
-    evidence[i] = f64(0.0)
-    if k == 0:
-        iterations[f] = iteration + 1
+    max_change[frame, iteration] = max |rho_new - rho|; iterations[frame] counts the updates.
+    One thread per location, for each frame of the batch not done."""
+    k = wp.tid()
+    for f in range(done.shape[0]):
+        if done[f] == 0:
+            i = f * locations + k
+            rho_new = sigmoid(logit_prior + evidence[i])
+            wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
+            rho[i] = (f64(1.0) - damping) * rho[i] + damping * rho_new
+            evidence[i] = f64(0.0)
+            if k == 0:
+                iterations[f] = iteration + 1
 
 
 @wp.kernel(enable_backward=False)
