@@ -301,11 +301,11 @@ class Engine:
     def iterate(self, it: int, logit_prior: float, damping: float):
         """One mean-field iteration over the built lists: evidence pass, then damped update
         (recording max |rho_new - rho| as max_change[frame, it]) of the frames not done."""
-        wp.launch(K.evidence_pass, dim=self.n_pixels, device=self.device,
+        wp.launch(K.evidence_pass, dim=self.batch * self.n_pixels, device=self.device,
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
                           self.delta_bg, self.rho, self.behind, self.evidence, self.n_pixels,
                           self.done, self.local_scratch])
-        wp.launch(K.update_rho, dim=self.n_locations, device=self.device,
+        wp.launch(K.update_rho, dim=self.batch * self.n_locations, device=self.device,
                   inputs=[logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
                           self.done, self.max_change, self.iterations])
 
