@@ -44,7 +44,7 @@ def lists_as_entries(engine):
 
 def distorted_voxel_scene(seed):
     """A rolled camera with lens distortion over a voxel grid whose first rows reach under and
-    behind the camera, objects that hide each other, background occluding some voxels."""
+    behind the camera, random readings, and a background that occludes some voxels."""
     rng = np.random.default_rng(seed)
     cam = Camera(56, 44, 40.0, 41.0, 27.0, 22.5, pose_from_angles(1.6, 25.0, 5.0, 10.0),
                  distortion=(-0.25, 0.08, 0.001, -0.002, -0.01))
