@@ -37,9 +37,8 @@ def frame_of(index: int, per_frame: int) -> int:
     return f
 
 
-@wp.func
-def pixel_evidence(
-    p: int,
+@wp.kernel(enable_backward=False)
+def evidence_pass(
     offsets: wp.array(dtype=wp.int32),
     counts: wp.array(dtype=wp.int32),
     entry_loc: wp.array(dtype=wp.int32),
@@ -48,10 +47,20 @@ def pixel_evidence(
     rho: wp.array(dtype=wp.float64),
     behind: wp.array(dtype=wp.float64),
     evidence: wp.array(dtype=wp.float64),
+    pixels: int,
+    done: wp.array(dtype=wp.int32),
     local: int,
 ):
-    """Adds pixel p's T_j (D_j - B_j) to the evidence of each of its entries."""
+    """One thread per pixel of the batch, frame after frame, skipping frames that are done.
+    With `local` (CPU), lists of up to LOCAL_ENTRIES keep D_j - B_j and 1 - r_j on the stack,
+    in cache, instead of the global scratch `behind` (~15 % faster on one CPU thread); longer
+    lists, and every list on a GPU (where a big stack spills), use `behind`."""
+    p = wp.tid()
     n = counts[p]
+    if n == 0:
+        return
+    if done[frame_of(p, pixels)] != 0:  # (Warp evaluates both sides of an `or`)
+        return
     start = offsets[p]
     b = delta_bg[p]  # B_n: what lies behind the last entry
     if local != 0 and n <= LOCAL_ENTRIES:
@@ -68,41 +77,17 @@ def pixel_evidence(
         for j in range(n):  # front to back: T_j and the evidence T_j (D_j - B_j)
             wp.atomic_add(evidence, entry_loc[start + j], t * excess[j])
             t = t * clear[j]
-    else:
-        for jj in range(n):
-            j = start + n - 1 - jj
-            behind[j] = b
-            r = rho[entry_loc[j]]
-            b = r * f64(entry_delta[j]) + (f64(1.0) - r) * b
-        t = f64(1.0)
-        for j in range(start, start + n):
-            k = entry_loc[j]
-            wp.atomic_add(evidence, k, t * (f64(entry_delta[j]) - behind[j]))
-            t = t * (f64(1.0) - rho[k])
-
-
-@wp.kernel(enable_backward=False)
-def evidence_pass(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
-    entry_delta: wp.array(dtype=wp.float32),
-    delta_bg: wp.array(dtype=wp.float64),
-    rho: wp.array(dtype=wp.float64),
-    behind: wp.array(dtype=wp.float64),
-    evidence: wp.array(dtype=wp.float64),
-    pixels: int,
-    done: wp.array(dtype=wp.int32),
-    local: int,
-):
-    """One thread per pixel of the batch, frame by frame, skipping frames that are done. With
-    `local` (CPU), lists of up to LOCAL_ENTRIES keep D_j - B_j and 1 - r_j on the stack, in
-    cache, instead of the global scratch `behind` (~15 % faster on one CPU thread); longer
-    lists, and every list on a GPU (where a big stack spills), use `behind`."""
-    p = wp.tid()
-    if counts[p] > 0 and done[frame_of(p, pixels)] == 0:
-        pixel_evidence(p, offsets, counts, entry_loc, entry_delta, delta_bg, rho, behind,
-                       evidence, local)
+        return
+    for jj in range(n):
+        j = start + n - 1 - jj
+        behind[j] = b
+        r = rho[entry_loc[j]]
+        b = r * f64(entry_delta[j]) + (f64(1.0) - r) * b
+    t = f64(1.0)
+    for j in range(start, start + n):
+        k = entry_loc[j]
+        wp.atomic_add(evidence, k, t * (f64(entry_delta[j]) - behind[j]))
+        t = t * (f64(1.0) - rho[k])
 
 
 @wp.kernel(enable_backward=False)
