@@ -148,7 +148,7 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     scale = cfg.inputs.depth_scale
     frames, skipped = check_frames(expand(cfg.inputs.frames, "input.frames"), scale, shape, strict)
     bg_files = expand(cfg.inputs.background, "input.background") if cfg.inputs.background else []
-    bg_frames = [read_depth(f, scale, shape) for f in bg_files]  # a bad one is fatal
+    bg_frames = [read_frame(cfg, f) for f in bg_files]  # a bad one is fatal
     for item in skipped:
         log(f"skipping {item['reason']}")
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
@@ -167,9 +167,7 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     t = time.perf_counter()
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
     try:
-        engine = Engine(geometry, cfg.model, dev, cfg.engine.entries_per_pixel,
-                        cfg.engine.max_entries, cfg.engine.memory_gb, batch=cfg.engine.batch,
-                        graph={"auto": None, "on": True, "off": False}[cfg.engine.graph])
+        engine = make_engine(cfg, geometry, dev, cfg.engine.batch)
     except MemoryBudgetError as e:
         raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
     if bg_frames:
@@ -227,10 +225,18 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     return summary
 
 
-def _attempt(cfg, engine, geometry, f, out, truth):
-    """(frame, record, None) or (frame, None, reason) for a frame that cannot be processed."""
+def make_engine(cfg: RunConfig, geometry, device: str, batch: int) -> Engine:
+    """The engine of a run (engine.* options), for `batch` frames per call."""
+    return Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel, cfg.engine.max_entries,
+                  cfg.engine.memory_gb, batch=batch,
+                  graph={"auto": None, "on": True, "off": False}[cfg.engine.graph])
+
+
+def _attempt(cfg, engine, geometry, f, out, truth, read=None):
+    """(frame, record, None) or (frame, None, reason) for a frame that cannot be processed;
+    `read` = (depth, seconds) when the frame has been read already."""
     try:
-        return f, process_frame(cfg, engine, geometry, f, out, truth), None
+        return f, process_frame(cfg, engine, geometry, f, out, truth, read), None
     except InputError as e:
         return f, None, str(e)
     except ListOverflow as e:
@@ -260,13 +266,13 @@ def _attempt_batch(cfg, engine, geometry, files, out, truth):
         except InputError as e:
             yield f, None, str(e)
     if len(read) < 2:
-        yield from (_attempt(cfg, engine, geometry, f, out, truth) for f, _, _ in read)
+        yield from (_attempt(cfg, engine, geometry, f, out, truth, (d, s)) for f, d, s in read)
         return
     t0 = time.perf_counter()
     try:
         results = engine.infer_batch(np.stack([depth for _, depth, _ in read]))
     except ListOverflow:
-        yield from (_attempt(cfg, engine, geometry, f, out, truth) for f, _, _ in read)
+        yield from (_attempt(cfg, engine, geometry, f, out, truth, (d, s)) for f, d, s in read)
         return
     share = (time.perf_counter() - t0) / len(read)
     for (f, depth, read_s), res in zip(read, results):
@@ -288,12 +294,9 @@ def _worker_start(cfg, camera, bg_files, device, cache_dir):
     shutil.copytree(cache_dir, own / Path(cache_dir).name, dirs_exist_ok=True)
     os.environ["WARP_CACHE_PATH"] = str(own)
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
-    engine = Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel,
-                    cfg.engine.max_entries, cfg.engine.memory_gb)
+    engine = make_engine(cfg, geometry, device, batch=1)  # a worker takes frames one at a time
     if bg_files:
-        shape = (camera.height, camera.width)
-        engine.set_background_frames(np.stack([read_depth(f, cfg.inputs.depth_scale, shape)
-                                               for f in bg_files]))
+        engine.set_background_frames(np.stack([read_frame(cfg, f) for f in bg_files]))
     import warp as wp
 
     _worker.update(cfg=cfg, engine=engine, geometry=geometry, cache=wp.config.kernel_cache_dir)
@@ -339,13 +342,18 @@ def read_frame(cfg: RunConfig, f: Path) -> np.ndarray:
     return read_depth(f, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
 
 
-def process_frame(cfg: RunConfig, engine: Engine, geometry, f: Path, out: Path, truth) -> dict:
-    """Infer one frame and write its map, picture and record (finish_frame)."""
-    t_read = time.perf_counter()
-    depth = read_frame(cfg, f)
+def process_frame(cfg: RunConfig, engine: Engine, geometry, f: Path, out: Path, truth,
+                  read: tuple[np.ndarray, float] | None = None) -> dict:
+    """Infer one frame and write its map, picture and record (finish_frame); `read` =
+    (depth, seconds) when the frame has been read already."""
+    if read is None:
+        t = time.perf_counter()
+        depth = read_frame(cfg, f)
+        read = depth, time.perf_counter() - t
+    depth, read_s = read
     t0 = time.perf_counter()
     res = engine.infer(depth)
-    return finish_frame(cfg, geometry, f, depth, res, out, truth, t0 - t_read, time.perf_counter() - t0)
+    return finish_frame(cfg, geometry, f, depth, res, out, truth, read_s, time.perf_counter() - t0)
 
 
 def finish_frame(cfg: RunConfig, geometry, f: Path, depth, res, out: Path, truth, read_s: float,
