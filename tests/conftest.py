@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 import warp as wp
 
+from dpom_warp.warp_setup import init_warp
+
 wp.config.log_level = wp.LOG_ERROR
-wp.init()
+init_warp()
 DEVICES = ["cpu"] + [str(d) for d in wp.get_cuda_devices()]
 
 
