@@ -3,7 +3,11 @@
 Runs the people demo config over synthetic variants (other seeds, camera heights and tilts,
 crowd sizes), each a fresh rendered sequence, and reports MODA / precision / recall at 0.5 m.
 
-    python -m bench.robustness [--frames 10] [--jobs 2] [--output runs/robustness]
+    python -m bench.robustness [--frames 10] [--jobs 2] [--output runs/robustness] [--floor-only]
+                               [--set key.path=value ...] [--name NAME]
+
+`--set` applies config overrides to every variant (e.g. `--set engine.exact=true` for the
+exact path); results go to OUTPUT/NAME.json and .md.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ VARIANTS = {
 
 
 def run_variant(args):
-    name, overrides, frames, out, background = args
+    name, overrides, frames, out, background, extra = args
     import os
 
     os.environ.setdefault("WARP_CACHE_PATH", str(Path(".cache") / f"warp-{os.getpid()}"))
@@ -41,13 +45,16 @@ def run_variant(args):
                         f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
                         f"input.background={cache}/background/*.png" if background else "input.background=null",
                         f"evaluation.ground_truth={cache}/ground_truth.json", "output.images=false"]
+    sets += list(extra)
     cfg = load_config("configs/demo_people.yaml", sets)
-    summary = run(cfg, str(Path(out) / slug / ("bg" if background else "floor")), "cpu",
+    tag = "_".join(x.replace("/", "-") for x in extra)
+    summary = run(cfg, str(Path(out) / slug / (("bg" if background else "floor") + tag)), "cpu",
                   progress=False, log=lambda *_: None, overwrite=True)
     s = summary["scores"]
     return name, {k: s[k] for k in ("moda", "precision", "recall", "mean_error_m", "n_gt")} | {
         "median_frame_s": summary["timings"]["median_infer_s"],
-        "median_iterations": summary["timings"]["median_iterations"]}
+        "median_iterations": summary["timings"]["median_iterations"],
+        "stride": summary["inference"]["stride"]}
 
 
 def main():
@@ -56,22 +63,27 @@ def main():
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--output", default="runs/robustness")
     ap.add_argument("--floor-only", action="store_true", help="no background frames")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="config override for every variant")
+    ap.add_argument("--name", help="results file name (default robustness or robustness_floor)")
     a = ap.parse_args()
-    jobs = [(n, o, a.frames, a.output, not a.floor_only) for n, o in VARIANTS.items()]
+    jobs = [(n, o, a.frames, a.output, not a.floor_only, a.set) for n, o in VARIANTS.items()]
     with ProcessPoolExecutor(a.jobs) as pool:
         results = dict(pool.map(run_variant, jobs))
-    lines = ["| scene | people | MODA | precision | recall | mean error (m) | median s/frame | iterations |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| scene | people | MODA | precision | recall | mean error (m) | stride | median s/frame "
+             "| iterations |", "|---|---|---|---|---|---|---|---|---|"]
     for n, r in results.items():
         lines.append(f"| {n} | {r['n_gt']} | {r['moda']:.3f} | {r['precision']:.3f} | {r['recall']:.3f} "
-                     f"| {r['mean_error_m']:.3f} | {r['median_frame_s']:.2f} | {r['median_iterations']:.0f} |")
+                     f"| {r['mean_error_m']:.3f} | {r['stride']} | {r['median_frame_s']:.3f} "
+                     f"| {r['median_iterations']:.0f} |")
     modas = [r["moda"] for r in results.values()]
     lines.append(f"\nMODA over {len(modas)} variants: median {statistics.median(modas):.3f}, "
                  f"min {min(modas):.3f}, max {max(modas):.3f} "
-                 f"({'floor-only background' if a.floor_only else 'background frames'})")
+                 f"({'floor-only background' if a.floor_only else 'background frames'}"
+                 f"{'; ' + ', '.join(a.set) if a.set else ''})")
     print("\n".join(lines))
     Path(a.output).mkdir(parents=True, exist_ok=True)
-    name = "robustness_floor" if a.floor_only else "robustness"
+    name = a.name or ("robustness_floor" if a.floor_only else "robustness")
     (Path(a.output) / f"{name}.json").write_text(json.dumps(results, indent=2))
     (Path(a.output) / f"{name}.md").write_text("\n".join(lines) + "\n")
 

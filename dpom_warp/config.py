@@ -17,6 +17,7 @@ import yaml
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
 from .ground import GroundOptions
 from .model import ModelParams
+from .resolution import REDUCERS
 from .synthetic import SceneSpec
 
 
@@ -58,6 +59,11 @@ class _Section:
         v = self.get(name, default, required)
         if v is None:
             return None
+        if isinstance(v, str) and not integer:  # YAML 1.1 reads 1e-3 (no dot) as a string
+            try:
+                v = float(v) if np.isfinite(float(v)) else v
+            except ValueError:
+                pass
         ok_type = isinstance(v, int) if integer else isinstance(v, (int, float))
         if isinstance(v, bool) or not ok_type:
             kind = "an integer" if integer else "a number"
@@ -124,6 +130,8 @@ class Inputs:
     frames: str
     background: str | None = None
     depth_scale: float = 0.001
+    stride: int | str = "auto"  # "auto" or an integer >= 1 (dpom_warp.resolution)
+    reduce: str = "median"
 
 
 @dataclass(frozen=True)
@@ -140,6 +148,7 @@ class EngineOptions:
     memory_gb: float | None = 8.0
     batch: int = 1
     graph: str = "auto"
+    exact: bool = False
 
 
 @dataclass
@@ -219,9 +228,16 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         raise ConfigError(f"device: expected auto, cpu, cuda or cuda:N, found {device!r}")
 
     s = top.section("input")
+    stride = s.get("stride", "auto")
+    if isinstance(stride, str) and stride != "auto":
+        raise ConfigError(f"input.stride: expected auto or an integer >= 1, found {stride!r}")
+    if stride != "auto":
+        stride = s.number("stride", integer=True, lo=1, hi=64)
     inputs = Inputs(frames=s.string("frames", required=True),
                     background=s.string("background", None, nullable=True),
-                    depth_scale=s.number("depth_scale", 0.001, lo=0, lo_open=True))
+                    depth_scale=s.number("depth_scale", 0.001, lo=0, lo_open=True),
+                    stride=stride,
+                    reduce=s.string("reduce", "median", choices=REDUCERS))
     s.done()
 
     s = top.section("camera")
@@ -308,6 +324,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         background_outside_grid=s.boolean("background_outside_grid", d.background_outside_grid),
         background_occludes=s.boolean("background_occludes", d.background_occludes),
         occlusion_margin=s.number("occlusion_margin", d.occlusion_margin, lo=0),
+        sparse_epsilon=s.number("sparse_epsilon", d.sparse_epsilon, lo=0, hi=0.5),
+        warm_start=s.boolean("warm_start", d.warm_start),
     )
     if "damping_max" not in s.raw:  # default cap, never below the starting damping
         model = dataclasses.replace(model, damping_max=max(d.damping_max, model.damping))
@@ -340,8 +358,12 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
                            max_entries=s.number("max_entries", None, integer=True, lo=1),
                            memory_gb=s.number("memory_gb", 8.0, lo=0, lo_open=True),
                            batch=s.number("batch", 1, integer=True, lo=1),
-                           graph=s.string("graph", "auto", choices=("auto", "on", "off")))
+                           graph=s.string("graph", "auto", choices=("auto", "on", "off")),
+                           exact=s.boolean("exact", False))
     s.done()
+    if engine.exact:  # the exact path: full resolution, every pass full, no warm start
+        inputs = dataclasses.replace(inputs, stride=1)
+        model = dataclasses.replace(model, sparse_epsilon=0.0, warm_start=False)
 
     synthetic, cache = None, None
     if top.get("synthetic") is not None and pose_auto:

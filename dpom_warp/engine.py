@@ -13,13 +13,13 @@ import warp as wp
 from . import kernels as K
 from .geometry import Geometry
 from .model import Background, ModelParams
-
-wp.config.log_level = wp.LOG_WARNING
+from .resolution import Resolution
+from .warp_setup import init_warp
 
 
 def resolve_device(name: str = "auto") -> str:
     """'auto' -> the first CUDA device when there is one, else 'cpu'; otherwise as given."""
-    wp.init()
+    init_warp()
     if name == "auto":
         cuda = wp.get_cuda_devices()
         return str(cuda[0]) if cuda else "cpu"
@@ -48,9 +48,9 @@ def pixel_model(params: ModelParams) -> K.PixelModel:
 
 
 INT32_MAX = 2**31 - 1  # list offsets are int32
-ENTRY_BYTES = 4 + 4 + 4 + 8  # location, object depth, Delta, B scratch
-PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32  # ray, depth, count, offset, Delta_bg, background
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6  # rect, normal, plane, area and five accumulators
+ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
+PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8  # ray, depth, count, offset, Delta_bg, background, compact
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6 + 4  # rect, normal, plane, area, five accumulators, live
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
@@ -94,6 +94,7 @@ class FrameResult:
     entries: int
     timings: dict = field(default_factory=dict)
     max_change: np.ndarray | None = None
+    live: int | None = None  # live locations at the end (sparse iterations)
 
 
 class Engine:
@@ -121,17 +122,21 @@ class Engine:
         tile: edge in pixels of the image tiles of the static mask index (kernels.masks).
         batch: frames per launch.
         graph: capture the iteration loop as a graph (None: on CUDA devices only).
+        resolution: how full-resolution frames are reduced to this engine's pixels (kept for
+            the caller: the engine's own arrays are at the geometry's resolution).
     """
 
     def __init__(self, geometry: Geometry, params: ModelParams, device: str = "cpu",
                  entries_per_pixel: float = 8.0, max_entries: int | None = None,
                  memory_gb: float | None = None, tile: int = 8, batch: int = 1,
-                 graph: bool | None = None):
+                 graph: bool | None = None, resolution: Resolution | None = None):
+        init_warp()
         if min(params.sensor_noise) < 0:
             raise ValueError(f"sensor_noise: expected [a, b] >= 0, found {list(params.sensor_noise)}")
         if batch < 1 or tile < 1:
             raise ValueError(f"batch and tile: expected integers >= 1, found {batch} and {tile}")
         self.geometry, self.params, self.device = geometry, params, device
+        self.resolution = resolution or Resolution()
         self.height, self.width = geometry.rays.shape[:2]
         self.n_pixels = self.height * self.width
         self.n_locations = len(geometry.rect)
@@ -139,6 +144,8 @@ class Engine:
         self.graph = wp.get_device(device).is_cuda if graph is None else graph
         self.local_scratch = 0 if wp.get_device(device).is_cuda else 1  # see kernels.evidence_pass
         self._graph, self._graph_lists = None, None
+        self._last_rho = None  # the last frame's rho, for params.warm_start
+        self.compact_lists = True  # False: sparse schedule on the full lists (for measuring)
         self.tile, tiles_x = tile, -(-self.width // tile)
         self.n_tiles = tiles_x * -(-self.height // tile)
         pair_loc, pair_tile = tile_pairs(geometry.rect, tile, tiles_x)
@@ -181,6 +188,9 @@ class Engine:
             self.max_change = wp.zeros((batch, max(1, params.max_iterations)), dtype=wp.float64)
             self.done = wp.zeros(batch, dtype=wp.int32)
             self.iterations = wp.zeros(batch, dtype=wp.int32)
+            self.live = wp.ones(L, dtype=wp.int32)
+            self.live_counts = wp.zeros(P, dtype=wp.int32)
+            self.live_offsets = wp.zeros(P, dtype=wp.int32)
         self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
         self._allocate_lists(int(entries_per_pixel * P))
         self.set_floor_background()
@@ -218,6 +228,8 @@ class Engine:
             self.entry_mu = wp.zeros(capacity, dtype=wp.float32)
             self.entry_delta = wp.zeros(capacity, dtype=wp.float32)
             self.behind = wp.zeros(capacity, dtype=wp.float64)
+            self.live_loc = wp.zeros(capacity, dtype=wp.int32)
+            self.live_delta = wp.zeros(capacity, dtype=wp.float32)
         self.capacity = capacity
 
     def memory_bytes(self) -> int:
@@ -298,16 +310,33 @@ class Engine:
         wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev, inputs=inputs + [1] + lists)
         return total
 
-    def iterate(self, it: int, logit_prior: float, damping: float):
-        """One mean-field iteration over the built lists: evidence pass, then damped update
-        (recording max |rho_new - rho| as max_change[frame, it]) of the frames not done."""
+    def iterate(self, it: int, logit_prior: float, damping: float, full: bool = True,
+                compact: bool = True):
+        """One mean-field iteration: evidence pass, then damped update (recording
+        max |rho_new - rho| as max_change[frame, it]) of the frames not done. A full pass
+        walks every list and updates every location; otherwise only live locations move, and
+        with `compact` the pass walks the compact lists of the live locations (see
+        `compact`), without it the full lists (dead locations in place with their rho)."""
+        lists = ((self.offsets, self.counts, self.entry_loc, self.entry_delta) if full or not compact
+                 else (self.live_offsets, self.live_counts, self.live_loc, self.live_delta))
         wp.launch(K.evidence_pass, dim=self.batch * self.n_pixels, device=self.device,
-                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
-                          self.delta_bg, self.rho, self.behind, self.evidence, self.n_pixels,
-                          self.done, self.local_scratch])
+                  inputs=[*lists, self.delta_bg, self.rho, self.behind, self.evidence,
+                          self.n_pixels, self.done, self.local_scratch])
         wp.launch(K.update_rho, dim=self.batch * self.n_locations, device=self.device,
                   inputs=[logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
-                          self.done, self.max_change, self.iterations])
+                          self.done, self.max_change, self.iterations, int(full),
+                          self.params.sparse_epsilon, self.live])
+
+    def compact(self):
+        """Copy each pixel's list, in order, keeping the live locations (count, scan, fill)."""
+        dim, dev = self.batch * self.n_pixels, self.device
+        wp.launch(K.count_live, dim=dim, device=dev,
+                  inputs=[self.offsets, self.counts, self.entry_loc, self.live, self.n_pixels,
+                          self.done, self.live_counts])
+        wp.utils.array_scan(self.live_counts, self.live_offsets, inclusive=False)
+        wp.launch(K.fill_live, dim=dim, device=dev,
+                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta, self.live,
+                          self.live_offsets, self.live_counts, self.live_loc, self.live_delta])
 
     def _check(self, it: int):
         wp.launch(K.check_converged, dim=self.batch, device=self.device,
@@ -315,10 +344,16 @@ class Engine:
 
     def _iterate_all(self, logit_prior: float):
         """The whole loop: up to max_iterations, each frame stopping at its first check
-        (every check_every iterations) whose largest change is below the tolerance."""
+        (every check_every iterations) whose largest change is below the tolerance. With
+        sparse iterations the checked iterations are full passes, so a frame stops only when
+        a pass over every location has found nothing to revive."""
         p = self.params
+        full = True
         for it in range(p.max_iterations):
-            self.iterate(it, logit_prior, p.damping_at(it))
+            was_full, full = full, p.full_pass(it)
+            if not full and was_full and self.compact_lists:
+                self.compact()
+            self.iterate(it, logit_prior, p.damping_at(it), full, self.compact_lists)
             if (it + 1) % p.check_every == 0:
                 self._check(it)
                 if not self.graph and self.done.numpy().all():
@@ -335,13 +370,15 @@ class Engine:
             self._graph, self._graph_lists = capture.graph, lists
         wp.capture_launch(self._graph)
 
-    def infer(self, depth_m: np.ndarray) -> FrameResult:
-        """Occupancy probabilities of one depth frame (metres, 0 = no reading)."""
-        return self.infer_batch(np.asarray(depth_m)[None])[0]
+    def infer(self, depth_m: np.ndarray, start: np.ndarray | None = None) -> FrameResult:
+        """Occupancy probabilities of one depth frame (metres, 0 = no reading); `start`:
+        the rho to start from (a previous frame's, for warm starts) instead of the prior."""
+        return self.infer_batch(np.asarray(depth_m)[None], start)[0]
 
-    def infer_batch(self, depths_m: np.ndarray) -> list[FrameResult]:
+    def infer_batch(self, depths_m: np.ndarray, start: np.ndarray | None = None) -> list[FrameResult]:
         """Occupancy of up to `batch` frames (n, H, W) at once; one result per frame, each
-        equal to what `infer` gives that frame alone. Timings are the batch's."""
+        equal to what `infer` gives that frame alone. Timings are the batch's. `start`
+        (locations,): the rho every frame starts from instead of the prior."""
         p, dev = self.params, self.device
         n = len(depths_m)
         t0 = time.perf_counter()
@@ -349,7 +386,15 @@ class Engine:
         counts = self.counts.numpy().reshape(self.batch, self.n_pixels)
         wp.synchronize_device(dev)
         t1 = time.perf_counter()
-        self.rho.fill_(p.prior)
+        if start is None and p.warm_start and self._last_rho is not None:
+            # capped at the prior: locations found empty start (nearly) empty, while occupied
+            # ones start afresh (starting them occupied holds moving people back, +3 cm)
+            start = np.minimum(self._last_rho, p.prior)
+        if start is None:
+            self.rho.fill_(p.prior)
+        else:
+            self.rho.assign(np.tile(np.asarray(start, dtype=np.float64), self.batch))
+        self.live.fill_(1)
         self.evidence.zero_()
         self.max_change.zero_()
         self.iterations.zero_()
@@ -365,11 +410,14 @@ class Engine:
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))
         iterations, max_change = self.iterations.numpy(), self.max_change.numpy()
+        live = self.live.numpy().reshape(self.batch, self.n_locations).sum(1)
+        self._last_rho = rho[n - 1].copy()
         t3 = time.perf_counter()
         timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2, "total_s": t3 - t0}
         if self.batch > 1:
             timings["batch"] = n
         return [FrameResult(rho=rho[f].copy(), rho_star=rho_star[f].copy(), evidence_share=share[f].copy(),
                             iterations=int(iterations[f]), entries=int(counts[f].sum()),
-                            max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings))
+                            max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
+                            live=int(live[f]))
                 for f in range(n)]

@@ -166,11 +166,17 @@ def front_transparency(r):
     return t
 
 
-def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams):
+def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, start=None):
     """Mean-field inference of MODEL.md in exclusive form, with damping and soft threshold.
 
+    With params.sparse_epsilon > 0, the sparse iterations of kernels.sparse: full passes at
+    params.full_pass(it), after which a location whose rho and rho_new are both below epsilon
+    is dead until a later full pass; in between only live locations are in the lists (dead
+    ones count as rho = 0, transparent) and only they move. `start`: initial rho
+    (warm start) instead of the prior.
+
     Returns:
-        dict with rho (K,), rho_star (K,), evidence_share e_k (K,), iterations, entries.
+        dict with rho (K,), rho_star (K,), evidence_share e_k (K,), iterations, entries, live.
     """
     K = len(geom.rect)
     pixel, loc, _, delta = mask_entries(depth_m, geom, params, bg)
@@ -178,22 +184,31 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams):
     pix, valid, L, D = _padded_lists(pixel, loc, delta.astype(np.float64))
     dbg = d_bg[pix]
     logit_prior = np.log(params.prior) - np.log1p(-params.prior)
-    rho = np.full(K, params.prior)
+    rho = np.full(K, params.prior) if start is None else np.array(start, dtype=np.float64)
+    live = np.ones(K, bool)
     iterations = 0
     for it in range(params.max_iterations):
-        r = np.where(valid, rho[L], 0.0)
+        full = params.full_pass(it)
+        r = np.where(valid & (full | live[L]), rho[L], 0.0)
         T = front_transparency(r)
         B = np.empty_like(D)
         b = dbg.copy()
         for j in range(D.shape[1] - 1, -1, -1):
             B[:, j] = b
             b = r[:, j] * D[:, j] + (1.0 - r[:, j]) * b
-        contrib = np.where(valid, T * (D - B), 0.0)
-        evidence = np.bincount(L[valid], weights=contrib[valid], minlength=K)
+        use = valid & (full | live[L])
+        contrib = np.where(use, T * (D - B), 0.0)
+        evidence = np.bincount(L[use], weights=contrib[use], minlength=K)
         rho_new = sigmoid(logit_prior + evidence)
-        diff = float(np.max(np.abs(rho_new - rho))) if K else 0.0
+        moving = np.ones(K, bool) if full else live
+        diff = float(np.max(np.abs(rho_new - rho)[moving])) if moving.any() else 0.0
         lam = params.damping_at(it)
-        rho = (1.0 - lam) * rho + lam * rho_new
+        damped = (1.0 - lam) * rho + lam * rho_new
+        if full:
+            live = (rho_new >= params.sparse_epsilon) | (damped >= params.sparse_epsilon)
+            rho = damped
+        else:
+            rho = np.where(live, damped, rho)
         iterations = it + 1
         if (it + 1) % params.check_every == 0 and diff < params.tolerance:
             break
@@ -204,4 +219,4 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams):
         share = np.where(geom.area > 0, tsum / geom.area, 0.0)
     rho_star = np.where(geom.area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
     return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
-                entries=len(pixel))
+                entries=len(pixel), live=int(live.sum()))

@@ -5,6 +5,7 @@
   into per-pixel lists kept in depth order (location id breaking ties).
 - `mean_field`: the exclusive-form mean-field evidence pass, damped update, on-device
   convergence check (batches, graphs), soft threshold.
+- `sparse`: the per-pixel lists compacted to the live locations (sparse iterations).
 - `background`: background distributions from background frames or from the floor plane.
 """
 
@@ -12,9 +13,10 @@ from .background import background_delta, background_from_frames, floor_backgrou
 from .masks import TileIndex, pair_depth_bounds, pixel_entries
 from .mean_field import check_converged, evidence_pass, soft_threshold, transparency_pass, update_rho
 from .pixel_model import GeometryArrays, PixelModel
+from .sparse import count_live, fill_live
 
 __all__ = [
     "GeometryArrays", "PixelModel", "TileIndex", "background_delta", "background_from_frames",
-    "check_converged", "evidence_pass", "floor_background", "pair_depth_bounds", "pixel_entries",
-    "soft_threshold", "transparency_pass", "update_rho",
+    "check_converged", "count_live", "evidence_pass", "fill_live", "floor_background",
+    "pair_depth_bounds", "pixel_entries", "soft_threshold", "transparency_pass", "update_rho",
 ]

@@ -101,19 +101,36 @@ def update_rho(
     done: wp.array(dtype=wp.int32),
     max_change: wp.array2d(dtype=wp.float64),
     iterations: wp.array(dtype=wp.int32),
+    full: int,
+    epsilon: wp.float64,
+    live: wp.array(dtype=wp.int32),
 ):
     """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence); clears the evidence;
     max_change[frame, iteration] = max |rho_new - rho|; iterations[frame] counts the updates.
-    One thread per location of the batch, skipping frames that are done."""
+    One thread per location of the batch, skipping frames that are done.
+
+    Sparse iterations (kernels.sparse): after a full pass (`full` = 1, the evidence of every
+    location) a location whose rho and rho_new are both below `epsilon` is marked dead
+    (live = 0), any other live; after a pass over the compact lists
+    (`full` = 0) only live locations move. With epsilon = 0 and every pass full this is the
+    exact damped update."""
     i = wp.tid()
     f = frame_of(i, locations)
-    if done[f] == 0:
-        rho_new = sigmoid(logit_prior + evidence[i])
-        wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
-        rho[i] = (f64(1.0) - damping) * rho[i] + damping * rho_new
-        evidence[i] = f64(0.0)
-        if i == f * locations:
-            iterations[f] = iteration + 1
+    if done[f] != 0:
+        return
+    if i == f * locations:
+        iterations[f] = iteration + 1
+    if full == 0 and live[i] == 0:
+        evidence[i] = f64(0.0)  # (a dead location in a pass over the full lists)
+        return
+    rho_new = sigmoid(logit_prior + evidence[i])
+    wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
+    evidence[i] = f64(0.0)
+    rho[i] = (f64(1.0) - damping) * rho[i] + damping * rho_new
+    if full != 0 and rho_new < epsilon and rho[i] < epsilon:
+        live[i] = 0
+    else:
+        live[i] = 1
 
 
 @wp.kernel(enable_backward=False)

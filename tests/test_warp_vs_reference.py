@@ -1,5 +1,7 @@
 """The Warp kernels against the plain NumPy reference, on random small scenes, every device."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -11,9 +13,11 @@ from dpom_warp.model import ModelParams
 from scenes import random_scene
 
 
+@pytest.mark.parametrize("path", ["exact", "sparse"])
 @pytest.mark.parametrize("seed", range(6))
-def test_rho_matches_reference(device, seed):
+def test_rho_matches_reference(device, seed, path):
     geom, params, depth, bg_frames = random_scene(seed)
+    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4)
     engine = Engine(geom, params, device)
     use_frames = seed % 2 == 0
     if use_frames:

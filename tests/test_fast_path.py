@@ -1,0 +1,176 @@
+"""The fast path: reduced resolution, sparse iterations and warm starts, against the exact path
+and the NumPy reference."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from dpom_warp import reference as ref
+from dpom_warp.config import ConfigError, load_config
+from dpom_warp.engine import Engine
+from dpom_warp.geometry import Camera, Grid, ObjectBox, pose_from_angles
+from dpom_warp.resolution import (AUTO_MIN_PIXELS, REDUCERS, auto_stride, farthest_object_pixels,
+                                  reduce_depth, strided_camera)
+
+from scenes import random_scene
+
+# The stated bound of the sparse path (model.sparse_epsilon = eps): rho* moves by at most eps
+# from the exact path's on the random test scenes (measured: 0.41 eps at most over 20 scenes,
+# eps 1e-5 to 1e-3), and by at most 20 eps on rendered people frames (measured 11 eps on the
+# demo at stride 4). `python -m bench` prints the distance on its scenes.
+BOUND_RANDOM = 1.0
+BOUND_RENDERED = 20.0
+
+
+def reduce_loop(depth, s, how, z_max=np.inf, min_share=0.25):
+    """reduce_depth, one block at a time."""
+    h, w = depth.shape[0] // s, depth.shape[1] // s
+    out = np.zeros((h, w), np.float32)
+    for v in range(h):
+        for u in range(w):
+            block = depth[v * s:(v + 1) * s, u * s:(u + 1) * s]
+            if how == "nearest":
+                out[v, u] = block[s // 2, s // 2]
+                continue
+            vals = np.sort(block[(block > 0) & (block <= z_max)].ravel())
+            if len(vals) < max(1, int(np.ceil(min_share * s * s))):
+                continue
+            out[v, u] = vals[0] if how == "min" else vals[(len(vals) - 1) // 2]
+    return out
+
+
+@pytest.mark.parametrize("how", REDUCERS)
+@pytest.mark.parametrize("stride", [2, 3, 4])
+def test_reduce_depth_matches_block_loop(how, stride, rng):
+    depth = rng.uniform(0.5, 9.0, (23, 30)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.4] = 0  # many holes: some blocks fall under min_share
+    depth[:4, :4] = 0
+    depth[rng.random(depth.shape) < 0.05] = 12.0  # beyond z_max: missing
+    got = reduce_depth(depth, stride, how, z_max=10.0)
+    want = reduce_loop(depth, stride, how, z_max=10.0)
+    assert got.shape == (23 // stride, 30 // stride)
+    np.testing.assert_array_equal(got, want)
+    if how != "nearest":
+        assert (got == 0).any() and (got > 0).any()
+    both = reduce_depth(np.stack([depth, depth[::-1].copy()]), stride, how, z_max=10.0)
+    np.testing.assert_array_equal(both[1], reduce_loop(depth[::-1], stride, how, 10.0))
+
+
+@pytest.mark.parametrize("stride", [2, 3, 4])
+def test_strided_camera_rays_pass_through_block_centres(stride):
+    cam = Camera(64, 50, 55.0, 57.0, 31.2, 24.9, pose_from_angles(2.0, 20.0, 3.0, 5.0),
+                 distortion=(-0.2, 0.05, 0.001, -0.001, 0.0))
+    small = strided_camera(cam, stride)
+    assert (small.width, small.height) == (64 // stride, 50 // stride)
+    uu, vv = np.meshgrid(np.arange(small.width), np.arange(small.height))
+    x, y = cam.normalised(stride * uu + (stride - 1) / 2, stride * vv + (stride - 1) / 2)
+    want = np.stack([x, y, np.ones_like(x)], -1) @ cam.R_wc.T
+    np.testing.assert_allclose(small.rays(), want, rtol=0, atol=1e-12)
+
+
+def test_auto_stride_keeps_enough_pixels_on_the_farthest_object():
+    cfg = load_config("configs/demo_people.yaml")
+    px = farthest_object_pixels(cfg.camera, cfg.grid, cfg.obj)
+    assert 25 < px < 28  # 0.5 m at ~7 m with fx = 365
+    s = auto_stride(cfg.camera, cfg.grid, cfg.obj)
+    assert s == 4 and px / s >= AUTO_MIN_PIXELS > px / (s + 1)
+    near = Grid(x=(-1, 1, 0.1), y=(1.0, 2.0, 0.1))  # close by: objects are big
+    far = Grid(x=(-1, 1, 0.1), y=(1.0, 30.0, 0.5))  # far away: full resolution
+    assert auto_stride(cfg.camera, near, cfg.obj) == 8
+    assert auto_stride(cfg.camera, far, cfg.obj) == 1
+    small = Camera(40, 30, 30.0, 30.0, 19.5, 14.5, cfg.camera.T_world_from_camera)
+    assert auto_stride(small, near, ObjectBox(0.5, 1.8)) == 1  # never below 16 pixels a side
+
+
+def test_config_stride_reduce_and_exact(tmp_path):
+    cfg = load_config("configs/demo_people.yaml")
+    assert cfg.inputs.stride == "auto" and cfg.inputs.reduce == "median"
+    assert cfg.model.sparse_epsilon == 1e-4 and not cfg.model.warm_start
+    exact = load_config("configs/demo_people.yaml", ["engine.exact=true", "input.stride=3",
+                                                     "model.warm_start=true"])
+    assert exact.inputs.stride == 1 and exact.model.sparse_epsilon == 0 and not exact.model.warm_start
+    assert load_config("configs/demo_people.yaml", ["model.sparse_epsilon=1e-6"]).model.sparse_epsilon == 1e-6
+    for sets, message in [(["input.stride=fast"], "input.stride: expected auto or an integer >= 1, found 'fast'"),
+                          (["input.stride=0"], "input.stride: expected a value >= 1, found 0"),
+                          (["input.reduce=mean"], "input.reduce: expected one of median, nearest, min, found 'mean'"),
+                          (["model.sparse_epsilon=-1"], "model.sparse_epsilon: expected a value >= 0, found -1")]:
+        with pytest.raises(ConfigError) as e:
+            load_config("configs/demo_people.yaml", sets)
+        assert str(e.value) == f"configs/demo_people.yaml: {message}"
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sparse_path_matches_sparse_reference(device, seed):
+    geom, params, depth, bg_frames = random_scene(seed)
+    params = dataclasses.replace(params, sparse_epsilon=1e-3)
+    engine = Engine(geom, params, device)
+    engine.set_background_frames(bg_frames)
+    want = ref.mean_field(depth, geom, ref.background_from_frames(bg_frames, params), params)
+    got = engine.infer(depth)
+    assert got.iterations == want["iterations"] and got.live == want["live"]
+    assert got.live < len(geom.rect) // 2, "nothing was dropped: the sparse path is not exercised"
+    np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("eps", [1e-3, 1e-4])
+@pytest.mark.parametrize("seed", range(8))
+def test_sparse_path_stays_within_bound_of_exact(seed, eps):
+    geom, params, depth, bg_frames = random_scene(seed)
+    engine = Engine(geom, dataclasses.replace(params, sparse_epsilon=eps), "cpu")
+    exact = Engine(geom, dataclasses.replace(params, sparse_epsilon=0.0), "cpu")
+    for e in (engine, exact):
+        e.set_background_frames(bg_frames)
+    fast, slow = engine.infer(depth), exact.infer(depth)
+    assert slow.live == len(geom.rect)
+    assert np.abs(fast.rho_star - slow.rho_star).max() <= BOUND_RANDOM * eps
+    assert np.abs(fast.rho - slow.rho).max() <= BOUND_RANDOM * eps
+
+
+def test_sparse_path_within_bound_on_rendered_people(tmp_path):
+    """Rendered people at 128x106 (tests/test_cli's small scene): the sparse path's rho* within
+    BOUND_RENDERED eps of the exact path's, and the same detections."""
+    from dpom_warp.detect import detect
+    from dpom_warp.geometry import build_geometry
+    from dpom_warp.pipeline import expand, make_engine, read_frame
+    from dpom_warp.synthetic import generate
+
+    from test_cli import small_config
+
+    cfg = load_config(small_config(tmp_path))
+    generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
+    frames = [read_frame(cfg, f) for f in expand(cfg.inputs.frames, "input.frames")]
+    bg = np.stack([read_frame(cfg, f) for f in expand(cfg.inputs.background, "input.background")])
+    geom = build_geometry(cfg.camera, cfg.grid, cfg.obj)
+    eps = cfg.model.sparse_epsilon
+    engines = []
+    for e in (0.0, eps):
+        c = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, sparse_epsilon=e))
+        engine = make_engine(c, cfg.camera, "cpu", 1)
+        engine.set_background_frames(engine.resolution.frames(bg))
+        engines.append(engine)
+    for depth in frames:
+        slow, fast = (e.infer(e.resolution.frames(depth)) for e in engines)
+        assert fast.live < 0.5 * len(geom.rect)
+        assert np.abs(fast.rho_star - slow.rho_star).max() <= BOUND_RENDERED * eps
+        found = [detect(r.rho_star.reshape(cfg.grid.shape), geom.locations, geom.rect, 0.5, 0.4)
+                 for r in (slow, fast)]
+        assert sorted(d.k for d in found[0]) == sorted(d.k for d in found[1]) and found[0]
+
+
+def test_warm_start_starts_from_the_previous_frame_capped_at_the_prior(device):
+    geom, params, depth, bg_frames = random_scene(2)
+    params = dataclasses.replace(params, warm_start=True)
+    engine = Engine(geom, params, device)
+    engine.set_background_frames(bg_frames)
+    bg = ref.background_from_frames(bg_frames, params)
+    first = engine.infer(depth)
+    np.testing.assert_allclose(first.rho, ref.mean_field(depth, geom, bg, params)["rho"], atol=1e-6)
+    second_depth = np.roll(depth, 2, axis=1)
+    second = engine.infer(second_depth)
+    start = np.minimum(first.rho, params.prior)
+    want = ref.mean_field(second_depth, geom, bg, params, start=start)
+    np.testing.assert_allclose(second.rho, want["rho"], rtol=0, atol=1e-6)
+    cold = ref.mean_field(second_depth, geom, bg, dataclasses.replace(params, warm_start=False))
+    assert np.abs(cold["rho"] - want["rho"]).max() > 1e-9  # the start really differs
