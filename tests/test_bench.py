@@ -4,9 +4,8 @@ import numpy as np
 
 from bench.__main__ import time_scene
 from dpom_warp.config import load_config
-from dpom_warp.engine import Engine
 from dpom_warp.io import read_depth
-from dpom_warp.pipeline import expand
+from dpom_warp.pipeline import expand, make_engine
 from dpom_warp.synthetic import generate
 
 from test_cli import small_config
@@ -20,12 +19,14 @@ def test_bench_times_every_stage_and_batches_honestly(tmp_path):
                        for f in expand(cfg.inputs.frames, "input.frames")])
     bg = np.stack([read_depth(f, cfg.inputs.depth_scale, shape)
                    for f in expand(cfg.inputs.background, "input.background")])
-    r, geom, warm = time_scene(cfg, frames[0], bg, "cpu", 2, batch=3, sequence=(frames, bg))
+    cfg = load_config(small_config(tmp_path), ["input.stride=2"])
+    r, warm = time_scene(cfg, frames[0], bg, "cpu", 2, batch=3, sequence=(frames, bg))
     assert set(r["median_s"]) == {"background model (kernel)", "masks, Delta, lists, sort", "one iteration",
                                   "whole frame", "whole frame, graph", "per frame, batched"}
     assert all(t > 0 for t in r["median_s"].values())
     assert r["mask_entries"] == warm.entries > 0 and r["engine_memory_mb"] > 0
-    alone = Engine(geom, cfg.model, "cpu")
-    alone.set_background_frames(bg)
-    assert r["batch_iterations"] == [alone.infer(f).iterations for f in frames]
+    assert r["image"] == [64, 53] and r["stride"] == 2  # frames reduced as a run reduces them
+    alone = make_engine(cfg, cfg.camera, "cpu", 1)
+    alone.set_background_frames(alone.resolution.frames(bg))
+    assert r["batch_iterations"] == [alone.infer(alone.resolution.frames(f)).iterations for f in frames]
     assert r["frames_per_s_batched"] == 1 / r["median_s"]["per frame, batched"]
