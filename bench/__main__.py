@@ -145,15 +145,17 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     return result, warm
 
 
-def score_scene(cfg, device, name, n):
+def score_scene(cfg, device, seq, n):
     """MODA, precision, recall and mean position error of the config's path over the first
-    `n` frames of the scene's rendered sequence, and each frame's rho*."""
+    `n` frames of a rendered sequence seq = scene_frames(..., with_truth=True), and each
+    frame's rho*."""
     from dpom_warp.detect import detect
-    from dpom_warp.evaluate import load_ground_truth, score_frames
+    from dpom_warp.evaluate import score_frames
     from dpom_warp.geometry import build_geometry
     from dpom_warp.pipeline import make_engine
 
-    frames, bg, names, truth = scene_frames(name, n, with_truth=True)
+    frames, bg, names, truth = seq
+    frames, names = frames[:n], names[:n]
     geom = build_geometry(cfg.camera, cfg.grid, cfg.obj)
     engine = make_engine(cfg, cfg.camera, device, 1)
     engine.set_background_frames(engine.resolution.frames(bg))
@@ -271,14 +273,15 @@ def main():
              "one full iteration | whole frame | with graph | batched, per frame | MODA | mean error |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name in a.scenes:
-        sequence = scene_frames(name, a.batch) if a.batch > 1 else None
+        seq = scene_frames(name, max(a.batch, a.moda_frames, 1), with_truth=True)
+        sequence = (seq[0][:a.batch], seq[1]) if a.batch > 1 else None
         rows = {}
         for path, extra in PATHS.items():
             cfg, depth, bg = load_scene(name, extra)
             r, warm = time_scene(cfg, depth, bg, device, a.repeats, a.batch, sequence)
             r["rho_star"] = warm.rho_star
             if a.moda_frames:
-                r["scores"], r["maps"] = score_scene(cfg, device, name, a.moda_frames)
+                r["scores"], r["maps"] = score_scene(cfg, device, seq, a.moda_frames)
             rows[path] = r
             if a.reference and name == "kinect_v2" and path == "exact":
                 params = dataclasses.replace(cfg.model)

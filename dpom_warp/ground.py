@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
+from ._open3d import o3d
 
 from .geometry import Camera
 

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-import open3d as o3d
+from ._open3d import o3d
 
 from .geometry import Camera
 from .io import write_depth_png, write_json_atomic
