@@ -123,15 +123,21 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     stages["one iteration"] = median_time(one_iteration, repeats)
     stages["whole frame"] = median_time(lambda: engine.infer(reduce(depth)), repeats)
     engine.graph = True
-    engine.infer(reduce(depth))  # captures the graph
-    stages["whole frame, graph"] = median_time(lambda: engine.infer(reduce(depth)), repeats)
+    graph_error = None
+    try:
+        engine.infer(reduce(depth))  # captures the graph
+        stages["whole frame, graph"] = median_time(lambda: engine.infer(reduce(depth)), repeats)
+    except Exception as e:  # reported in the table and the JSON, not hidden
+        graph_error = f"{type(e).__name__}: {e}"
+        stages["whole frame, graph"] = float("nan")
+        engine.graph = False
     r = engine.resolution
     result = {"image": [engine.width, engine.height], "stride": r.stride, "reduce": r.reduce,
               "sparse_epsilon": cfg.model.sparse_epsilon, "grid": list(cfg.grid.shape),
               "locations": int(cfg.grid.size), "mask_entries": warm.entries,
               "live_locations_at_end": warm.live, "iterations": warm.iterations,
               "engine_setup_s": setup, "engine_memory_mb": engine.memory_bytes() / 2**20,
-              "median_s": stages}
+              "median_s": stages, "graph_error": graph_error}
     if batch > 1:
         del engine
         frames, seq_bg = sequence
