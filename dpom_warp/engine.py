@@ -145,7 +145,6 @@ class Engine:
         self.local_scratch = 0 if wp.get_device(device).is_cuda else 1  # see kernels.evidence_pass
         self._graph, self._graph_lists = None, None
         self._last_rho = None  # the last frame's rho, for params.warm_start
-        self.compact_lists = True  # False: sparse schedule on the full lists (for measuring)
         self.tile, tiles_x = tile, -(-self.width // tile)
         self.n_tiles = tiles_x * -(-self.height // tile)
         pair_loc, pair_tile = tile_pairs(geometry.rect, tile, tiles_x)
@@ -310,15 +309,13 @@ class Engine:
         wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev, inputs=inputs + [1] + lists)
         return total
 
-    def iterate(self, it: int, logit_prior: float, damping: float, full: bool = True,
-                compact: bool = True):
+    def iterate(self, it: int, logit_prior: float, damping: float, full: bool = True):
         """One mean-field iteration: evidence pass, then damped update (recording
         max |rho_new - rho| as max_change[frame, it]) of the frames not done. A full pass
-        walks every list and updates every location; otherwise only live locations move, and
-        with `compact` the pass walks the compact lists of the live locations (see
-        `compact`), without it the full lists (dead locations in place with their rho)."""
-        lists = ((self.offsets, self.counts, self.entry_loc, self.entry_delta) if full or not compact
-                 else (self.live_offsets, self.live_counts, self.live_loc, self.live_delta))
+        walks every list and updates every location; otherwise the compact lists of the live
+        locations (see `compact`) and only those move (kernels.sparse)."""
+        lists = ((self.offsets, self.counts, self.entry_loc, self.entry_delta) if full else
+                 (self.live_offsets, self.live_counts, self.live_loc, self.live_delta))
         wp.launch(K.evidence_pass, dim=self.batch * self.n_pixels, device=self.device,
                   inputs=[*lists, self.delta_bg, self.rho, self.behind, self.evidence,
                           self.n_pixels, self.done, self.local_scratch])
@@ -351,9 +348,9 @@ class Engine:
         full = True
         for it in range(p.max_iterations):
             was_full, full = full, p.full_pass(it)
-            if not full and was_full and self.compact_lists:
+            if not full and was_full:
                 self.compact()
-            self.iterate(it, logit_prior, p.damping_at(it), full, self.compact_lists)
+            self.iterate(it, logit_prior, p.damping_at(it), full)
             if (it + 1) % p.check_every == 0:
                 self._check(it)
                 if not self.graph and self.done.numpy().all():

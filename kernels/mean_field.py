@@ -120,8 +120,7 @@ def update_rho(
         return
     if i == f * locations:
         iterations[f] = iteration + 1
-    if full == 0 and live[i] == 0:
-        evidence[i] = f64(0.0)  # (a dead location in a pass over the full lists)
+    if full == 0 and live[i] == 0:  # dead: in no compact list, its evidence is 0
         return
     rho_new = sigmoid(logit_prior + evidence[i])
     wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
