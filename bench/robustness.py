@@ -3,8 +3,11 @@
 Runs the people demo config over synthetic variants (other seeds, camera heights and tilts,
 crowd sizes), each a fresh rendered sequence, and reports MODA / precision / recall at 0.5 m.
 
-    python -m bench.robustness [--frames 10] [--jobs 2] [--output runs/robustness] [--floor-only]
-                               [--set key.path=value ...] [--name NAME]
+    python -m bench.robustness [--frames 10] [--jobs 2] [--output runs/robustness]
+                               [--background frames|auto|floor] [--set key.path=value ...] [--name NAME]
+
+--background: the empty room's frames (default), `input.background: auto` (estimated from the
+variant's own frames), or the floor-only model (`--floor-only` is the same).
 
 `--set` applies config overrides to every variant (e.g. `--set engine.exact=true` for the
 exact path); results go to OUTPUT/NAME.json and .md.
@@ -29,6 +32,9 @@ VARIANTS = {
     "8 people": ["synthetic.people=8"],
 }
 
+BACKGROUNDS = {"frames": "background frames", "auto": "background estimated from the frames (auto)",
+               "floor": "floor-only background"}
+
 
 def run_variant(args):
     name, overrides, frames, out, background, extra = args
@@ -43,12 +49,13 @@ def run_variant(args):
     cache = Path(".cache") / "robustness" / slug
     sets = overrides + [f"synthetic.seed={seed}", f"synthetic.frames={frames}",
                         f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
-                        f"input.background={cache}/background/*.png" if background else "input.background=null",
+                        {"frames": f"input.background={cache}/background/*.png", "auto": "input.background=auto",
+                         "floor": "input.background=null"}[background],
                         f"evaluation.ground_truth={cache}/ground_truth.json", "output.images=false"]
     sets += list(extra)
     cfg = load_config("configs/demo_people.yaml", sets)
     tag = "_".join(x.replace("/", "-") for x in extra)
-    summary = run(cfg, str(Path(out) / slug / (("bg" if background else "floor") + tag)), "cpu",
+    summary = run(cfg, str(Path(out) / slug / ({"frames": "bg"}.get(background, background) + tag)), "cpu",
                   progress=False, log=lambda *_: None, overwrite=True)
     s = summary["scores"]
     return name, {k: s[k] for k in ("moda", "precision", "recall", "mean_error_m", "n_gt")} | {
@@ -62,12 +69,15 @@ def main():
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--output", default="runs/robustness")
-    ap.add_argument("--floor-only", action="store_true", help="no background frames")
+    ap.add_argument("--background", choices=("frames", "auto", "floor"), default="frames",
+                    help="background frames, estimated from the frames, or the floor only")
+    ap.add_argument("--floor-only", action="store_true", help="the same as --background floor")
     ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                     help="config override for every variant")
     ap.add_argument("--name", help="results file name (default robustness or robustness_floor)")
     a = ap.parse_args()
-    jobs = [(n, o, a.frames, a.output, not a.floor_only, a.set) for n, o in VARIANTS.items()]
+    background = "floor" if a.floor_only else a.background
+    jobs = [(n, o, a.frames, a.output, background, a.set) for n, o in VARIANTS.items()]
     with ProcessPoolExecutor(a.jobs) as pool:
         results = dict(pool.map(run_variant, jobs))
     lines = ["| scene | people | MODA | precision | recall | mean error (m) | stride | median s/frame "
@@ -79,11 +89,11 @@ def main():
     modas = [r["moda"] for r in results.values()]
     lines.append(f"\nMODA over {len(modas)} variants: median {statistics.median(modas):.3f}, "
                  f"min {min(modas):.3f}, max {max(modas):.3f} "
-                 f"({'floor-only background' if a.floor_only else 'background frames'}"
+                 f"({BACKGROUNDS[background]}"
                  f"{'; ' + ', '.join(a.set) if a.set else ''})")
     print("\n".join(lines))
     Path(a.output).mkdir(parents=True, exist_ok=True)
-    name = a.name or ("robustness_floor" if a.floor_only else "robustness")
+    name = a.name or {"frames": "robustness", "auto": "robustness_auto", "floor": "robustness_floor"}[background]
     (Path(a.output) / f"{name}.json").write_text(json.dumps(results, indent=2))
     (Path(a.output) / f"{name}.md").write_text("\n".join(lines) + "\n")
 

@@ -16,7 +16,7 @@ import yaml
 
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
 from .ground import GroundOptions
-from .model import ModelParams
+from .model import AutoBackground, ModelParams
 from .resolution import REDUCERS
 from .synthetic import SceneSpec
 
@@ -132,6 +132,11 @@ class Inputs:
     depth_scale: float = 0.001
     stride: int | str = "auto"  # "auto" or an integer >= 1 (dpom_warp.resolution)
     reduce: str = "median"
+    background_auto: AutoBackground = AutoBackground()  # for background: auto
+
+    @property
+    def auto_background(self) -> bool:
+        return self.background == "auto"
 
 
 @dataclass(frozen=True)
@@ -233,11 +238,24 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         raise ConfigError(f"input.stride: expected auto or an integer >= 1, found {stride!r}")
     if stride != "auto":
         stride = s.number("stride", integer=True, lo=1, hi=64)
+    a = s.section("background_auto")
+    d = AutoBackground()
+    auto = AutoBackground(max_frames=a.number("max_frames", d.max_frames, integer=True, lo=1),
+                          min_frames=a.number("min_frames", d.min_frames, integer=True, lo=1),
+                          min_share=a.number("min_share", d.min_share, lo=0, hi=1, lo_open=True),
+                          slots=a.number("slots", d.slots, integer=True, lo=1, hi=16),
+                          cluster_sigmas=a.number("cluster_sigmas", d.cluster_sigmas, lo=0),
+                          cluster_floor=a.number("cluster_floor", d.cluster_floor, lo=0))
+    a.done()
+    if auto.min_frames > auto.max_frames:
+        raise ConfigError(f"input.background_auto.min_frames: expected at most max_frames "
+                          f"({auto.max_frames}), found {auto.min_frames}")
     inputs = Inputs(frames=s.string("frames", required=True),
                     background=s.string("background", None, nullable=True),
                     depth_scale=s.number("depth_scale", 0.001, lo=0, lo_open=True),
                     stride=stride,
-                    reduce=s.string("reduce", "median", choices=REDUCERS))
+                    reduce=s.string("reduce", "median", choices=REDUCERS),
+                    background_auto=auto)
     s.done()
 
     s = top.section("camera")
@@ -395,7 +413,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
 
     resolved = {
         "device": device,
-        "input": vars_of(inputs),
+        "input": {**vars_of(inputs), "background_auto": vars_of(inputs.background_auto)},
         "camera": {"width": width, "height": height,
                    "intrinsics": {"fx": fx, "fy": fy, "cx": cx, "cy": cy},
                    "extrinsics": pose_resolved, "distortion": list(distortion) if distortion else None,

@@ -12,7 +12,7 @@ import warp as wp
 
 from . import kernels as K
 from .geometry import Geometry
-from .model import Background, ModelParams
+from .model import AutoBackground, Background, ModelParams
 from .resolution import Resolution
 from .warp_setup import init_warp
 
@@ -49,7 +49,8 @@ def pixel_model(params: ModelParams) -> K.PixelModel:
 
 INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
-PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8  # ray, depth, count, offset, Delta_bg, background, compact
+PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4  # ray, depth, count, offset, Delta_bg, background,
+# compact, floor mask
 LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6 + 4  # rect, normal, plane, area, five accumulators, live
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
@@ -124,12 +125,15 @@ class Engine:
         graph: capture the iteration loop as a graph (None: on CUDA devices only).
         resolution: how full-resolution frames are reduced to this engine's pixels (kept for
             the caller: the engine's own arrays are at the geometry's resolution).
+        background_auto: the run estimates its background (background.BackgroundEstimator at
+            this resolution): its state counts in the memory budget and memory_bytes.
     """
 
     def __init__(self, geometry: Geometry, params: ModelParams, device: str = "cpu",
                  entries_per_pixel: float = 8.0, max_entries: int | None = None,
                  memory_gb: float | None = None, tile: int = 8, batch: int = 1,
-                 graph: bool | None = None, resolution: Resolution | None = None):
+                 graph: bool | None = None, resolution: Resolution | None = None,
+                 background_auto: AutoBackground | None = None):
         init_warp()
         if min(params.sensor_noise) < 0:
             raise ValueError(f"sensor_noise: expected [a, b] >= 0, found {list(params.sensor_noise)}")
@@ -149,11 +153,13 @@ class Engine:
         self.n_tiles = tiles_x * -(-self.height // tile)
         pair_loc, pair_tile = tile_pairs(geometry.rect, tile, tiles_x)
         P, L = batch * self.n_pixels, batch * self.n_locations
+        self.extra_bytes = background_auto.state_bytes(self.n_pixels) if background_auto else 0
         cap = INT32_MAX if max_entries is None else min(max_entries, INT32_MAX)
         if memory_gb is not None:
-            fixed = memory_estimate(P, L, 0, len(pair_loc))
+            fixed = memory_estimate(P, L, 0, len(pair_loc)) + self.extra_bytes
             cap = min(cap, max(0, int((memory_gb * 2**30 - fixed) // ENTRY_BYTES)))
-            first = memory_estimate(P, L, max(1024, int(entries_per_pixel * P)), len(pair_loc))
+            first = (memory_estimate(P, L, max(1024, int(entries_per_pixel * P)), len(pair_loc))
+                     + self.extra_bytes)
             if first > memory_gb * 2**30:
                 raise MemoryBudgetError(
                     f"the engine needs at least {first / 2**30:.2f} GiB for {self.n_locations} "
@@ -179,6 +185,7 @@ class Engine:
             self.offsets = wp.zeros(P, dtype=wp.int32)
             self.delta_bg = wp.zeros(P, dtype=wp.float64)
             self.bg = wp.zeros((P, 4), dtype=wp.float64)
+            self.floor_pixels = wp.ones(self.n_pixels, dtype=wp.int32)  # floor-only model here
             self.rho = wp.zeros(L, dtype=wp.float64)
             self.evidence = wp.zeros(L, dtype=wp.float64)
             self.visible = wp.zeros(L, dtype=wp.float64)
@@ -232,21 +239,37 @@ class Engine:
         self.capacity = capacity
 
     def memory_bytes(self) -> int:
-        """Bytes the engine's buffers hold now (memory_estimate of its sizes)."""
+        """Bytes the engine's buffers hold now (memory_estimate of its sizes, with the auto
+        background's state)."""
         return memory_estimate(self.batch * self.n_pixels, self.batch * self.n_locations,
-                               self.capacity, self.n_pairs)
+                               self.capacity, self.n_pairs) + self.extra_bytes
 
     # -- background ----------------------------------------------------------------------
     def set_floor_background(self):
         """Use the floor-only background of MODEL.md (no background frames); with
         params.background_outside_grid it is completed from each frame (see reference)."""
-        self.floor_mode = True
+        self.floor_pixels.fill_(1)
+        self.floor_mode, self.fallback_pixels = True, self.n_pixels
         self._floor_background(0)
 
     def _floor_background(self, outside_is_static: int):
         wp.launch(K.floor_background, dim=self.depth.shape, device=self.device,
                   inputs=[self.geo.rays, self.centre, self.depth, self.bounds, outside_is_static,
-                          self.pm, self.bg])
+                          self.pm, self.floor_pixels, self.bg])
+
+    def set_background_estimate(self, estimator):
+        """Use an auto background (background.BackgroundEstimator at this engine's
+        resolution); the pixels it leaves to the floor-only model get that model, completed
+        from each frame like set_floor_background. Returns how many pixels those are."""
+        if (estimator.height, estimator.width) != (self.height, self.width):
+            raise ValueError(f"background estimate: expected {self.width}x{self.height} pixels, "
+                             f"found {estimator.width}x{estimator.height}")
+        estimator.write(self.bg, self.floor_pixels, self.batch)
+        self.fallback_pixels = int(self.floor_pixels.numpy().sum())
+        self.floor_mode = self.fallback_pixels > 0
+        if self.floor_mode:
+            self._floor_background(0)
+        return self.fallback_pixels
 
     def set_background_frames(self, frames_m: np.ndarray):
         """Estimate the background from (N, H, W) frames in metres (0 = no reading)."""
@@ -256,13 +279,19 @@ class Engine:
             scratch = wp.zeros((self.n_pixels, frames.shape[0]), dtype=wp.float64)
             wp.launch(K.background_from_frames, dim=(self.height, self.width),
                       inputs=[f, self.pm, scratch, self.batch, self.bg])
-        self.floor_mode = False
+        self.floor_mode, self.fallback_pixels = False, 0
 
-    def set_background(self, bg: Background):
-        """Use a given per-pixel background distribution (arrays of shape (H, W))."""
-        self.floor_mode = False
+    def set_background(self, bg: Background, fallback: np.ndarray | None = None):
+        """Use a given per-pixel background distribution (arrays of shape (H, W)); pixels
+        where `fallback` (H, W) is true get the floor-only model instead, per frame."""
         b = np.stack([bg.mu, bg.sigma, bg.missing, bg.outlier], -1).reshape(self.n_pixels, 4)
         self.bg.assign(np.ascontiguousarray(np.tile(b, (self.batch, 1)), dtype=np.float64))
+        mask = np.zeros(self.n_pixels, np.int32) if fallback is None else np.asarray(fallback).ravel()
+        self.floor_pixels.assign(mask.astype(np.int32))
+        self.fallback_pixels = int(mask.sum())
+        self.floor_mode = self.fallback_pixels > 0
+        if self.floor_mode:
+            self._floor_background(0)
 
     def background(self, frame: int = 0) -> Background:
         """The background distribution of frame `frame` of the last batch (arrays (H, W))."""

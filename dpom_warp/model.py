@@ -83,6 +83,44 @@ class ModelParams:
         return a + b * np.asarray(z, dtype=np.float64) ** 2
 
 
+@dataclass(frozen=True)
+class AutoBackground:
+    """How `input.background: auto` estimates each pixel's background from the run's own
+    frames (kernels.background_auto; reference.background_clusters).
+
+    Each pixel keeps `slots` clusters of its readings, streamed frame by frame: a reading
+    joins the nearest cluster when within `cluster_sigmas` sensor sigmas plus `cluster_floor`
+    metres of its mean, else starts a new one in a free slot or in place of the smallest
+    other than the farthest (of equal ones the nearest): people pass in front of the surface
+    that is the background, which must not be pushed out by them when it shows rarely. The
+    background is the farthest cluster holding at least `min_share` of the frames (people are
+    always in front of the static surface); with no such cluster, a pixel whose readings are
+    missing in at least `min_share` of the frames has a broad background, and any other pixel
+    (or every pixel, with fewer than `min_frames` frames) falls back to the floor-only model.
+
+    Attributes:
+        max_frames: frames used, evenly spread over the sequence (a streaming estimate: the
+            memory does not grow with the number of frames).
+        min_frames: fewer frames than this: the floor-only model everywhere.
+        min_share: share of the frames a cluster must hold to be the background.
+        slots: clusters kept per pixel.
+        cluster_sigmas, cluster_floor: a reading joins a cluster within
+            cluster_sigmas * sigma_sensor(mean) + cluster_floor metres of its mean.
+    """
+
+    max_frames: int = 100
+    min_frames: int = 8
+    min_share: float = 0.2
+    slots: int = 4
+    cluster_sigmas: float = 3.0
+    cluster_floor: float = 0.03
+
+    def state_bytes(self, n_pixels: int) -> int:
+        """Device memory of the estimate: per pixel and slot a count (int32) and a running
+        mean and sum of squares (float64), plus a per-pixel reading count."""
+        return n_pixels * (self.slots * (4 + 8 + 8) + 4)
+
+
 @dataclass
 class Background:
     """Per-pixel background distribution theta_bg,i (arrays of shape (H, W), float64).

@@ -19,6 +19,7 @@ from .config import ConfigError, RunConfig
 from .detect import detect
 from .engine import Engine, ListOverflow, MemoryBudgetError, resolve_device
 from .evaluate import load_ground_truth, score_frames
+from .background import BackgroundEstimator, sample_frames
 from .geometry import build_geometry
 from .resolution import Resolution, auto_stride
 from .ground import fit_ground_files
@@ -148,7 +149,9 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     shape = (cfg.camera.height, cfg.camera.width)
     scale = cfg.inputs.depth_scale
     frames, skipped = check_frames(expand(cfg.inputs.frames, "input.frames"), scale, shape, strict)
-    bg_files = expand(cfg.inputs.background, "input.background") if cfg.inputs.background else []
+    auto_bg = cfg.inputs.auto_background
+    bg_files = (expand(cfg.inputs.background, "input.background")
+                if cfg.inputs.background and not auto_bg else [])
     bg_frames = [read_frame(cfg, f) for f in bg_files]  # a bad one is fatal
     for item in skipped:
         log(f"skipping {item['reason']}")
@@ -161,9 +164,14 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         dev = resolve_device(device or cfg.device)
     except ValueError as e:
         raise ConfigError(str(e)) from None
+    sample = ([frames[i] for i in sample_frames(len(frames), cfg.inputs.background_auto.max_frames)]
+              if auto_bg else [])
     camera, ground = cfg.camera, None
     if cfg.pose_auto:
-        camera, ground = fit_camera_pose(cfg, bg_files or frames[:cfg.ground_frames], log)
+        if auto_bg and len(sample) >= cfg.inputs.background_auto.min_frames:
+            camera, ground = fit_pose_on_estimate(cfg, sample, dev, log)
+        else:
+            camera, ground = fit_camera_pose(cfg, bg_files or frames[:cfg.ground_frames], log)
 
     t = time.perf_counter()
     geometry = build_geometry(camera, cfg.grid, cfg.obj)  # full resolution: boxes, pictures
@@ -174,9 +182,19 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         engine = make_engine(cfg, camera, dev, cfg.engine.batch)
     except MemoryBudgetError as e:
         raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
+    auto_report, given = None, None
     if bg_frames:
         engine.set_background_frames(engine.resolution.frames(np.stack(bg_frames)))
         background = f"{len(bg_files)} background frames"
+    elif auto_bg:
+        estimator, auto_report = estimate_background(cfg, sample, engine.height, engine.width, dev,
+                                                     engine.resolution)
+        engine.set_background_estimate(estimator)
+        given = estimator.result()  # for --workers
+        auto_report["fallback_pixels"] = engine.fallback_pixels
+        auto_report["fallback_share"] = engine.fallback_pixels / engine.n_pixels
+        background = (f"auto from {len(sample)} of the frames ({engine.fallback_pixels} of "
+                      f"{engine.n_pixels} pixels left to the floor-only model)")
     else:
         background = "floor plane only"
     del bg_frames
@@ -199,8 +217,8 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     if resume:
         log(f"resuming: {len(records)} frames already done, {len(todo)} to go")
     if workers > 1 and len(todo) > 1:
-        outcomes = _process_in_workers(cfg, camera, bg_files, engine, todo, out, truth, workers,
-                                       progress)
+        outcomes = _process_in_workers(cfg, camera, given or bg_files, engine, todo, out, truth,
+                                       workers, progress)
     else:
         outcomes = _process_here(cfg, engine, geometry, todo, out, truth, progress)
     try:
@@ -217,6 +235,8 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     done = [f for f in frames if f.name in records]
     summary = summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground,
                         engine.grown)
+    if auto_report is not None:
+        summary["background_auto"] = auto_report
     summary["inference"] = {"stride": r.stride, "reduce": r.reduce, "image": [engine.width, engine.height],
                             "sparse_epsilon": cfg.model.sparse_epsilon,
                             "warm_start": cfg.model.warm_start, "exact": cfg.engine.exact}
@@ -233,6 +253,42 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
 
             write_figures(results, out / "plots")
     return summary
+
+
+def estimate_background(cfg: RunConfig, files: list[Path], height: int, width: int, device: str,
+                        resolution: Resolution | None = None, chunk: int = 16):
+    """input.background: auto over `files`, streamed `chunk` frames at a time, reduced by
+    `resolution` (None: full resolution). Returns the estimator and a report."""
+    t = time.perf_counter()
+    estimator = BackgroundEstimator(height, width, cfg.model, cfg.inputs.background_auto, device)
+    for i in range(0, len(files), chunk):
+        batch = np.stack([read_frame(cfg, f) for f in files[i:i + chunk]])
+        estimator.add(resolution.frames(batch) if resolution else batch)
+    return estimator, {"frames": len(files), "pixels": height * width,
+                       "memory_bytes": estimator.memory_bytes(),
+                       "estimate_s": time.perf_counter() - t}
+
+
+def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=print):
+    """camera.extrinsics: auto with background: auto: the floor is fitted on the estimated
+    background at full resolution (the floor people hide in a frame shows in the estimate)."""
+    from .ground import GroundFitError, fit_ground_frames
+
+    t = time.perf_counter()
+    estimator, _ = estimate_background(cfg, files, cfg.camera.height, cfg.camera.width, device)
+    bg, fallback = estimator.result()
+    depth = np.where(fallback | (bg.outlier >= 1), 0.0, bg.mu)
+    try:
+        fit = fit_ground_frames([depth], cfg.camera, cfg.ground)
+    except GroundFitError as e:
+        raise InputError(f"{files[0]} and {len(files) - 1} more frames: in their estimated "
+                         f"background: {e}") from None
+    log(f"ground plane from the background estimated on {len(files)} frames: camera "
+        f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
+        f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")
+    report = {**fit.report(), "rms_m": fit.rms_m, "frames": "estimated background of "
+              f"{len(files)} frames", "fit_s": time.perf_counter() - t}
+    return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 
 
 def resolution_of(cfg: RunConfig, camera) -> Resolution:
@@ -256,7 +312,8 @@ def make_engine(cfg: RunConfig, camera, device: str, batch: int) -> Engine:
     return Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel, cfg.engine.max_entries,
                   cfg.engine.memory_gb, tile=tile, batch=batch,
                   graph={"auto": None, "on": True, "off": False}[cfg.engine.graph],
-                  resolution=resolution)
+                  resolution=resolution,
+                  background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
 
 
 def _attempt(cfg, engine, geometry, f, out, truth, read=None):
@@ -309,8 +366,9 @@ def _attempt_batch(cfg, engine, geometry, files, out, truth):
 _worker = {}
 
 
-def _worker_start(cfg, camera, bg_files, device, cache_dir):
-    """Process-pool initializer: a private copy of the kernel cache, then an engine."""
+def _worker_start(cfg, camera, background, device, cache_dir):
+    """Process-pool initializer: a private copy of the kernel cache, then an engine;
+    `background`: the background files, or the run's auto estimate (Background, fallback)."""
     import atexit
     import os
     import tempfile
@@ -322,8 +380,10 @@ def _worker_start(cfg, camera, bg_files, device, cache_dir):
     os.environ["WARP_CACHE_PATH"] = str(own)
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
     engine = make_engine(cfg, camera, device, batch=1)  # a worker takes frames one at a time
-    if bg_files:
-        engine.set_background_frames(engine.resolution.frames(np.stack([read_frame(cfg, f) for f in bg_files])))
+    if isinstance(background, tuple):
+        engine.set_background(*background)
+    elif background:
+        engine.set_background_frames(engine.resolution.frames(np.stack([read_frame(cfg, f) for f in background])))
     import warp as wp
 
     _worker.update(cfg=cfg, engine=engine, geometry=geometry, cache=wp.config.kernel_cache_dir)
@@ -334,7 +394,7 @@ def _worker_frame(f, out, truth):
     return _attempt(w["cfg"], w["engine"], w["geometry"], f, out, truth)
 
 
-def _process_in_workers(cfg, camera, bg_files, engine, todo, out, truth, workers, progress):
+def _process_in_workers(cfg, camera, background, engine, todo, out, truth, workers, progress):
     """Frames in a pool of processes ('spawn': no Warp state is forked). The main engine
     first runs an empty frame, which compiles every kernel into the cache; each worker copies
     the cache and only loads them."""
@@ -347,7 +407,7 @@ def _process_in_workers(cfg, camera, bg_files, engine, todo, out, truth, workers
     engine.infer(np.zeros((engine.height, engine.width), np.float32))
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_worker_start,
-                               initargs=(cfg, camera, bg_files, engine.device,
+                               initargs=(cfg, camera, background, engine.device,
                                          wp.config.kernel_cache_dir))
     try:
         futures = [pool.submit(_worker_frame, f, out, truth) for f in todo]

@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 
 from .geometry import Geometry
-from .model import Background, ModelParams
+from .model import AutoBackground, Background, ModelParams
 
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
 
@@ -88,6 +88,77 @@ def background_from_frames(frames_m: np.ndarray, params: ModelParams) -> Backgro
     missing = np.clip(1.0 - n_ok / frames.shape[0], c, 1.0 - c)
     return Background(mu=mu, sigma=sigma, missing=missing,
                       outlier=np.where(seen, params.outlier_prob, 1.0))
+
+
+def background_clusters(frames_m, params: ModelParams, auto: AutoBackground):
+    """`input.background: auto` (model.AutoBackground): the background of each pixel from
+    (N, H, W) frames in metres that show people, streamed in order.
+
+    Returns:
+        (Background, fallback): fallback (H, W) bool marks the pixels left to the floor-only
+        model (their Background entries are broad placeholders).
+    """
+    frames = np.asarray(frames_m, dtype=np.float64)
+    n, shape = len(frames), frames.shape[1:]
+    S = auto.slots
+    cnt = np.zeros(shape + (S,), np.int64)
+    mean = np.zeros(shape + (S,))
+    m2 = np.zeros(shape + (S,))
+    n_read = np.zeros(shape, np.int64)
+    for f in range(n):
+        z = frames[f]
+        ok = valid_reading(z, params)
+        n_read += ok
+        dist = np.where(cnt > 0, np.abs(z[..., None] - mean), np.inf)
+        best = np.argmin(dist, axis=-1)
+        best_mean = np.take_along_axis(mean, best[..., None], -1)[..., 0]
+        tol = auto.cluster_sigmas * params.sensor_sigma(best_mean) + auto.cluster_floor
+        join = ok & (np.take_along_axis(dist, best[..., None], -1)[..., 0] <= tol)
+        # a new cluster: the first free slot, else the smallest other than the farthest (of
+        # equal counts the nearest, then the first): people come and go in front of the
+        # surface that is the background, which may show rarely
+        free = cnt == 0
+        others = np.ones(cnt.shape, bool)
+        if S > 1:
+            np.put_along_axis(others, np.argmax(mean, -1)[..., None], False, -1)
+        c_other = np.where(others, cnt, np.iinfo(np.int64).max)
+        smallest = c_other == c_other.min(-1, keepdims=True)
+        slot = np.where(free.any(-1), np.argmax(free, -1),
+                        np.argmin(np.where(smallest, mean, np.inf), -1))
+        new = ok & ~join
+        target = np.where(join, best, slot)
+        c = np.take_along_axis(cnt, target[..., None], -1)[..., 0]
+        m = np.take_along_axis(mean, target[..., None], -1)[..., 0]
+        q = np.take_along_axis(m2, target[..., None], -1)[..., 0]
+        c1 = np.where(new, 1, c + 1)
+        d = z - np.where(new, 0.0, m)
+        m1 = np.where(new, z, m + d / np.maximum(c1, 1))
+        q1 = np.where(new, 0.0, q + d * (z - m1))
+        for arr, val in ((cnt, c1), (mean, m1), (m2, q1)):
+            cur = np.take_along_axis(arr, target[..., None], -1)[..., 0]
+            np.put_along_axis(arr, target[..., None], np.where(ok, val, cur)[..., None], -1)
+    stable = cnt >= auto.min_share * n
+    pick = np.argmax(np.where(stable, mean, -np.inf), axis=-1)
+    found = stable.any(-1) & (n >= auto.min_frames)
+    mu = np.take_along_axis(mean, pick[..., None], -1)[..., 0]
+    c = np.take_along_axis(cnt, pick[..., None], -1)[..., 0]
+    q = np.take_along_axis(m2, pick[..., None], -1)[..., 0]
+    spread = np.sqrt(np.where(c > 1, q / np.maximum(c - 1, 1), 0.0))
+    gaps = n - n_read
+    clip = params.missing_clip
+    # missing share of the background alone: the frames with a reading in front are left out
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bg_missing = np.clip(gaps / np.maximum(gaps + c, 1), clip, 1 - clip)
+    absent = ~found & (n >= auto.min_frames) & (gaps >= auto.min_share * n)
+    fallback = ~found & ~absent
+    mu = np.where(found, mu, 0.0)
+    bg = Background(
+        mu=mu,
+        sigma=np.where(found, np.maximum(spread, params.sensor_sigma(mu)), 1.0),
+        missing=np.where(found, bg_missing, np.clip(gaps / max(n, 1), clip, 1 - clip)),
+        outlier=np.where(found, params.outlier_prob, 1.0),
+    )
+    return bg, fallback
 
 
 def background_delta(depth_m, bg: Background, params: ModelParams):

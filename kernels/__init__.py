@@ -6,10 +6,12 @@
 - `mean_field`: the exclusive-form mean-field evidence pass, damped update, on-device
   convergence check (batches, graphs), soft threshold.
 - `sparse`: the per-pixel lists compacted to the live locations (sparse iterations).
-- `background`: background distributions from background frames or from the floor plane.
+- `background`: background distributions from background frames, from the run's own frames
+  (streamed clusters, `input.background: auto`) or from the floor plane.
 """
 
-from .background import background_delta, background_from_frames, floor_background
+from .background import (background_delta, background_from_frames, cluster_background, cluster_frames,
+                         floor_background)
 from .masks import TileIndex, pair_depth_bounds, pixel_entries
 from .mean_field import check_converged, evidence_pass, soft_threshold, transparency_pass, update_rho
 from .pixel_model import GeometryArrays, PixelModel
@@ -17,6 +19,6 @@ from .sparse import count_live, fill_live
 
 __all__ = [
     "GeometryArrays", "PixelModel", "TileIndex", "background_delta", "background_from_frames",
-    "check_converged", "count_live", "evidence_pass", "fill_live", "floor_background",
+    "check_converged", "cluster_background", "cluster_frames", "count_live", "evidence_pass", "fill_live", "floor_background",
     "pair_depth_bounds", "pixel_entries", "soft_threshold", "transparency_pass", "update_rho",
 ]

@@ -55,11 +55,15 @@ def floor_background(
     bounds: wp.array(dtype=wp.float64),
     outside_is_static: int,
     pm: PixelModel,
+    where: wp.array(dtype=wp.int32),
     bg: wp.array2d(dtype=wp.float64),
 ):
-    """Floor-only background: the ray's hit on z = 0 within range, else broad; with
+    """Floor-only background, at the pixels with where[v * W + u] = 1 (all of them, or those
+    an auto background left to it): the ray's hit on z = 0 within range, else broad; with
     `outside_is_static`, a reading whose point no object box can reach is background there."""
     b, v, u = wp.tid()
+    if where[v * rays.shape[1] + u] == 0:
+        return
     p = (b * rays.shape[0] + v) * rays.shape[1] + u
     d = rays[v, u]
     t = f64(-1.0)
@@ -128,3 +132,117 @@ def background_from_frames(
     sigma = wp.max(f64(1.4826) * sorted_median(scratch, p, n), sensor_sigma(pm, mu))
     for c in range(copies):
         set_background(bg, c * pixels + p, mu, sigma, missing, pm.outlier_prob)
+
+
+@wp.kernel(enable_backward=False)
+def cluster_frames(
+    frames: wp.array3d(dtype=wp.float32),
+    pm: PixelModel,
+    sigmas: wp.float64,
+    floor: wp.float64,
+    count: wp.array2d(dtype=wp.int32),
+    mean: wp.array2d(dtype=wp.float64),
+    m2: wp.array2d(dtype=wp.float64),
+    n_read: wp.array(dtype=wp.int32),
+):
+    """`input.background: auto`, streamed: each pixel's readings of `frames`, in order, join
+    the nearest of its clusters (count, running mean, sum of squared deviations; Welford)
+    when within sigmas * sensor sigma + floor of its mean, else start one in the first free
+    slot or in place of the smallest other than the farthest (of equals, the nearest): people
+    come and go in front of the surface that is the background, which may show rarely and
+    must not be pushed out by them. One thread per pixel; the state persists across calls."""
+    v, u = wp.tid()
+    p = v * frames.shape[2] + u
+    slots = count.shape[1]
+    for f in range(frames.shape[0]):
+        z = f64(frames[f, v, u])
+        if is_reading(pm, z):
+            n_read[p] = n_read[p] + 1
+            best = int(-1)
+            best_d = f64(1.0e300)  # (Warp: loop-mutated variables are declared dynamic)
+            for s in range(slots):
+                if count[p, s] > 0:
+                    d = wp.abs(z - mean[p, s])
+                    if d < best_d:
+                        best = s
+                        best_d = d
+            join = False
+            if best >= 0:
+                join = best_d <= sigmas * sensor_sigma(pm, mean[p, best]) + floor
+            if join:
+                c = count[p, best] + 1
+                d = z - mean[p, best]
+                m = mean[p, best] + d / f64(c)
+                m2[p, best] = m2[p, best] + d * (z - m)
+                mean[p, best] = m
+                count[p, best] = c
+            else:
+                slot = int(-1)
+                far = int(0)
+                for s in range(slots):
+                    if slot < 0 and count[p, s] == 0:
+                        slot = s
+                    if mean[p, s] > mean[p, far]:
+                        far = s
+                if slot < 0:  # full: the smallest, never the farthest (when there is a choice)
+                    smallest = int(-1)
+                    for s in range(slots):
+                        if s != far or slots == 1:
+                            if smallest < 0:
+                                smallest = s
+                            elif count[p, s] < count[p, smallest] or (
+                                    count[p, s] == count[p, smallest] and mean[p, s] < mean[p, smallest]):
+                                smallest = s
+                    slot = smallest
+                count[p, slot] = 1
+                mean[p, slot] = z
+                m2[p, slot] = f64(0.0)
+
+
+@wp.kernel(enable_backward=False)
+def cluster_background(
+    count: wp.array2d(dtype=wp.int32),
+    mean: wp.array2d(dtype=wp.float64),
+    m2: wp.array2d(dtype=wp.float64),
+    n_read: wp.array(dtype=wp.int32),
+    n_frames: int,
+    min_frames: int,
+    min_share: wp.float64,
+    pm: PixelModel,
+    copies: int,
+    bg: wp.array2d(dtype=wp.float64),
+    fallback: wp.array(dtype=wp.int32),
+):
+    """The background of each pixel from its clusters (cluster_frames): the farthest holding
+    at least min_share of the frames; else broad where readings are missing in at least
+    min_share of the frames; else (and with fewer than min_frames frames) fallback = 1, the
+    floor-only model's pixel. Written into the first `copies` blocks of bg."""
+    p = wp.tid()
+    pixels = n_read.shape[0]
+    need = min_share * f64(n_frames)
+    pick = int(-1)
+    for s in range(count.shape[1]):
+        if f64(count[p, s]) >= need:
+            if pick < 0:
+                pick = s
+            elif mean[p, s] > mean[p, pick]:
+                pick = s
+    gaps = n_frames - n_read[p]
+    clip = pm.missing_clip
+    fallback[p] = 0
+    if n_frames >= min_frames and pick >= 0:
+        c = count[p, pick]
+        mu = mean[p, pick]
+        spread = f64(0.0)
+        if c > 1:
+            spread = wp.sqrt(m2[p, pick] / f64(c - 1))
+        missing = wp.clamp(f64(gaps) / f64(wp.max(gaps + c, 1)), clip, f64(1.0) - clip)
+        for k in range(copies):
+            set_background(bg, k * pixels + p, mu, wp.max(spread, sensor_sigma(pm, mu)), missing,
+                           pm.outlier_prob)
+        return
+    missing = wp.clamp(f64(gaps) / f64(wp.max(n_frames, 1)), clip, f64(1.0) - clip)
+    for k in range(copies):
+        set_broad(bg, k * pixels + p, missing)
+    if n_frames < min_frames or f64(gaps) < need:
+        fallback[p] = 1
