@@ -344,6 +344,11 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         occlusion_margin=s.number("occlusion_margin", d.occlusion_margin, lo=0),
         sparse_epsilon=s.number("sparse_epsilon", d.sparse_epsilon, lo=0, hi=0.5),
         warm_start=s.boolean("warm_start", d.warm_start),
+        top_support=s.number("top_support", d.top_support, lo=0, hi=1),
+        top_band=s.number("top_band", d.top_band, lo=0, hi=1, hi_open=True),
+        top_hidden=s.number("top_hidden", d.top_hidden, lo=0, hi=1),
+        top_slope=s.number("top_slope", d.top_slope, lo=0, lo_open=True),
+        top_min_pixels=s.number("top_min_pixels", d.top_min_pixels, integer=True, lo=1),
     )
     if "damping_max" not in s.raw:  # default cap, never below the starting damping
         model = dataclasses.replace(model, damping_max=max(d.damping_max, model.damping))

@@ -12,7 +12,7 @@ import warp as wp
 
 from . import kernels as K
 from .geometry import Geometry
-from .model import AutoBackground, Background, ModelParams
+from .model import TOP_MIN_RHO, AutoBackground, Background, ModelParams
 from .resolution import Resolution
 from .warp_setup import init_warp
 
@@ -51,7 +51,8 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6 + 4  # rect, normal, plane, area, five accumulators, live
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6 + 4 + 12  # rect, normal, plane, area, five accumulators,
+# live, top band
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
@@ -190,6 +191,9 @@ class Engine:
             self.evidence = wp.zeros(L, dtype=wp.float64)
             self.visible = wp.zeros(L, dtype=wp.float64)
             self.share = wp.zeros(L, dtype=wp.float64)
+            self.top_support = wp.zeros(L, dtype=wp.int32)
+            self.top_against = wp.zeros(L, dtype=wp.int32)
+            self.top_hidden = wp.zeros(L, dtype=wp.int32)
             self.rho_star = wp.zeros(L, dtype=wp.float64)
             self.max_change = wp.zeros((batch, max(1, params.max_iterations)), dtype=wp.float64)
             self.done = wp.zeros(batch, dtype=wp.int32)
@@ -431,8 +435,17 @@ class Engine:
         self.visible.zero_()
         wp.launch(K.transparency_pass, dim=self.batch * self.n_pixels, device=dev,
                   inputs=[self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
+        top = p.top_support if self.geometry.height > 0 else 0.0
+        if top > 0:
+            h = self.geometry.height
+            wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
+                      inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]),
+                              p.top_band * h, h, TOP_MIN_RHO, self.rho, self.top_support,
+                              self.top_against, self.top_hidden])
         wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
-                  inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.share, self.rho_star])
+                  inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support,
+                          self.top_against, self.top_hidden, p.top_hidden, top, p.top_slope,
+                          p.top_min_pixels, self.share, self.rho_star])
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))
         iterations, max_change = self.iterations.numpy(), self.max_change.numpy()

@@ -195,6 +195,8 @@ class Geometry:
         plane: (K,) n . (P_k - C); the object depth along pixel ray d is plane / (n . d).
         bounds: (6,) x_min, x_max, y_min, y_max, z_min, z_max of all object boxes: a point
             outside can belong to no object.
+        height: the height of the boxes standing on the floor (ground mode); 0 for boxes
+            centred on voxels, where the top-band test of the soft threshold does not apply.
     """
 
     rays: np.ndarray
@@ -205,6 +207,7 @@ class Geometry:
     normal: np.ndarray
     plane: np.ndarray
     bounds: np.ndarray
+    height: float = 0.0
 
 
 def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
@@ -244,4 +247,5 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
         rays=camera.rays(), centre=c, locations=locs, rect=rect.astype(np.int32),
         area=area.astype(np.int64), normal=normal, plane=plane,
         bounds=np.stack([corners.min(axis=(0, 1)), corners.max(axis=(0, 1))], 1).ravel(),
+        height=float(obj.height) if grid.mode == "ground" else 0.0,
     )

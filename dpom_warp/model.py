@@ -7,6 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 
 
+TOP_MIN_RHO = 1e-3  # locations below it skip the top-band test (their rho* is below it anyway)
+
+
 @dataclass(frozen=True)
 class ModelParams:
     """Parameters of the DPOM pixel models and of mean-field inference.
@@ -43,6 +46,18 @@ class ModelParams:
             dropping a location at once, rho = rho_new, changes which competing neighbour
             wins (measured: robustness MODA down to 0.825), so it is not done.
         warm_start: start a frame from the previous frame's rho instead of the prior.
+        top_support: the top-band test of the soft threshold, for objects standing on the
+            floor (kernels.mean_field.top_band). In the band of the box from top_band x its
+            height to its top, the silhouette pixels with a reading either support the
+            object (s: the mask test), read behind its facing plane (a: the object would
+            hide them) or in front of it (f: hidden by something nearer, which may hide a
+            head: each counts as top_hidden of a supporting pixel). rho* is multiplied by
+            sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f); a
+            band with fewer than top_min_pixels readings, a location with rho < TOP_MIN_RHO
+            and voxel grids are not judged. A table or cabinet lower than the box shows the
+            wall through the band (u = 0); a person's head and shoulders support it (u about
+            0.1 to 0.5, the least for short people), also when their legs are hidden. 0: off.
+        top_band, top_hidden, top_slope, top_min_pixels: see top_support.
     """
 
     prior: float = 0.01
@@ -65,6 +80,11 @@ class ModelParams:
     occlusion_margin: float = 0.1
     sparse_epsilon: float = 1e-4
     warm_start: bool = False
+    top_support: float = 0.05
+    top_band: float = 0.75
+    top_hidden: float = 0.15
+    top_slope: float = 100.0
+    top_min_pixels: int = 3
 
     def full_pass(self, iteration: int) -> bool:
         """Whether iteration `iteration` (0-based) is a full pass: always on the exact path;

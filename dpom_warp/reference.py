@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 
 from .geometry import Geometry
-from .model import AutoBackground, Background, ModelParams
+from .model import TOP_MIN_RHO, AutoBackground, Background, ModelParams
 
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
 
@@ -289,5 +289,45 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(geom.area > 0, tsum / geom.area, 0.0)
     rho_star = np.where(geom.area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
+    support, against, hidden = top_band(depth_m, geom, params, rho)
+    if params.top_support > 0 and geom.height > 0:
+        n = support + against + hidden
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = (support + params.top_hidden * hidden) / n
+            factor = sigmoid(params.top_slope * (u - params.top_support))
+        rho_star = rho_star * np.where(n >= max(params.top_min_pixels, 1), factor, 1.0)
     return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
-                entries=len(pixel), live=int(live.sum()))
+                entries=len(pixel), live=int(live.sum()), top_support=support, top_against=against,
+                top_hidden=hidden)
+
+
+def top_band(depth_m, geom: Geometry, params: ModelParams, rho):
+    """The top-band test of the soft threshold (ModelParams.top_support): for each location
+    with rho >= TOP_MIN_RHO of a standing box, the silhouette pixels with a reading whose
+    facing-plane point lies between top_band x height and the height that pass the mask
+    test (support), and of the others those that read beyond the plane (against) and in
+    front of it (hidden). Returns three (K,) arrays."""
+    K = len(geom.rect)
+    support, against, hidden = (np.zeros(K, np.int64) for _ in range(3))
+    if geom.height <= 0:
+        return support, against, hidden
+    z_img = np.asarray(depth_m, dtype=np.float64)
+    lo, hi = params.top_band * geom.height, geom.height
+    outlier = np.log(params.outlier_prob) - np.log(params.z_max)
+    for k in np.flatnonzero(np.asarray(rho) >= TOP_MIN_RHO):
+        u0, v0, u1, v1 = (int(x) for x in geom.rect[k])
+        if u1 < u0 or v1 < v0:
+            continue
+        rays = geom.rays[v0:v1 + 1, u0:u1 + 1]
+        z = z_img[v0:v1 + 1, u0:u1 + 1]
+        denom = rays @ geom.normal[k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mu = np.where(denom < -1e-12, geom.plane[k] / denom, -1.0)
+            h = geom.centre[2] + mu * rays[..., 2]
+            inlier = np.log1p(-params.outlier_prob) + gaussian_logpdf(z, mu, object_sigma(mu, params))
+        band = (mu > 0) & (h >= lo) & (h <= hi) & valid_reading(z, params)
+        passes = inlier > outlier
+        support[k] = np.sum(band & passes)
+        against[k] = np.sum(band & ~passes & (z > mu))
+        hidden[k] = np.sum(band & ~passes & (z <= mu))
+    return support, against, hidden

@@ -12,7 +12,8 @@ captured once as a graph, with no host sync) gives every frame what it would get
 
 import warp as wp
 
-from .pixel_model import f64
+from .pixel_model import GeometryArrays, PixelModel, f64, facing_plane_depth, gaussian_logpdf, is_reading
+from .pixel_model import object_sigma
 
 
 @wp.func
@@ -163,23 +164,94 @@ def transparency_pass(
 
 
 @wp.kernel(enable_backward=False)
+def top_band(
+    depth: wp.array3d(dtype=wp.float32),
+    geo: GeometryArrays,
+    pm: PixelModel,
+    centre_z: wp.float64,
+    lo: wp.float64,
+    hi: wp.float64,
+    min_rho: wp.float64,
+    rho: wp.array(dtype=wp.float64),
+    support: wp.array(dtype=wp.int32),
+    against: wp.array(dtype=wp.int32),
+    hidden: wp.array(dtype=wp.int32),
+):
+    """The top band of a standing box (heights lo to hi on its facing plane): how many of its
+    silhouette's pixels there pass the mask test (support), read behind the plane (against:
+    the box would hide them, so nothing that tall stands there) or in front of it (hidden by
+    something nearer). Missing readings count for none. One thread per location of the
+    batch, for those with rho >= min_rho (the others: 0, 0, 0)."""
+    i = wp.tid()
+    n_loc = geo.rect.shape[0]
+    b = i / n_loc
+    k = i - b * n_loc
+    s = int(0)
+    a = int(0)
+    f = int(0)
+    if rho[i] >= min_rho:
+        r = geo.rect[k]
+        n = geo.normal[k]
+        for v in range(r[1], r[3] + 1):
+            for u in range(r[0], r[2] + 1):
+                d = geo.rays[v, u]
+                mu = facing_plane_depth(d, n, geo.plane[k])
+                if mu > f64(0.0):
+                    h = centre_z + mu * d[2]
+                    z = f64(depth[b, v, u])
+                    if h >= lo and h <= hi and is_reading(pm, z):
+                        inlier = pm.log_inlier_weight + gaussian_logpdf(z, mu, object_sigma(pm, mu))
+                        if inlier > pm.log_outlier:
+                            s += 1
+                        elif z > mu:
+                            a += 1
+                        else:
+                            f += 1
+    support[i] = s
+    against[i] = a
+    hidden[i] = f
+
+
+@wp.func
+def top_factor(s: int, a: int, f: int, weight: wp.float64, share: wp.float64, slope: wp.float64,
+               min_pixels: int) -> wp.float64:
+    """sigmoid(slope ((s + weight f) / (s + a + f) - share)), or 1 with fewer than
+    min_pixels read in the band."""
+    n = s + a + f
+    if n < min_pixels or n == 0:
+        return f64(1.0)
+    return sigmoid(slope * ((f64(s) + weight * f64(f)) / f64(n) - share))
+
+
+@wp.kernel(enable_backward=False)
 def soft_threshold(
     alpha: wp.float64,
     beta: wp.float64,
     area: wp.array(dtype=wp.float64),
     visible: wp.array(dtype=wp.float64),
     rho: wp.array(dtype=wp.float64),
+    support: wp.array(dtype=wp.int32),
+    against: wp.array(dtype=wp.int32),
+    hidden: wp.array(dtype=wp.int32),
+    top_hidden: wp.float64,
+    top_share: wp.float64,
+    top_slope: wp.float64,
+    top_min_pixels: int,
     share: wp.array(dtype=wp.float64),
     rho_star: wp.array(dtype=wp.float64),
 ):
     """Eq. 13 with the corrected sign: rho* = sigmoid(alpha e + beta) rho, e = visible / |S_k|
-    (area holds the L locations of one frame; the arrays hold the frames of a batch)."""
+    (area holds the L locations of one frame; the arrays hold the frames of a batch), times
+    the top-band factor (top_band; top_share = 0: none)."""
     k = wp.tid()
     a = area[k % area.shape[0]]
     if a > f64(0.0):
         e = visible[k] / a
         share[k] = e
         rho_star[k] = sigmoid(alpha * e + beta) * rho[k]
+        if top_share > f64(0.0):
+            rho_star[k] = rho_star[k] * top_factor(support[k], against[k], hidden[k], top_hidden,
+                                                   top_share, top_slope, top_min_pixels)
     else:
         share[k] = f64(0.0)
         rho_star[k] = f64(0.0)
