@@ -30,6 +30,7 @@ VARIANTS = {
     "roll 4 deg": ["camera.extrinsics.roll_deg=4"],
     "3 people": ["synthetic.people=3"],
     "8 people": ["synthetic.people=8"],
+    "side by side 0.45 m": ["synthetic.people=6", "synthetic.pair_gap=0.45"],
 }
 
 BACKGROUNDS = {"frames": "background frames", "auto": "background estimated from the frames (auto)",

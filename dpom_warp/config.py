@@ -408,6 +408,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
             room=s.numbers("room", 5, d.room),
             furniture=s.number("furniture", d.furniture, integer=True, lo=0),
             step_m=s.number("step_m", d.step_m, lo=0),
+            pair_gap=s.number("pair_gap", d.pair_gap, lo=0),
             noise=s.numbers("noise", 2, d.noise),
             dropout=s.number("dropout", d.dropout, lo=0, hi=1),
             edge_holes=s.number("edge_holes", d.edge_holes, lo=0, hi=1),

@@ -37,6 +37,8 @@ class SceneSpec:
         room: (x_min, x_max, y_min, y_max, height) of the room's walls.
         furniture: number of furniture pieces placed in the room.
         step_m: distance a person walks between frames.
+        pair_gap: > 0: people walk in pairs, side by side, this far apart (centre to centre,
+            across their heading): person 2i + 1 at the left of person 2i.
         noise: (a, b) of the depth noise sigma(z) = a + b z^2, metres.
         dropout: share of pixels with no reading, at random.
         edge_holes: probability that a pixel at a depth edge has no reading.
@@ -54,6 +56,7 @@ class SceneSpec:
     room: tuple[float, float, float, float, float] = (-3.6, 3.6, -0.5, 8.0, 3.0)
     furniture: int = 4
     step_m: float = 0.3
+    pair_gap: float = 0.0
     noise: tuple[float, float] = (0.002, 0.0015)
     dropout: float = 0.01
     edge_holes: float = 0.5
@@ -310,6 +313,8 @@ def walk(spec: SceneSpec, camera: Camera, footprints, rng: np.random.Generator):
                 and _in_view(camera, x, y, heights[i])
                 and all(math.hypot(x - o[0], y - o[1]) > 0.6 for o in others))
 
+    if spec.pair_gap > 0:
+        return _walk_pairs(spec, ok, heights, builds, rng)
     pos = []
     for i in range(spec.people):
         for _ in range(10000):
@@ -332,6 +337,48 @@ def walk(spec: SceneSpec, camera: Camera, footprints, rng: np.random.Generator):
                     p[:3] = [x, y, hd]
                     break
             p[3] += 1.3
+    return frames
+
+
+def _walk_pairs(spec: SceneSpec, ok, heights, builds, rng: np.random.Generator):
+    """walk() for people in pairs (spec.pair_gap): each pair moves as one, the second person
+    pair_gap to the left of the first, both in view, off the furniture, 0.6 m from others."""
+    n, gap = spec.people, spec.pair_gap
+    units = [list(range(i, min(i + 2, n))) for i in range(0, n, 2)]
+
+    def members(x, y, h, unit):
+        return [(x, y)] + [(x - gap * math.sin(h), y + gap * math.cos(h))] * (len(unit) - 1)
+
+    def unit_ok(x, y, h, unit, others):
+        return all(ok(px, py, others, i) for (px, py), i in zip(members(x, y, h, unit), unit))
+
+    state = []  # x, y, heading, phase of each unit's first person
+    for unit in units:
+        others = [m for st, u in zip(state, units) for m in members(*st[:3], u)]
+        for _ in range(10000):
+            x, y, h = rng.uniform(*spec.area[:2]), rng.uniform(*spec.area[2:]), rng.uniform(0, 2 * math.pi)
+            if unit_ok(x, y, h, unit, others):
+                break
+        else:
+            raise RuntimeError("synthetic: could not place every pair in view; enlarge 'area'")
+        state.append([x, y, h, rng.uniform(0, 2 * math.pi)])
+    frames = []
+    for _ in range(spec.frames):
+        people = []
+        for st, unit in zip(state, units):
+            for (px, py), i in zip(members(*st[:3], unit), unit):
+                people.append(dict(x=px, y=py, heading=st[2], phase=st[3] + 1.7 * (i - unit[0]),
+                                   height=float(heights[i]), build=float(builds[i])))
+        frames.append(people)
+        for u, (st, unit) in enumerate(zip(state, units)):
+            others = [m for v, (s2, u2) in enumerate(zip(state, units)) if v != u for m in members(*s2[:3], u2)]
+            for attempt in range(50):
+                hd = st[2] + rng.normal(0, 0.3) + (0 if attempt < 5 else rng.uniform(-math.pi, math.pi))
+                x, y = st[0] + spec.step_m * math.cos(hd), st[1] + spec.step_m * math.sin(hd)
+                if unit_ok(x, y, hd, unit, others):
+                    st[:3] = [x, y, hd]
+                    break
+            st[3] += 1.3
     return frames
 
 
