@@ -165,3 +165,22 @@ def test_run_with_auto_background(tmp_path):
     assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "one")] + sets + one) == 0
     s = json.load(open(tmp_path / "one" / "summary.json"))
     assert s["background_auto"]["fallback_pixels"] == s["background_auto"]["pixels"]
+
+
+def test_auto_background_with_workers_and_fitted_pose(tmp_path):
+    """--workers 2 gives the single-process files (the workers take the run's estimate), and
+    with extrinsics: auto the floor is fitted on the estimated background."""
+    path = small_config(tmp_path)
+    sets = ["--set", "input.background=auto", "--set", "input.background_auto.min_frames=3",
+            "--set", "synthetic.frames=6", "--set", "output.images=false"]
+    assert main(["run", str(path), "--no-progress"] + sets) == 0
+    assert main(["run", str(path), "--no-progress", "--workers", "2", "--output",
+                 str(tmp_path / "two")] + sets) == 0
+    one = (tmp_path / "out" / "detections.csv").read_text()
+    assert one == (tmp_path / "two" / "detections.csv").read_text() and one.count("\n") > 3
+    posed = sets + ["--set", "synthetic=null", "--set", "camera.extrinsics=auto",
+                    "--set", "evaluation.ground_truth=null"]
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "fit")] + posed) == 0
+    fit = json.load(open(tmp_path / "fit" / "summary.json"))["ground_fit"]
+    assert fit["frames"] == "estimated background of 6 frames"
+    assert abs(fit["camera_height"] - 2.2) < 0.03 and abs(fit["pitch_deg"] - 20.0) < 0.5

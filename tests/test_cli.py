@@ -79,6 +79,9 @@ def test_floor_only_background_and_set_override(tmp_path):
     ("camera.width=640", "expected 640x106 pixels (camera.width x camera.height), found 128x106"),
     ("object.width=9", "object.width: expected at most the grid's x extent 5 m, found 9"),
     ("camera.extrinsics.T_world_from_camera=[[1,0],[0,1]]", "expected a 4x4 list of numbers"),
+    ("input.background_auto={min_frames: 200}", "input.background_auto.min_frames: expected at "
+     "most max_frames (100), found 200"),
+    ("model.top_band=1", "model.top_band: expected a value < 1"),
 ])
 def test_bad_config_is_one_line_exit_2(tmp_path, capsys, override, message):
     path = small_config(tmp_path)
