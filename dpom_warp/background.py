@@ -57,20 +57,16 @@ class BackgroundEstimator:
                               self.mean, self.m2, self.n_read])
         self.frames += len(f)
 
-    def write(self, bg: wp.array, fallback: wp.array, copies: int = 1):
-        """The estimate into an engine's (copies * H * W, 4) background array and its (H * W)
-        fallback mask (1: the floor-only model's pixel), on the device."""
-        a = self.auto
-        wp.launch(K.cluster_background, dim=self.height * self.width, device=self.device,
-                  inputs=[self.count, self.mean, self.m2, self.n_read, self.frames, a.min_frames,
-                          a.min_share, self.pm, copies, bg, fallback])
-
     def result(self) -> tuple[Background, np.ndarray]:
-        """(Background of arrays (H, W), fallback (H, W) bool), as reference.background_clusters."""
+        """(Background of arrays (H, W), fallback (H, W) bool: the pixels left to the
+        floor-only model), as reference.background_clusters."""
+        a, n = self.auto, self.height * self.width
         with wp.ScopedDevice(self.device):
-            bg = wp.zeros((self.height * self.width, 4), dtype=wp.float64)
-            fallback = wp.zeros(self.height * self.width, dtype=wp.int32)
-        self.write(bg, fallback)
+            bg = wp.zeros((n, 4), dtype=wp.float64)
+            fallback = wp.zeros(n, dtype=wp.int32)
+            wp.launch(K.cluster_background, dim=n,
+                      inputs=[self.count, self.mean, self.m2, self.n_read, self.frames, a.min_frames,
+                              a.min_share, self.pm, bg, fallback])
         b = bg.numpy().reshape(self.height, self.width, 4)
         return (Background(mu=b[..., 0], sigma=b[..., 1], missing=b[..., 2], outlier=b[..., 3]),
                 fallback.numpy().reshape(self.height, self.width).astype(bool))

@@ -268,12 +268,7 @@ class Engine:
         if (estimator.height, estimator.width) != (self.height, self.width):
             raise ValueError(f"background estimate: expected {self.width}x{self.height} pixels, "
                              f"found {estimator.width}x{estimator.height}")
-        estimator.write(self.bg, self.floor_pixels, self.batch)
-        self.fallback_pixels = int(self.floor_pixels.numpy().sum())
-        self.floor_mode = self.fallback_pixels > 0
-        if self.floor_mode:
-            self._floor_background(0)
-        return self.fallback_pixels
+        return self.set_background(*estimator.result())
 
     def set_background_frames(self, frames_m: np.ndarray):
         """Estimate the background from (N, H, W) frames in metres (0 = no reading)."""
@@ -287,7 +282,8 @@ class Engine:
 
     def set_background(self, bg: Background, fallback: np.ndarray | None = None):
         """Use a given per-pixel background distribution (arrays of shape (H, W)); pixels
-        where `fallback` (H, W) is true get the floor-only model instead, per frame."""
+        where `fallback` (H, W) is true get the floor-only model instead, per frame. Returns
+        how many pixels those are."""
         b = np.stack([bg.mu, bg.sigma, bg.missing, bg.outlier], -1).reshape(self.n_pixels, 4)
         self.bg.assign(np.ascontiguousarray(np.tile(b, (self.batch, 1)), dtype=np.float64))
         mask = np.zeros(self.n_pixels, np.int32) if fallback is None else np.asarray(fallback).ravel()
@@ -296,6 +292,7 @@ class Engine:
         self.floor_mode = self.fallback_pixels > 0
         if self.floor_mode:
             self._floor_background(0)
+        return self.fallback_pixels
 
     def background(self, frame: int = 0) -> Background:
         """The background distribution of frame `frame` of the last batch (arrays (H, W))."""

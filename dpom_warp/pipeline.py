@@ -189,8 +189,8 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     elif auto_bg:
         estimator, auto_report = estimate_background(cfg, sample, engine.height, engine.width, dev,
                                                      engine.resolution)
-        engine.set_background_estimate(estimator)
-        given = estimator.result()  # for --workers
+        given = estimator.result()  # (Background, fallback): also what --workers' engines take
+        engine.set_background(*given)
         auto_report["fallback_pixels"] = engine.fallback_pixels
         auto_report["fallback_share"] = engine.fallback_pixels / engine.n_pixels
         background = (f"auto from {len(sample)} of the frames ({engine.fallback_pixels} of "

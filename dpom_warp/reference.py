@@ -169,6 +169,27 @@ def background_delta(depth_m, bg: Background, params: ModelParams):
     return np.where(ok, d, 0.0)
 
 
+def log_outlier(params: ModelParams):
+    """log(pi_out U(z)): the outlier term the mask test compares with."""
+    return np.log(params.outlier_prob) - np.log(params.z_max)
+
+
+def silhouette(z_img, geom: Geometry, k: int, params: ModelParams):
+    """Location k's silhouette rectangle: ((v0, u0), rays, readings z, facing-plane depth mu
+    (-1 where the ray misses the plane), log inlier term of the object at mu), or None when
+    it has no silhouette."""
+    u0, v0, u1, v1 = (int(x) for x in geom.rect[k])
+    if u1 < u0 or v1 < v0:
+        return None
+    rays = geom.rays[v0:v1 + 1, u0:u1 + 1]
+    z = z_img[v0:v1 + 1, u0:u1 + 1]
+    denom = rays @ geom.normal[k]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mu = np.where(denom < -1e-12, geom.plane[k] / denom, -1.0)
+        inlier = np.log1p(-params.outlier_prob) + gaussian_logpdf(z, mu, object_sigma(mu, params))
+    return (v0, u0), rays, z, mu, inlier
+
+
 def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | None = None):
     """All (pixel, location) pairs with i in M_k (eq. 12, corrected sign); with
     params.background_occludes, not where the known background is clearly in front of k.
@@ -179,23 +200,18 @@ def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | 
     """
     z_img = np.asarray(depth_m, dtype=np.float64)
     w = z_img.shape[1]
+    outlier = log_outlier(params)
     out = []
     for k in range(len(geom.rect)):
-        u0, v0, u1, v1 = (int(x) for x in geom.rect[k])
-        if u1 < u0 or v1 < v0:
+        sil = silhouette(z_img, geom, k, params)
+        if sil is None:
             continue
-        z = z_img[v0:v1 + 1, u0:u1 + 1]
-        denom = geom.rays[v0:v1 + 1, u0:u1 + 1] @ geom.normal[k]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            mu = np.where(denom < -1e-12, geom.plane[k] / denom, -1.0)
-        s = object_sigma(mu, params)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inlier = np.log1p(-params.outlier_prob) + gaussian_logpdf(z, mu, s)
-        outlier = np.log(params.outlier_prob) - np.log(params.z_max)
+        (v0, u0), _, z, mu, inlier = sil
         m = valid_reading(z, params) & (mu > 0) & (inlier > outlier)
         if params.background_occludes and bg is not None:
-            b_mu = bg.mu[v0:v1 + 1, u0:u1 + 1]
-            known = bg.outlier[v0:v1 + 1, u0:u1 + 1] < 1
+            rows, cols = slice(v0, v0 + z.shape[0]), slice(u0, u0 + z.shape[1])
+            b_mu = bg.mu[rows, cols]
+            known = bg.outlier[rows, cols] < 1
             m &= ~(known & (b_mu + params.occlusion_margin < mu))
         vv, uu = np.nonzero(m)
         delta = np.log1p(-params.missing_prob) + np.logaddexp(outlier, inlier[m])
@@ -313,20 +329,14 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho):
         return support, against, hidden
     z_img = np.asarray(depth_m, dtype=np.float64)
     lo, hi = params.top_band * geom.height, geom.height
-    outlier = np.log(params.outlier_prob) - np.log(params.z_max)
     for k in np.flatnonzero(np.asarray(rho) >= TOP_MIN_RHO):
-        u0, v0, u1, v1 = (int(x) for x in geom.rect[k])
-        if u1 < u0 or v1 < v0:
+        sil = silhouette(z_img, geom, k, params)
+        if sil is None:
             continue
-        rays = geom.rays[v0:v1 + 1, u0:u1 + 1]
-        z = z_img[v0:v1 + 1, u0:u1 + 1]
-        denom = rays @ geom.normal[k]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            mu = np.where(denom < -1e-12, geom.plane[k] / denom, -1.0)
-            h = geom.centre[2] + mu * rays[..., 2]
-            inlier = np.log1p(-params.outlier_prob) + gaussian_logpdf(z, mu, object_sigma(mu, params))
+        _, rays, z, mu, inlier = sil
+        h = geom.centre[2] + mu * rays[..., 2]
         band = (mu > 0) & (h >= lo) & (h <= hi) & valid_reading(z, params)
-        passes = inlier > outlier
+        passes = inlier > log_outlier(params)
         support[k] = np.sum(band & passes)
         against[k] = np.sum(band & ~passes & (z > mu))
         hidden[k] = np.sum(band & ~passes & (z <= mu))

@@ -209,16 +209,14 @@ def cluster_background(
     min_frames: int,
     min_share: wp.float64,
     pm: PixelModel,
-    copies: int,
     bg: wp.array2d(dtype=wp.float64),
     fallback: wp.array(dtype=wp.int32),
 ):
     """The background of each pixel from its clusters (cluster_frames): the farthest holding
     at least min_share of the frames; else broad where readings are missing in at least
     min_share of the frames; else (and with fewer than min_frames frames) fallback = 1, the
-    floor-only model's pixel. Written into the first `copies` blocks of bg."""
+    floor-only model's pixel."""
     p = wp.tid()
-    pixels = n_read.shape[0]
     need = min_share * f64(n_frames)
     pick = int(-1)
     for s in range(count.shape[1]):
@@ -237,12 +235,9 @@ def cluster_background(
         if c > 1:
             spread = wp.sqrt(m2[p, pick] / f64(c - 1))
         missing = wp.clamp(f64(gaps) / f64(wp.max(gaps + c, 1)), clip, f64(1.0) - clip)
-        for k in range(copies):
-            set_background(bg, k * pixels + p, mu, wp.max(spread, sensor_sigma(pm, mu)), missing,
-                           pm.outlier_prob)
+        set_background(bg, p, mu, wp.max(spread, sensor_sigma(pm, mu)), missing, pm.outlier_prob)
         return
     missing = wp.clamp(f64(gaps) / f64(wp.max(n_frames, 1)), clip, f64(1.0) - clip)
-    for k in range(copies):
-        set_broad(bg, k * pixels + p, missing)
+    set_broad(bg, p, missing)
     if n_frames < min_frames or f64(gaps) < need:
         fallback[p] = 1

@@ -24,8 +24,8 @@ does not claim a pixel whose known background is clearly in front of it.
 
 import warp as wp
 
-from .pixel_model import LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, facing_plane_depth, gaussian_logpdf
-from .pixel_model import is_reading, logaddexp, object_sigma
+from .pixel_model import LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, facing_plane_depth
+from .pixel_model import is_reading, logaddexp, object_log_inlier, object_sigma
 
 EMPTY = wp.constant(wp.float64(1.0e300))
 
@@ -148,7 +148,7 @@ def pixel_entries(
                 if u >= r[0] and u <= r[2] and v >= r[1] and v <= r[3]:
                     mu = facing_plane_depth(d, geo.normal[k], geo.plane[k])
                     if mu > f64(0.0):
-                        inlier = pm.log_inlier_weight + gaussian_logpdf(z, mu, object_sigma(pm, mu))
+                        inlier = object_log_inlier(pm, z, mu)
                         if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
                             if fill == 1 and e0 + n < capacity:
                                 mu32 = wp.float32(mu)

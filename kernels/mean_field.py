@@ -12,8 +12,7 @@ captured once as a graph, with no host sync) gives every frame what it would get
 
 import warp as wp
 
-from .pixel_model import GeometryArrays, PixelModel, f64, facing_plane_depth, gaussian_logpdf, is_reading
-from .pixel_model import object_sigma
+from .pixel_model import GeometryArrays, PixelModel, f64, facing_plane_depth, is_reading, object_log_inlier
 
 
 @wp.func
@@ -200,8 +199,7 @@ def top_band(
                     h = centre_z + mu * d[2]
                     z = f64(depth[b, v, u])
                     if h >= lo and h <= hi and is_reading(pm, z):
-                        inlier = pm.log_inlier_weight + gaussian_logpdf(z, mu, object_sigma(pm, mu))
-                        if inlier > pm.log_outlier:
+                        if object_log_inlier(pm, z, mu) > pm.log_outlier:
                             s += 1
                         elif z > mu:
                             a += 1

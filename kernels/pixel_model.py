@@ -58,6 +58,13 @@ def object_sigma(pm: PixelModel, mu: wp.float64) -> wp.float64:
 
 
 @wp.func
+def object_log_inlier(pm: PixelModel, z: wp.float64, mu: wp.float64) -> wp.float64:
+    """log((1 - pi_out) N(z | mu, s^2)) of an object at depth mu; the mask test (eq. 12) is
+    that it beats pm.log_outlier."""
+    return pm.log_inlier_weight + gaussian_logpdf(z, mu, object_sigma(pm, mu))
+
+
+@wp.func
 def is_reading(pm: PixelModel, z: wp.float64) -> bool:
     return z > f64(0.0) and z <= pm.z_max
 

@@ -7,6 +7,22 @@ from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_fro
 from dpom_warp.model import ModelParams
 
 
+def draw_slab(depth, geom, k, below=None):
+    """Draw location k's facing plane into `depth` (in place) where it is nearer than what is
+    there; with `below`, only where the plane's points are lower than that (metres)."""
+    u0, v0, u1, v1 = geom.rect[k]
+    if u1 < u0:
+        return
+    rays = geom.rays[v0:v1 + 1, u0:u1 + 1]
+    d = rays @ geom.normal[k]
+    mu = np.where(d < 0, geom.plane[k] / np.where(d < 0, d, -1), 0)
+    patch = depth[v0:v1 + 1, u0:u1 + 1]
+    front = (mu > 0) & ((patch == 0) | (mu < patch))
+    if below is not None:
+        front &= geom.centre[2] + mu * rays[..., 2] < below
+    patch[front] = mu[front]
+
+
 def random_scene(seed: int, width=48, height=40):
     """A tilted camera over a small grid; depth = floor background with a few fronto-parallel
     slabs standing on it (some hiding others), noise and dropouts; background frames too."""
@@ -22,14 +38,7 @@ def random_scene(seed: int, width=48, height=40):
     depth = floor.copy()
     # slabs: people-sized boxes drawn at the depth of their facing plane
     for k in rng.choice(len(geom.rect), size=int(rng.integers(1, 5)), replace=False):
-        u0, v0, u1, v1 = geom.rect[k]
-        if u1 < u0:
-            continue
-        d = geom.rays[v0:v1 + 1, u0:u1 + 1] @ geom.normal[k]
-        mu = np.where(d < 0, geom.plane[k] / np.where(d < 0, d, -1), 0)
-        patch = depth[v0:v1 + 1, u0:u1 + 1]
-        front = (mu > 0) & ((patch == 0) | (mu < patch))
-        patch[front] = mu[front]
+        draw_slab(depth, geom, k)
     bg_frames = np.stack([floor + rng.normal(0, 0.01, floor.shape) * (floor > 0) for _ in range(7)])
     bg_frames[rng.random(bg_frames.shape) < 0.1] = 0
     depth = depth + rng.normal(0, 0.02, depth.shape) * (depth > 0)

@@ -13,7 +13,7 @@ from dpom_warp.engine import Engine
 from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
 from dpom_warp.model import TOP_MIN_RHO, ModelParams
 
-from scenes import random_scene
+from scenes import draw_slab, random_scene
 
 
 def with_low_slabs(seed):
@@ -23,16 +23,7 @@ def with_low_slabs(seed):
     rng = np.random.default_rng(100 + seed)
     depth = depth.copy()
     for k in rng.choice(len(geom.rect), size=3, replace=False):
-        u0, v0, u1, v1 = geom.rect[k]
-        if u1 < u0:
-            continue
-        rays = geom.rays[v0:v1 + 1, u0:u1 + 1]
-        d = rays @ geom.normal[k]
-        mu = np.where(d < 0, geom.plane[k] / np.where(d < 0, d, -1), 0)
-        low = (mu > 0) & (geom.centre[2] + mu * rays[..., 2] < 0.4 * geom.height)
-        patch = depth[v0:v1 + 1, u0:u1 + 1]
-        front = low & ((patch == 0) | (mu < patch))
-        patch[front] = mu[front]
+        draw_slab(depth, geom, k, below=0.4 * geom.height)
     return geom, params, depth
 
 
