@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import tempfile
@@ -64,6 +65,11 @@ def write_text_atomic(path, text: str):
         tmp.write_text(text)
 
 
+def write_bytes_atomic(path, data: bytes):
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+
+
 def write_depth_png(path, depth_m: np.ndarray, depth_scale: float = 0.001):
     """Save depth in metres as a 16-bit PNG in units of `depth_scale` (0 = no reading)."""
     units = np.clip(np.round(np.asarray(depth_m) / depth_scale), 0, 65535).astype(np.uint16)
@@ -71,24 +77,28 @@ def write_depth_png(path, depth_m: np.ndarray, depth_scale: float = 0.001):
         Image.fromarray(units).save(tmp, format="PNG")
 
 
-def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | None = None) -> np.ndarray:
+def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | None = None,
+               data: bytes | None = None) -> np.ndarray:
     """Read a depth frame (16-bit PNG in depth units, or .npy) as float32 metres, 0 = no reading.
 
     Args:
         path: the file.
         depth_scale: metres per unit of the file's values.
         shape: expected (height, width), checked when given.
+        data: the file's bytes, read elsewhere (a cluster's actor gets them from the
+            driver); `path` then only names the frame and its kind.
 
     Raises:
         InputError: missing or unreadable file, not a single-channel 16-bit depth image,
             non-finite or negative values, wrong size.
     """
     path = Path(path)
-    if not path.is_file():
+    if data is None and not path.is_file():
         raise InputError(f"{path}: no such file")
+    source = path if data is None else io.BytesIO(data)
     if path.suffix.lower() == ".npy":
         try:
-            raw = np.load(path, allow_pickle=False)
+            raw = np.load(source, allow_pickle=False)
         except Exception as e:  # noqa: BLE001 - numpy raises many kinds
             raise InputError(f"{path}: not a readable .npy file ({e})") from None
         if raw.ndim != 2 or not np.issubdtype(raw.dtype, np.number):
@@ -100,7 +110,7 @@ def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | No
             raise InputError(f"{path}: depth has negative values")
     else:
         try:
-            with Image.open(path) as im:
+            with Image.open(source) as im:
                 im.load()
                 mode = im.mode
                 raw = np.asarray(im)

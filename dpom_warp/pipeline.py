@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import glob
-import itertools
 import json
 import platform
 import shutil
@@ -15,17 +14,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import ConfigError, RunConfig
-from .detect import detect
-from .engine import Engine, ListOverflow, MemoryBudgetError, resolve_device
-from .evaluate import load_ground_truth, score_frames
 from .background import BackgroundEstimator, sample_frames
+from .config import ConfigError, RunConfig
+from .engine import Engine, MemoryBudgetError, resolve_device
+from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
-from .resolution import Resolution, auto_stride
 from .ground import fit_ground_files
-from .io import (TEMP_MARK, InputError, WorkerError, read_depth, write_json_atomic,
-                 write_npy_atomic, write_text_atomic)
+from .io import TEMP_MARK, InputError, read_depth, write_json_atomic, write_text_atomic
+from .resolution import Resolution
 from .synthetic import generate
+from .worker import (FrameItem, FrameOutput, FrameWorker, WorkerSpec, kernel_cache, make_engine,
+                     pool_outcomes, write_output)
 
 CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
 
@@ -126,6 +125,39 @@ def check_frames(frames: list[Path], scale: float, shape, strict: bool) -> tuple
     return good, skipped
 
 
+@dataclasses.dataclass
+class RunPlan:
+    """A run checked and set up, before any output is written: what every way of inferring
+    its frames (this process, --workers processes, Ray actors) starts from."""
+
+    cfg: RunConfig
+    out: Path
+    frames: list[Path]
+    skipped: list[dict]
+    truth: dict | None
+    device: str
+    spec: WorkerSpec  # how a worker builds the run's engine
+    geometry: object  # full resolution: boxes, pictures, scores
+    ground: dict | None
+    background: str
+    auto_report: dict | None
+    inference: dict
+    engine: Engine | None  # this process's engine (None when workers infer the frames)
+    t_start: float
+    t_setup: float
+    records: dict = dataclasses.field(default_factory=dict)
+    todo: list = dataclasses.field(default_factory=list)
+    grown: list = dataclasses.field(default_factory=list)
+    by_worker: Counter = dataclasses.field(default_factory=Counter)
+
+    def chunks(self) -> list[list[FrameItem]]:
+        """The frames to do in engine batches, in frame order (their files not read yet)."""
+        items = [FrameItem(str(f), None, self.truth.get(f.name) if self.truth else None)
+                 for f in self.todo]
+        n = self.cfg.engine.batch
+        return [items[i:i + n] for i in range(0, len(items), n)]
+
+
 def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None,
         progress: bool = True, log=print, strict: bool = False, overwrite: bool = False,
         resume: bool = False, workers: int = 1) -> dict:
@@ -135,9 +167,29 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     and skipped (listed in summary.json), unless `strict`. Each frame's outputs (map,
     picture, then its record in frames/) are written atomically, so an interrupted run
     leaves whole files and `resume` continues it to the same final files. With `workers` > 1
-    frames are processed by that many processes, each with its own engine (Warp runs CPU
-    kernels on one thread), giving the same files.
+    frames are inferred by that many processes, each with its own engine (Warp runs CPU
+    kernels on one thread), and written here: the same files.
     """
+    plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1)
+    open_output(plan, overwrite, resume, log)
+    if workers > 1 and len(plan.todo) > 1:
+        outcomes = pool_outcomes(plan.spec, kernel_cache(), plan.chunks(), workers, progress)
+        runner = {"kind": "processes", "workers": workers}
+    else:
+        outcomes = _outcomes_here(plan, progress)
+        runner = {"kind": "one process"}
+    try:
+        collect(plan, outcomes, strict, log)
+    finally:
+        outcomes.close()  # stops the worker pool at once on an error or Ctrl-C
+    return finish_run(plan, runner)
+
+
+def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None,
+             log=print, strict: bool = False, parallel: bool = False) -> RunPlan:
+    """Check the frames, fit the pose, set up the background and the engine; nothing is
+    written to the output yet. `parallel`: other processes will infer the frames, so the
+    engine here only compiles the kernels (into the cache they are given) and is dropped."""
     t_start = time.perf_counter()
     out = Path(output_dir or cfg.output.dir)
     if cfg.synthetic is not None:
@@ -175,9 +227,9 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
 
     t = time.perf_counter()
     geometry = build_geometry(camera, cfg.grid, cfg.obj)  # full resolution: boxes, pictures
-    if workers > 1 and cfg.model.warm_start:
+    if parallel and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
-                          "must run in order; expected --workers 1 with it")
+                          "must run in order in one process; expected no --workers or --ray with it")
     try:
         engine = make_engine(cfg, camera, dev, cfg.engine.batch)
     except MemoryBudgetError as e:
@@ -185,11 +237,12 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     auto_report, given = None, None
     if bg_frames:
         engine.set_background_frames(engine.resolution.frames(np.stack(bg_frames)))
+        given = (engine.background(0), None) if parallel else None
         background = f"{len(bg_files)} background frames"
     elif auto_bg:
         estimator, auto_report = estimate_background(cfg, sample, engine.height, engine.width, dev,
                                                      engine.resolution)
-        given = estimator.result()  # (Background, fallback): also what --workers' engines take
+        given = estimator.result()  # (Background, fallback): also what other workers take
         engine.set_background(*given)
         auto_report["fallback_pixels"] = engine.fallback_pixels
         auto_report["fallback_share"] = engine.fallback_pixels / engine.n_pixels
@@ -198,50 +251,88 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     else:
         background = "floor plane only"
     del bg_frames
-    t_setup = time.perf_counter() - t
-    prepare_output(out, cfg.resolved, overwrite, resume)
     r = engine.resolution
-    log(f"device {dev}; {geometry.locations.shape[0]} locations {cfg.grid.shape}; "
-        f"{len(frames)} frames; background: {background}; inference at {engine.width}x"
-        f"{engine.height} pixels (stride {r.stride}{', ' + r.reduce if r.stride > 1 else ''}"
-        f"{', exact path' if cfg.engine.exact else ''})")
+    inference = {"stride": r.stride, "reduce": r.reduce, "image": [engine.width, engine.height],
+                 "sparse_epsilon": cfg.model.sparse_epsilon, "warm_start": cfg.model.warm_start,
+                 "exact": cfg.engine.exact}
+    if parallel:  # an empty frame compiles every kernel into the cache the workers are given
+        engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))
+        engine = None
+    return RunPlan(cfg, out, frames, skipped, truth, dev, WorkerSpec(cfg, camera, dev, given),
+                   geometry, ground, background, auto_report, inference, engine, t_start,
+                   time.perf_counter() - t)
 
-    records = {}
-    todo = []
-    for f in frames:
+
+def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None:
+    """Make the output folder ready (prepare_output) and find the frames left to do: with
+    `resume`, the frames whose record exists are done."""
+    cfg, out, i = plan.cfg, plan.out, plan.inference
+    prepare_output(out, cfg.resolved, overwrite, resume)
+    log(f"device {plan.device}; {plan.geometry.locations.shape[0]} locations {cfg.grid.shape}; "
+        f"{len(plan.frames)} frames; background: {plan.background}; inference at {i['image'][0]}x"
+        f"{i['image'][1]} pixels (stride {i['stride']}{', ' + i['reduce'] if i['stride'] > 1 else ''}"
+        f"{', exact path' if cfg.engine.exact else ''})")
+    for f in plan.frames:
         record = out / "frames" / f"{f.stem}.json"
         if resume and record.exists():
-            records[f.name] = json.loads(record.read_text())
+            plan.records[f.name] = json.loads(record.read_text())
         else:
-            todo.append(f)
+            plan.todo.append(f)
     if resume:
-        log(f"resuming: {len(records)} frames already done, {len(todo)} to go")
-    if workers > 1 and len(todo) > 1:
-        outcomes = _process_in_workers(cfg, camera, given or bg_files, engine, todo, out, truth,
-                                       workers, progress)
-    else:
-        outcomes = _process_here(cfg, engine, geometry, todo, out, truth, progress)
+        log(f"resuming: {len(plan.records)} frames already done, {len(plan.todo)} to go")
+
+
+def _outcomes_here(plan: RunPlan, progress: bool):
+    worker = FrameWorker(plan.spec, engine=plan.engine)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(plan.todo), unit="frame", desc="dpom", leave=False)
     try:
-        for f, record, error in outcomes:
-            if error is None:
-                records[f.name] = record
-                continue
-            if strict:
-                raise InputError(error)
-            skipped.append({"frame": f.name, "reason": error})
-            log(f"skipping {error}")
+        for chunk in plan.chunks():
+            yield from worker.process(chunk)
+            if bar is not None:
+                bar.update(len(chunk))
     finally:
-        outcomes.close()  # stops the worker pool at once on an error or Ctrl-C
-    done = [f for f in frames if f.name in records]
-    summary = summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground,
-                        engine.grown)
-    if auto_report is not None:
-        summary["background_auto"] = auto_report
-    summary["inference"] = {"stride": r.stride, "reduce": r.reduce, "image": [engine.width, engine.height],
-                            "sparse_epsilon": cfg.model.sparse_epsilon,
-                            "warm_start": cfg.model.warm_start, "exact": cfg.engine.exact}
-    summary["timings"]["setup_s"] = t_setup
-    summary["timings"]["total_s"] = time.perf_counter() - t_start
+        if bar is not None:
+            bar.close()
+
+
+def collect(plan: RunPlan, outcomes, strict: bool, log=print) -> None:
+    """Write each frame's outputs as its outcome arrives; a frame that could not be processed
+    is skipped with its reason (fatal with `strict`)."""
+    for name, output, error in outcomes:
+        accept(plan, name, output, error, strict, log)
+
+
+def accept(plan: RunPlan, name: str, output: FrameOutput | None, error: str | None, strict: bool,
+           log=print) -> None:
+    if error is None:
+        plan.records[name] = write_output(plan.out, output)
+        plan.grown += output.grown
+        plan.by_worker[output.record["stats"]["worker"]] += 1
+        return
+    if strict:
+        raise InputError(error)
+    plan.skipped.append({"frame": name, "reason": error})
+    log(f"skipping {error}")
+
+
+def finish_run(plan: RunPlan, runner: dict) -> dict:
+    """detections.csv, summary.json and (with ground truth) eval.json of a run whose frames
+    are all done or skipped; `runner` says what inferred them (written in the summary with
+    the frames each worker did)."""
+    cfg, out, truth = plan.cfg, plan.out, plan.truth
+    done = [f for f in plan.frames if f.name in plan.records]
+    summary = summarise(cfg, out, done, plan.records, plan.skipped, truth, plan.geometry,
+                        runner.pop("device", plan.device), plan.background, plan.ground, plan.grown)
+    if plan.auto_report is not None:
+        summary["background_auto"] = plan.auto_report
+    summary["inference"] = plan.inference
+    summary["runner"] = {**runner, "frames_resumed": len(done) - sum(plan.by_worker.values()),
+                         "frames_per_worker": dict(sorted(plan.by_worker.items()))}
+    summary["timings"]["setup_s"] = plan.t_setup
+    summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))
     if truth is not None and done:  # the curves of `dpom-warp eval`, from the maps just written
         from .evaluate import evaluate_runs
@@ -291,209 +382,8 @@ def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=pri
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 
 
-def resolution_of(cfg: RunConfig, camera) -> Resolution:
-    """input.stride (auto: resolution.auto_stride for this camera and grid) and input.reduce."""
-    stride = (auto_stride(camera, cfg.grid, cfg.obj) if cfg.inputs.stride == "auto"
-              else cfg.inputs.stride)
-    if min(camera.width // stride, camera.height // stride) < 1:
-        raise ConfigError(f"input.stride: expected a stride that leaves at least one pixel of "
-                          f"the {camera.width}x{camera.height} image, found {stride}")
-    return Resolution(stride, cfg.inputs.reduce, cfg.model.z_max)
-
-
-def make_engine(cfg: RunConfig, camera, device: str, batch: int) -> Engine:
-    """The engine of a run (engine.* options) at the run's inference resolution, for `batch`
-    frames per call; it takes frames reduced by engine.resolution.frames."""
-    resolution = resolution_of(cfg, camera)
-    geometry = build_geometry(resolution.camera(camera), cfg.grid, cfg.obj)
-    # the tile index's tiles keep about 8 x 8 full-resolution pixels' worth of the scene
-    # (2 x 2 at stride 4: list building ~20 % faster than 8 x 8 there)
-    tile = max(2, round(8 / resolution.stride))
-    return Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel, cfg.engine.max_entries,
-                  cfg.engine.memory_gb, tile=tile, batch=batch,
-                  graph={"auto": None, "on": True, "off": False}[cfg.engine.graph],
-                  resolution=resolution,
-                  background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
-
-
-def _attempt(cfg, engine, geometry, f, out, truth, read=None):
-    """(frame, record, None) or (frame, None, reason) for a frame that cannot be processed;
-    `read` = (depth, seconds) when the frame has been read already."""
-    try:
-        return f, process_frame(cfg, engine, geometry, f, out, truth, read), None
-    except InputError as e:
-        return f, None, str(e)
-    except ListOverflow as e:
-        return f, None, f"{f}: {e}"
-
-
-def _process_here(cfg, engine, geometry, todo, out, truth, progress):
-    iterator = iter(todo)
-    if progress:
-        from tqdm import tqdm
-        iterator = iter(tqdm(todo, unit="frame", desc="dpom", leave=False))
-    while chunk := list(itertools.islice(iterator, engine.batch)):
-        if len(chunk) == 1:
-            yield _attempt(cfg, engine, geometry, chunk[0], out, truth)
-        else:
-            yield from _attempt_batch(cfg, engine, geometry, chunk, out, truth)
-
-
-def _attempt_batch(cfg, engine, geometry, files, out, truth):
-    """_attempt for the frames of one engine batch; frames that cannot be read are reported
-    alone, and a batch whose lists overflow is retried frame by frame."""
-    read = []
-    for f in files:
-        try:
-            t = time.perf_counter()
-            read.append((f, read_frame(cfg, f), time.perf_counter() - t))
-        except InputError as e:
-            yield f, None, str(e)
-    if len(read) < 2:
-        yield from (_attempt(cfg, engine, geometry, f, out, truth, (d, s)) for f, d, s in read)
-        return
-    t0 = time.perf_counter()
-    try:
-        results = engine.infer_batch(engine.resolution.frames(np.stack([depth for _, depth, _ in read])))
-    except ListOverflow:
-        yield from (_attempt(cfg, engine, geometry, f, out, truth, (d, s)) for f, d, s in read)
-        return
-    share = (time.perf_counter() - t0) / len(read)
-    for (f, depth, read_s), res in zip(read, results):
-        yield f, finish_frame(cfg, geometry, f, depth, res, out, truth, read_s, share), None
-
-
-_worker = {}
-
-
-def _worker_start(cfg, camera, background, device, cache_dir):
-    """Process-pool initializer: a private copy of the kernel cache, then an engine;
-    `background`: the background files, or the run's auto estimate (Background, fallback)."""
-    import atexit
-    import os
-    import tempfile
-
-    own = Path(tempfile.mkdtemp(prefix="dpom-warp-cache-"))
-    atexit.register(shutil.rmtree, own, True)
-    # Warp keeps its modules under WARP_CACHE_PATH/<version>, read when it initialises
-    shutil.copytree(cache_dir, own / Path(cache_dir).name, dirs_exist_ok=True)
-    os.environ["WARP_CACHE_PATH"] = str(own)
-    geometry = build_geometry(camera, cfg.grid, cfg.obj)
-    engine = make_engine(cfg, camera, device, batch=1)  # a worker takes frames one at a time
-    if isinstance(background, tuple):
-        engine.set_background(*background)
-    elif background:
-        engine.set_background_frames(engine.resolution.frames(np.stack([read_frame(cfg, f) for f in background])))
-    import warp as wp
-
-    _worker.update(cfg=cfg, engine=engine, geometry=geometry, cache=wp.config.kernel_cache_dir)
-
-
-def _worker_frame(f, out, truth):
-    w = _worker
-    return _attempt(w["cfg"], w["engine"], w["geometry"], f, out, truth)
-
-
-def _process_in_workers(cfg, camera, background, engine, todo, out, truth, workers, progress):
-    """Frames in a pool of processes ('spawn': no Warp state is forked). The main engine
-    first runs an empty frame, which compiles every kernel into the cache; each worker copies
-    the cache and only loads them."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-    from concurrent.futures.process import BrokenProcessPool
-
-    import warp as wp
-
-    engine.infer(np.zeros((engine.height, engine.width), np.float32))
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_start,
-                               initargs=(cfg, camera, background, engine.device,
-                                         wp.config.kernel_cache_dir))
-    try:
-        futures = [pool.submit(_worker_frame, f, out, truth) for f in todo]
-        iterator = futures
-        if progress:
-            from tqdm import tqdm
-            iterator = tqdm(futures, unit="frame", desc=f"dpom x{workers}", leave=False)
-        for fut in iterator:
-            try:
-                yield fut.result()
-            except BrokenProcessPool as e:
-                raise WorkerError(f"--workers: a worker process died ({e}); finished frames are "
-                                  f"kept, continue with --resume") from None
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-
-
 def read_frame(cfg: RunConfig, f: Path) -> np.ndarray:
     return read_depth(f, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
-
-
-def process_frame(cfg: RunConfig, engine: Engine, geometry, f: Path, out: Path, truth,
-                  read: tuple[np.ndarray, float] | None = None) -> dict:
-    """Infer one frame and write its map, picture and record (finish_frame); `read` =
-    (depth, seconds) when the frame has been read already."""
-    if read is None:
-        t = time.perf_counter()
-        depth = read_frame(cfg, f)
-        read = depth, time.perf_counter() - t
-    depth, read_s = read
-    t0 = time.perf_counter()
-    res = engine.infer(engine.resolution.frames(depth))
-    return finish_frame(cfg, geometry, f, depth, res, out, truth, read_s, time.perf_counter() - t0)
-
-
-def finish_frame(cfg: RunConfig, geometry, f: Path, depth, res, out: Path, truth, read_s: float,
-                 infer_s: float) -> dict:
-    """Detections of an inferred frame; writes its map, picture and record (the record last:
-    a frame is done when its record exists). `infer_s` is the frame's share of a batch."""
-    t1 = time.perf_counter()
-    rho_map = res.rho_star.reshape(cfg.grid.shape)
-    dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
-                  cfg.detection.nms_radius)
-    t2 = time.perf_counter()
-    write_npy_atomic(out / "maps" / f"{f.stem}.npy", rho_map.astype(np.float32))
-    if cfg.output.images:
-        from .render import frame_picture
-        frame_picture(out / "images" / f"{f.stem}.png", depth, rho_map, cfg.grid, dets,
-                      geometry.centre[:2], truth.get(f.name) if truth else None, f.name)
-    if cfg.output.ply:
-        write_ply(out / "ply", f.stem, depth, geometry, dets, cfg)
-    t3 = time.perf_counter()
-    record = {
-        "frame": f.name,
-        "rows": [f"{f.name},{d.x:.4f},{d.y:.4f},{d.z:.4f},{d.rho:.6f},{d.box[0]},{d.box[1]},"
-                 f"{d.box[2]},{d.box[3]}" for d in dets],
-        "xy": [[d.x, d.y, d.z] if cfg.grid.mode == "voxel" else [d.x, d.y] for d in dets],
-        "stats": {"frame": f.name, "detections": len(dets), "iterations": res.iterations, "live": res.live,
-                  "entries": res.entries, "read_s": read_s, "infer_s": infer_s,
-                  "detect_s": t2 - t1, "write_s": t3 - t2,
-                  **{f"engine_{k}": v for k, v in res.timings.items()}},
-    }
-    write_json_atomic(out / "frames" / f"{f.stem}.json", record)
-    return record
-
-
-def write_ply(folder: Path, stem: str, depth, geometry, dets, cfg: RunConfig):
-    """For Open3D's viewer: <stem>_points.ply (the frame's points, world metres) and
-    <stem>_boxes.ply (the detected object boxes as a mesh)."""
-    import open3d as o3d
-
-    from .io import atomic_path
-
-    ok = depth > 0
-    pts = geometry.centre + depth[ok][:, None].astype(np.float64) * geometry.rays[ok]
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-    with atomic_path(folder / f"{stem}_points.ply") as tmp:
-        o3d.io.write_point_cloud(str(tmp), cloud)
-    boxes = o3d.geometry.TriangleMesh()
-    size = np.array([cfg.obj.width, cfg.obj.depth or cfg.obj.width, cfg.obj.height])
-    for d in dets:
-        b = o3d.geometry.TriangleMesh.create_box(*size)
-        lift = 0.0 if cfg.grid.mode == "ground" else size[2] / 2
-        boxes += b.translate(np.array([d.x, d.y, d.z - lift]) - np.array([size[0] / 2, size[1] / 2, 0]))
-    with atomic_path(folder / f"{stem}_boxes.ply") as tmp:
-        o3d.io.write_triangle_mesh(str(tmp), boxes)
 
 
 def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground, grown):

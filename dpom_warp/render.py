@@ -7,12 +7,12 @@ frame rates the pictures must not cost more than the inference.
 
 from __future__ import annotations
 
+import io
 from functools import lru_cache
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from .io import atomic_path
 
 BG = (255, 255, 255)
 INK = (20, 20, 20)
@@ -116,9 +116,9 @@ class MapPanel:
             draw.ellipse((px - 7, py - 7, px + 7, py + 7), outline=(0, 255, 255), width=2)
 
 
-def frame_picture(path, depth_m, rho_map, grid, detections, camera_xy, truth=None, title="",
-                  z_max=None):
-    """Write a PNG: left the depth frame with detection boxes (solid, with rho*) and
+def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, title="",
+                  z_max=None) -> bytes:
+    """A PNG file's bytes: left the depth frame with detection boxes (solid, with rho*) and
     ground-truth boxes (dashed); right the occupancy map rho* seen from above, with
     detections (circles), ground truth (crosses) and the camera position; for a voxel grid
     also a side view (maximum over y)."""
@@ -185,5 +185,6 @@ def frame_picture(path, depth_m, rho_map, grid, detections, camera_xy, truth=Non
     for i, (c, text) in enumerate(legend):
         draw.text((PAD + 4 + 120 * i, height - 12), text, fill=tuple(int(v * 0.7) for v in c) if c != (255, 255, 255) else INK,
                   font=font(11), anchor="lm")
-    with atomic_path(path) as tmp:
-        canvas.save(tmp, format="PNG", compress_level=1)
+    png = io.BytesIO()
+    canvas.save(png, format="PNG", compress_level=1)
+    return png.getvalue()

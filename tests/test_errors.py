@@ -217,25 +217,25 @@ def test_identical_runs_give_identical_bytes(tmp_path, scene):
 
 
 def test_interrupted_run_resumes_to_the_same_files(tmp_path, scene, monkeypatch, capsys):
-    from dpom_warp import pipeline
+    from dpom_warp.worker import FrameWorker
 
     path = write_config(tmp_path, scene[1])
     assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "whole")]) == 0
-    real = pipeline.process_frame
+    real = FrameWorker.process
     calls = []
 
-    def interrupted(*args, **kwargs):
+    def interrupted(self, items):  # Ctrl-C while the fourth frame is inferred
         if len(calls) == 3:
             raise KeyboardInterrupt
         calls.append(1)
-        return real(*args, **kwargs)
+        return real(self, items)
 
-    monkeypatch.setattr(pipeline, "process_frame", interrupted)
+    monkeypatch.setattr(FrameWorker, "process", interrupted)
     assert main(["run", str(path), "--no-progress"]) == 130
     assert "continue with --resume" in capsys.readouterr().err
     out = tmp_path / "out"
     assert len(list((out / "frames").glob("*.json"))) == 3 and not (out / "detections.csv").exists()
-    monkeypatch.setattr(pipeline, "process_frame", real)
+    monkeypatch.setattr(FrameWorker, "process", real)
     assert main(["run", str(path), "--no-progress", "--resume"]) == 0
     assert "resuming: 3 frames already done, 3 to go" in capsys.readouterr().out
     whole = tmp_path / "whole"

@@ -1,0 +1,302 @@
+"""The engine side of a run: the same in every process that infers frames.
+
+A FrameWorker holds one engine (geometry, tile index, compiled kernels), built once, and turns
+depth frames into FrameOutputs: the occupancy map, the picture and point-cloud files as bytes,
+and the frame's record. It runs in the run's own process, in `--workers` processes and in Ray
+actors (cluster.py); only the run's own process writes outputs (write_output), so the files
+are the same whoever inferred them, and a cluster's nodes need no shared disk.
+"""
+
+from __future__ import annotations
+
+import atexit
+import dataclasses
+import io
+import os
+import shutil
+import tarfile
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .config import ConfigError, RunConfig
+from .detect import detect
+from .engine import Engine, ListOverflow
+from .geometry import Camera, build_geometry
+from .io import InputError, read_depth, write_bytes_atomic, write_json_atomic, write_npy_atomic
+from .resolution import Resolution, auto_stride
+
+
+@dataclasses.dataclass
+class WorkerSpec:
+    """All a worker needs to build the engine of a run: the config, the posed camera (a
+    fitted pose included), the Warp device and the background: None for the floor-only
+    model, else (Background, fallback) at the engine's resolution, where fallback (H, W)
+    marks the pixels left to the floor-only model (or is None)."""
+
+    cfg: RunConfig
+    camera: Camera
+    device: str
+    background: tuple | None = None
+
+
+@dataclasses.dataclass
+class FrameItem:
+    """One frame to infer: its file, the file's bytes when they travel to the worker (None:
+    the worker reads the file), and its ground truth (for the picture)."""
+
+    path: str
+    data: bytes | None = None
+    truth: list | None = None
+
+
+@dataclasses.dataclass
+class FrameOutput:
+    """What a frame gives: its map (float32), its other files (output-relative path ->
+    bytes), its record (frames/<stem>.json) and the list-capacity growths it caused."""
+
+    name: str
+    stem: str
+    map: np.ndarray
+    files: dict
+    record: dict
+    grown: list
+
+
+def resolution_of(cfg: RunConfig, camera: Camera) -> Resolution:
+    """input.stride (auto: resolution.auto_stride for this camera and grid) and input.reduce."""
+    stride = (auto_stride(camera, cfg.grid, cfg.obj) if cfg.inputs.stride == "auto"
+              else cfg.inputs.stride)
+    if min(camera.width // stride, camera.height // stride) < 1:
+        raise ConfigError(f"input.stride: expected a stride that leaves at least one pixel of "
+                          f"the {camera.width}x{camera.height} image, found {stride}")
+    return Resolution(stride, cfg.inputs.reduce, cfg.model.z_max)
+
+
+def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engine:
+    """The engine of a run (engine.* options) at the run's inference resolution, for `batch`
+    frames per call; it takes frames reduced by engine.resolution.frames."""
+    resolution = resolution_of(cfg, camera)
+    geometry = build_geometry(resolution.camera(camera), cfg.grid, cfg.obj)
+    # the tile index's tiles keep about 8 x 8 full-resolution pixels' worth of the scene
+    # (2 x 2 at stride 4: list building ~20 % faster than 8 x 8 there)
+    tile = max(2, round(8 / resolution.stride))
+    return Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel, cfg.engine.max_entries,
+                  cfg.engine.memory_gb, tile=tile, batch=batch,
+                  graph={"auto": None, "on": True, "off": False}[cfg.engine.graph],
+                  resolution=resolution,
+                  background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
+
+
+class FrameWorker:
+    """One run's engine and what turns its results into outputs. `engine`: one built
+    already (with its background set), else it is built from `spec`; `name` is written in
+    the records of the frames it infers."""
+
+    def __init__(self, spec: WorkerSpec, name: str = "main", engine: Engine | None = None):
+        self.cfg, self.name = spec.cfg, name
+        self.geometry = build_geometry(spec.camera, spec.cfg.grid, spec.cfg.obj)  # full resolution
+        self.shape = (spec.camera.height, spec.camera.width)
+        if engine is None:
+            engine = make_engine(spec.cfg, spec.camera, spec.device, spec.cfg.engine.batch)
+            if spec.background is not None:
+                engine.set_background(*spec.background)
+        self.engine = engine
+
+    def process(self, items: list[FrameItem]) -> list[tuple[str, FrameOutput | None, str | None]]:
+        """(frame name, output, None), or (frame name, None, reason) for a frame that cannot be
+        read or whose lists overflow, for up to engine.batch frames; a batch whose lists
+        overflow is retried frame by frame."""
+        outcomes, read = [], []
+        for item in items:
+            t = time.perf_counter()
+            try:
+                depth = read_depth(item.path, self.cfg.inputs.depth_scale, self.shape, item.data)
+            except InputError as e:
+                outcomes.append((Path(item.path).name, None, str(e)))
+                continue
+            read.append((item, depth, time.perf_counter() - t))
+        engine = self.engine
+        if len(read) > 1:
+            grown, t0 = len(engine.grown), time.perf_counter()
+            try:
+                results = engine.infer_batch(engine.resolution.frames(np.stack([d for _, d, _ in read])))
+            except ListOverflow:
+                pass  # each frame alone below
+            else:
+                share = (time.perf_counter() - t0) / len(read)
+                for i, ((item, depth, read_s), res) in enumerate(zip(read, results)):
+                    growth = engine.grown[grown:] if i == 0 else []
+                    outcomes.append(self._finish(item, depth, res, read_s, share, growth))
+                return outcomes
+        for item, depth, read_s in read:
+            grown, t0 = len(engine.grown), time.perf_counter()
+            try:
+                res = engine.infer(engine.resolution.frames(depth))
+            except ListOverflow as e:
+                outcomes.append((Path(item.path).name, None, f"{item.path}: {e}"))
+                continue
+            outcomes.append(self._finish(item, depth, res, read_s, time.perf_counter() - t0,
+                                         engine.grown[grown:]))
+        return outcomes
+
+    def _finish(self, item: FrameItem, depth, res, read_s: float, infer_s: float, grown: list):
+        """Detections, map, picture and record of an inferred frame; `infer_s` is the
+        frame's share of a batch."""
+        cfg, geometry, f = self.cfg, self.geometry, Path(item.path)
+        t1 = time.perf_counter()
+        rho_map = res.rho_star.reshape(cfg.grid.shape)
+        dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
+                      cfg.detection.nms_radius)
+        t2 = time.perf_counter()
+        files = {}
+        if cfg.output.images:
+            from .render import frame_picture
+
+            files[f"images/{f.stem}.png"] = frame_picture(depth, rho_map, cfg.grid, dets,
+                                                          geometry.centre[:2], item.truth, f.name)
+        if cfg.output.ply:
+            files.update(ply_files(f.stem, depth, geometry, dets, cfg))
+        t3 = time.perf_counter()
+        record = {
+            "frame": f.name,
+            "rows": [f"{f.name},{d.x:.4f},{d.y:.4f},{d.z:.4f},{d.rho:.6f},{d.box[0]},{d.box[1]},"
+                     f"{d.box[2]},{d.box[3]}" for d in dets],
+            "xy": [[d.x, d.y, d.z] if cfg.grid.mode == "voxel" else [d.x, d.y] for d in dets],
+            "stats": {"frame": f.name, "detections": len(dets), "iterations": res.iterations,
+                      "live": res.live, "entries": res.entries, "read_s": read_s,
+                      "infer_s": infer_s, "detect_s": t2 - t1, "render_s": t3 - t2,
+                      "worker": self.name, **{f"engine_{k}": v for k, v in res.timings.items()}},
+        }
+        return f.name, FrameOutput(f.name, f.stem, rho_map.astype(np.float32), files, record,
+                                   list(grown)), None
+
+
+def write_output(out: Path, output: FrameOutput) -> dict:
+    """Write a frame's map and files, then its record (a frame is done when its record
+    exists), each atomically; returns the record, with the writing time in its stats."""
+    t = time.perf_counter()
+    write_npy_atomic(out / "maps" / f"{output.stem}.npy", output.map)
+    for rel, data in output.files.items():
+        write_bytes_atomic(out / rel, data)
+    output.record["stats"]["write_s"] = time.perf_counter() - t
+    write_json_atomic(out / "frames" / f"{output.stem}.json", output.record)
+    return output.record
+
+
+def ply_files(stem: str, depth, geometry, dets, cfg: RunConfig) -> dict[str, bytes]:
+    """For Open3D's viewer: ply/<stem>_points.ply (the frame's points, world metres) and
+    ply/<stem>_boxes.ply (the detected object boxes as a mesh), as bytes."""
+    import open3d as o3d
+
+    ok = depth > 0
+    pts = geometry.centre + depth[ok][:, None].astype(np.float64) * geometry.rays[ok]
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    boxes = o3d.geometry.TriangleMesh()
+    size = np.array([cfg.obj.width, cfg.obj.depth or cfg.obj.width, cfg.obj.height])
+    for d in dets:
+        b = o3d.geometry.TriangleMesh.create_box(*size)
+        lift = 0.0 if cfg.grid.mode == "ground" else size[2] / 2
+        boxes += b.translate(np.array([d.x, d.y, d.z - lift]) - np.array([size[0] / 2, size[1] / 2, 0]))
+    with tempfile.TemporaryDirectory(prefix="dpom-warp-ply-") as tmp:
+        points, mesh = Path(tmp) / "points.ply", Path(tmp) / "boxes.ply"
+        o3d.io.write_point_cloud(str(points), cloud)
+        o3d.io.write_triangle_mesh(str(mesh), boxes)
+        return {f"ply/{stem}_points.ply": points.read_bytes(),
+                f"ply/{stem}_boxes.ply": mesh.read_bytes()}
+
+
+# -- compiled kernels for other processes ---------------------------------------------------
+CACHE_PREFIX = "dpom-warp-cache-"
+
+
+def kernel_cache() -> dict:
+    """This package's compiled Warp modules from this process's kernel cache, as a tar
+    archive (about 1 MB): a worker that installs it (install_kernel_cache) loads the kernels
+    instead of compiling them, on this machine or another of the same platform."""
+    import warp as wp
+
+    root = Path(wp.config.kernel_cache_dir)
+    archive = io.BytesIO()
+    with tarfile.open(fileobj=archive, mode="w") as tar:
+        for entry in sorted(root.glob("wp_dpom_warp*")):
+            tar.add(entry, arcname=entry.name)
+    return {"version": root.name, "tar": archive.getvalue()}
+
+
+def install_kernel_cache(cache: dict | None) -> None:
+    """Before Warp starts in this process: give it a private kernel cache (one per
+    concurrent process), holding `cache` (kernel_cache's archive) when given. Caches left by
+    killed processes are removed."""
+    from warp._src import context
+
+    if context.runtime is not None:
+        return  # Warp has started here: it keeps its cache
+    _remove_orphan_caches()
+    own = Path(tempfile.mkdtemp(prefix=f"{CACHE_PREFIX}{os.getpid()}-"))
+    atexit.register(shutil.rmtree, own, True)
+    if cache:
+        target = own / cache["version"]
+        target.mkdir()
+        with tarfile.open(fileobj=io.BytesIO(cache["tar"])) as tar:
+            if hasattr(tarfile, "data_filter"):
+                tar.extractall(target, filter="data")
+            else:  # Python < 3.10.12: our own archive, made by kernel_cache
+                tar.extractall(target)
+    # Warp keeps its modules under WARP_CACHE_PATH/<version>, read when it initialises
+    os.environ["WARP_CACHE_PATH"] = str(own)
+
+
+def _remove_orphan_caches():
+    for old in Path(tempfile.gettempdir()).glob(f"{CACHE_PREFIX}*"):
+        pid = old.name[len(CACHE_PREFIX):].split("-")[0]
+        if pid.isdigit() and not Path(f"/proc/{pid}").exists() and os.path.isdir("/proc/self"):
+            shutil.rmtree(old, ignore_errors=True)
+
+
+# -- `--workers N`: processes on this machine -----------------------------------------------
+_pool_worker: list[FrameWorker] = []
+
+
+def _pool_start(spec: WorkerSpec, cache: dict) -> None:
+    install_kernel_cache(cache)
+    _pool_worker.append(FrameWorker(spec, name=f"process {os.getpid()}"))
+
+
+def _pool_process(items: list[FrameItem]):
+    return _pool_worker[0].process(items)
+
+
+def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], workers: int,
+                  progress: bool):
+    """The outcomes of FrameWorker.process over `chunks`, in a pool of `workers` processes
+    ('spawn': no Warp state is forked) that each build the engine once from `spec` and load
+    the kernels from `cache`. Frames travel as paths: the processes share this disk."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    from .io import WorkerError
+
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_pool_start, initargs=(spec, cache))
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=sum(map(len, chunks)), unit="frame", desc=f"dpom x{workers}", leave=False)
+    try:
+        futures = [pool.submit(_pool_process, chunk) for chunk in chunks]
+        for fut, chunk in zip(futures, chunks):
+            try:
+                yield from fut.result()
+            except BrokenProcessPool as e:
+                raise WorkerError(f"--workers: a worker process died ({e}); finished frames are "
+                                  f"kept, continue with --resume") from None
+            if bar is not None:
+                bar.update(len(chunk))
+    finally:
+        if bar is not None:
+            bar.close()
+        pool.shutdown(wait=True, cancel_futures=True)
