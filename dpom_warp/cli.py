@@ -1,6 +1,7 @@
 """dpom-warp: people (and other objects) from single depth images with DPOM on Warp kernels.
 
-  dpom-warp run CONFIG [--output DIR] [--device D] [--set key.path=value ...]
+  dpom-warp run CONFIG... [--output DIR] [--device D] [--set key.path=value ...]
+                [--workers N] [--ray [ADDRESS]] [--resume | --overwrite]
   dpom-warp fit-ground DEPTH... --camera CAMERA.yaml [--output POSE.yaml]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
 """
@@ -16,28 +17,80 @@ from .io import InputError, WorkerError
 
 
 def _run(args) -> int:
-    from .pipeline import run
+    from pathlib import Path
+
+    from .config import check_device
+    from .pipeline import plan_run, run
 
     if args.overwrite and args.resume:
         raise ConfigError("--overwrite and --resume: expected at most one of them")
-    cfg = load_config(args.config, args.set)
-    if args.workers < 1:
+    if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers: expected a number >= 1, found {args.workers}")
-    summary = run(cfg, args.output, args.device, progress=not args.no_progress,
-                  strict=args.strict, overwrite=args.overwrite, resume=args.resume,
-                  workers=args.workers)
+    if args.device:
+        check_device(args.device, "--device")
+    if args.ray is not None:
+        from .cluster import import_ray
+        import_ray()  # not installed: say so before any work
+    cfgs = [load_config(c, args.set) for c in args.config]
+    outputs = output_dirs(args.config, cfgs, args.output)
+    many = len(cfgs) > 1
+    if args.ray is None:
+        for source, cfg, out in zip(args.config, cfgs, outputs):
+            if many:
+                print(f"== {source}")
+            summary = run(cfg, out, args.device, progress=not args.no_progress, strict=args.strict,
+                          overwrite=args.overwrite, resume=args.resume, workers=args.workers or 1)
+            _report(summary, out)
+        return 0
+    from .cluster import run_on_ray
+
+    plans = []
+    for source, cfg, out in zip(args.config, cfgs, outputs):
+        if many:
+            print(f"== {source}")
+        plans.append(plan_run(cfg, out, "cpu", strict=args.strict, parallel=True))
+    devices = [args.device or cfg.device for cfg in cfgs]
+    summaries = run_on_ray(plans, [str(Path(c)) for c in args.config], devices, args.ray or None,
+                           args.workers, args.strict, args.overwrite, args.resume,
+                           progress=not args.no_progress)
+    for source, summary, out in zip(args.config, summaries, outputs):
+        if many:
+            print(f"== {source}")
+        _report(summary, out)
+    return 0
+
+
+def output_dirs(sources: list[str], cfgs: list, output: str | None) -> list[str]:
+    """Each config's output folder: --output (one config), --output/<config name> (several),
+    else its output.dir; two runs may not share one."""
+    from pathlib import Path
+
+    if output and len(cfgs) > 1:
+        outs = [str(Path(output) / Path(s).stem) for s in sources]
+    else:
+        outs = [output or cfg.output.dir for cfg in cfgs]
+    seen = {}
+    for source, out in zip(sources, outs):
+        key = Path(out).resolve()
+        if key in seen:
+            raise ConfigError(f"output.dir: {seen[key]} and {source} both write to {out}; expected "
+                              f"a folder per config")
+        seen[key] = source
+    return outs
+
+
+def _report(summary: dict, out: str) -> None:
     if summary["skipped"]:
         print(f"{len(summary['skipped'])} frame(s) skipped (reasons in summary.json)")
     t = summary["timings"]
     print(f"{summary['frames']} frames, {summary['detections']} detections; median "
           f"{1000 * t['median_infer_s']:.0f} ms per frame ({t['median_iterations']:.0f} iterations) "
-          f"on {summary['device']}; outputs in {args.output or cfg.output.dir}")
+          f"on {summary['device']}; outputs in {out}")
     s = summary.get("scores")
     if s:
         print(f"MODA {s['moda']:.3f}  precision {s['precision']:.3f}  recall {s['recall']:.3f}  "
               f"at {s['match_distance']} m ({s['n_gt']} in the ground truth; MODA "
               f"{s['moda_visible']:.3f} not penalising those less than {s['hidden_visibility']:.0%} visible)")
-    return 0
 
 
 def _fit_ground(args) -> int:
@@ -93,15 +146,22 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="dpom-warp", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run DPOM over a sequence of depth frames")
-    p.add_argument("config", help="YAML run config (see README)")
-    p.add_argument("--output", help="output folder (overrides output.dir)")
+    p.add_argument("config", nargs="+", help="YAML run config (see README); several: one run each, "
+                                             "each to its own output")
+    p.add_argument("--output", help="output folder (overrides output.dir); with several configs "
+                                    "each run writes to OUTPUT/<config name>")
     p.add_argument("--device", help="auto, cpu or cuda:N (overrides device)")
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="override a config value, e.g. --set model.damping=0.2")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--strict", action="store_true", help="a bad frame is fatal instead of skipped")
-    p.add_argument("--workers", type=int, default=1,
-                   help="process frames in this many processes (Warp runs CPU kernels on one thread)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="infer frames in this many processes (Warp runs CPU kernels on one thread); "
+                        "with --ray, this many actors (default: one per CPU, or GPU, of the cluster)")
+    p.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                   help="infer frames on Ray actors: of the cluster at ADDRESS (or $RAY_ADDRESS; "
+                        "'auto': the one `ray start` runs here), else of a new local Ray instance; "
+                        "needs the [ray] extra")
     p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty output folder")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in its output folder, skipping finished frames")

@@ -104,6 +104,12 @@ class _Section:
                               f"{', '.join(sorted(self.used))})")
 
 
+def check_device(device: str, key: str = "device") -> str:
+    if device not in ("auto", "cpu", "cuda") and not (device.startswith("cuda:") and device[5:].isdigit()):
+        raise ConfigError(f"{key}: expected auto, cpu, cuda or cuda:N, found {device!r}")
+    return device
+
+
 def check_range(key, v, lo=None, hi=None, lo_open=False, hi_open=False):
     if lo is not None and (v < lo or (lo_open and v == lo)):
         raise ConfigError(f"{key}: expected a value {'>' if lo_open else '>='} {lo}, found {v!r}")
@@ -228,9 +234,7 @@ def _pose(sec: _Section):
 def parse_config(raw: dict[str, Any]) -> RunConfig:
     """Validate a config mapping (as loaded from YAML) into a RunConfig."""
     top = _Section(raw, "")
-    device = top.string("device", "auto")
-    if device not in ("auto", "cpu", "cuda") and not (device.startswith("cuda:") and device[5:].isdigit()):
-        raise ConfigError(f"device: expected auto, cpu, cuda or cuda:N, found {device!r}")
+    device = check_device(top.string("device", "auto"))
 
     s = top.section("input")
     stride = s.get("stride", "auto")
