@@ -160,7 +160,7 @@ def cube_iou(a: np.ndarray, b: np.ndarray, size) -> np.ndarray:
 
 def counts(dets: Detections, truth: dict[str, list[dict]], threshold: float, plane: str,
            gate: float, hidden_visibility: float = 0.0, penalise_hidden: bool = True,
-           cube_size=None) -> dict:
+           cube_size=None, memo: dict | None = None) -> dict:
     """CLEAR counts over a sequence at one detection threshold.
 
     Args:
@@ -170,6 +170,9 @@ def counts(dets: Detections, truth: dict[str, list[dict]], threshold: float, pla
         hidden_visibility, penalise_hidden: with penalise_hidden False, ground truth less
             visible than hidden_visibility is left out: missing it is no error, and a
             detection matched to it is neither right nor wrong.
+        memo: a dict kept across calls that differ only in `threshold` (a curve): a frame
+            whose detections above the threshold are those of an earlier call is not matched
+            again (the same rows, so the same counts).
 
     Returns:
         dict with tp, fp, fn, n_gt, moda, modp (mean overlap of matches: 1 - d / gate on the
@@ -179,35 +182,46 @@ def counts(dets: Detections, truth: dict[str, list[dict]], threshold: float, pla
     overlap = 0.0
     for frame, objs in truth.items():
         det = dets.at(frame, threshold)
-        hidden = np.array([(not penalise_hidden) and o.get("visibility", 1.0) < hidden_visibility
-                           for o in objs], bool)
-        if plane in ("ground", "space"):
-            n = 2 if plane == "ground" else 3
-            gt = np.array([[o["x"], o["y"], o.get("z", 0.0)][:n] for o in objs], float).reshape(-1, n)
-            cost = np.linalg.norm(det[:, None, :n] - gt[None, :, :], axis=2)
-            pairs = assign(cost, gate)
-            quality = [1.0 - cost[d, g] / gate for d, g in pairs]
-        else:
-            if plane == "image":
-                gt = np.array([o["bbox"] for o in objs], float).reshape(-1, 4)
-                iou = box_iou(det[:, BOX], gt)
-            else:
-                gt = np.array([[o["x"], o["y"], o.get("z", 0.0)] for o in objs], float).reshape(-1, 3)
-                iou = cube_iou(det[:, :3], gt, cube_size)
-            pairs = assign(1.0 - iou, 1.0 - gate + 1e-12)
-            quality = [iou[d, g] for d, g in pairs]
-        on_hidden = sum(1 for _, g in pairs if hidden[g])
-        tp += len(pairs) - on_hidden
-        overlap += sum(q for q, (_, g) in zip(quality, pairs) if not hidden[g])
-        fp += len(det) - len(pairs)
-        matched = {g for _, g in pairs}
-        fn += sum(1 for g in range(len(gt)) if g not in matched and not hidden[g])
-        n_gt += int((~hidden).sum())
+        key = (frame, len(det))  # the rows above a threshold are the len(det) best-scored
+        if memo is None or key not in memo:
+            c = frame_counts(det, objs, plane, gate, hidden_visibility, penalise_hidden, cube_size)
+            if memo is None:
+                memo = {}
+            memo[key] = c
+        f_tp, f_fp, f_fn, f_gt, f_overlap = memo[key]
+        tp, fp, fn, n_gt, overlap = tp + f_tp, fp + f_fp, fn + f_fn, n_gt + f_gt, overlap + f_overlap
     return {"threshold": threshold, "tp": tp, "fp": fp, "fn": fn, "n_gt": n_gt,
             "moda": 1.0 - (fp + fn) / n_gt if n_gt else float("nan"),
             "modp": overlap / tp if tp else float("nan"),
             "precision": tp / (tp + fp) if tp + fp else float("nan"),
             "recall": tp / n_gt if n_gt else float("nan")}
+
+
+def frame_counts(det: np.ndarray, objs: list[dict], plane: str, gate: float,
+                 hidden_visibility: float, penalise_hidden: bool, cube_size=None) -> tuple:
+    """(tp, fp, fn, n_gt, summed overlap) of one frame's detections (n, 8) (see counts)."""
+    hidden = np.array([(not penalise_hidden) and o.get("visibility", 1.0) < hidden_visibility
+                       for o in objs], bool)
+    if plane in ("ground", "space"):
+        n = 2 if plane == "ground" else 3
+        gt = np.array([[o["x"], o["y"], o.get("z", 0.0)][:n] for o in objs], float).reshape(-1, n)
+        cost = np.linalg.norm(det[:, None, :n] - gt[None, :, :], axis=2)
+        pairs = assign(cost, gate)
+        quality = [1.0 - cost[d, g] / gate for d, g in pairs]
+    else:
+        if plane == "image":
+            gt = np.array([o["bbox"] for o in objs], float).reshape(-1, 4)
+            iou = box_iou(det[:, BOX], gt)
+        else:
+            gt = np.array([[o["x"], o["y"], o.get("z", 0.0)] for o in objs], float).reshape(-1, 3)
+            iou = cube_iou(det[:, :3], gt, cube_size)
+        pairs = assign(1.0 - iou, 1.0 - gate + 1e-12)
+        quality = [iou[d, g] for d, g in pairs]
+    on_hidden = sum(1 for _, g in pairs if hidden[g])
+    matched = {g for _, g in pairs}
+    return (len(pairs) - on_hidden, len(det) - len(pairs),
+            sum(1 for g in range(len(gt)) if g not in matched and not hidden[g]),
+            int((~hidden).sum()), sum(q for q, (_, g) in zip(quality, pairs) if not hidden[g]))
 
 
 def detection_thresholds(dets: Detections, n: int = 60) -> np.ndarray:
@@ -223,10 +237,10 @@ def moda_curve(dets, truth, plane, gates, hidden_visibility, penalise_hidden, cu
     ths = detection_thresholds(dets)
     curve = []
     for gate in gates:
-        best = None
+        best, memo = None, {}
         for t in ths:
             c = counts(dets, truth, float(t), plane, gate, hidden_visibility, penalise_hidden,
-                       cube_size)
+                       cube_size, memo)
             if best is None or c["moda"] > best["moda"]:
                 best = c
         curve.append({"gate": gate, **(best or counts(dets, truth, 1.1, plane, gate,
@@ -237,8 +251,9 @@ def moda_curve(dets, truth, plane, gates, hidden_visibility, penalise_hidden, cu
 def pr_curve(dets, truth, plane, gate, hidden_visibility, penalise_hidden, cube_size=None):
     """Precision and recall at every detection threshold (high to low), and the average
     precision (area under the precision envelope, all points)."""
+    memo = {}
     points = [counts(dets, truth, float(t), plane, gate, hidden_visibility, penalise_hidden,
-                     cube_size)
+                     cube_size, memo)
               for t in np.unique(dets.scores())[::-1]]
     points = [p for p in points if p["tp"] + p["fp"] > 0]
     if not points or not points[0]["n_gt"]:
