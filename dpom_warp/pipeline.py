@@ -178,10 +178,14 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     else:
         outcomes = _outcomes_here(plan, progress)
         runner = {"kind": "one process"}
+    t = time.perf_counter()
     try:
         collect(plan, outcomes, strict, log)
     finally:
         outcomes.close()  # stops the worker pool at once on an error or Ctrl-C
+    wall = time.perf_counter() - t
+    runner["frames_wall_s"] = wall  # from the first frame sent to the last written
+    runner["frames_per_s"] = len(plan.todo) / wall if plan.todo and wall > 0 else None
     return finish_run(plan, runner)
 
 
