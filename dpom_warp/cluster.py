@@ -68,7 +68,8 @@ def connect(address: str | None):
         raise ConfigError(f"--ray: cannot join a Ray cluster at {address}: {first}") from None
     signal.signal(signal.SIGTERM, handler)  # ray.init replaces it; ours unwinds like Ctrl-C
     try:
-        yield f"the Ray cluster at {address}" if address else "a local Ray instance"
+        yield ("a local Ray instance" if not address else "the Ray cluster `ray start` runs here"
+               if address == "auto" else f"the Ray cluster at {address}")
     finally:
         ray.shutdown()
 
@@ -96,7 +97,8 @@ class FrameActor:
     def info(self) -> dict:
         import ray
 
-        return {"pid": os.getpid(), "node": ray.util.get_node_ip_address()}
+        node = ray.get_runtime_context().get_node_id()
+        return {"pid": os.getpid(), "node": f"{ray.util.get_node_ip_address()} ({node[:8]})"}
 
     def process(self, run: int, refs: list, items: list):
         """FrameWorker.process of run `run`'s frames; `refs` = [the run's WorkerSpec, the
@@ -171,6 +173,7 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
         try:
             pool.first_started()
             for p in plans:
+                p.device = f"{device} (Ray actors)"
                 open_output(p, overwrite, resume, log)
             log(f"ray: {n} actors ({'one GPU' if gpu else 'one CPU'} each) on {where} "
                 f"({nodes} node{'s' if nodes > 1 else ''})")
@@ -186,11 +189,11 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
                   "actor_resources": "1 GPU, 1 CPU" if gpu else "1 CPU",
                   "actor_restarts": sum(len(p) - 1 for p in pool.pids.values()),
                   "frames_resent": pool.resent, "actor_nodes": pool.nodes,
-                  "device": f"{device} (Ray actors)", "runs": len(plans)}
+                  "runs": len(plans)}
         wall = time.perf_counter() - t0
         frames = sum(len(c) for _, c in jobs)
         runner["frames_wall_s"] = wall  # all runs' frames, from the first sent to the last written
-        runner["frames_per_s"] = frames / wall if wall > 0 else None
+        runner["frames_per_s"] = frames / wall if frames and wall > 0 else None
         # reading, sending, receiving and writing: the driver's share of a frame, the
         # cluster's ceiling at 1 / driver_s_per_frame frames per second
         runner["driver_s_per_frame"] = (wall - pool.waited) / frames if frames else None

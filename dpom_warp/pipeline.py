@@ -329,7 +329,7 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     cfg, out, truth = plan.cfg, plan.out, plan.truth
     done = [f for f in plan.frames if f.name in plan.records]
     summary = summarise(cfg, out, done, plan.records, plan.skipped, truth, plan.geometry,
-                        runner.pop("device", plan.device), plan.background, plan.ground, plan.grown)
+                        plan.device, plan.background, plan.ground, plan.grown)
     if plan.auto_report is not None:
         summary["background_auto"] = plan.auto_report
     summary["inference"] = plan.inference
