@@ -65,7 +65,8 @@ def connect(address: str | None):
                  logging_level=logging.WARNING)
     except (ConnectionError, ValueError, RuntimeError) as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise ConfigError(f"--ray: cannot join a Ray cluster at {address}: {first}") from None
+        where = f"join a Ray cluster at {address}" if address else "start a local Ray instance"
+        raise ConfigError(f"--ray: cannot {where}: {first}") from None
     signal.signal(signal.SIGTERM, handler)  # ray.init replaces it; ours unwinds like Ctrl-C
     try:
         yield ("a local Ray instance" if not address else "the Ray cluster `ray start` runs here"
@@ -134,8 +135,9 @@ def actor_kind(ray, devices: list[tuple[str, str]]) -> bool:
     gpus = ray.cluster_resources().get("GPU", 0)
     if kinds == {"cuda"}:
         if gpus < 1:
-            raise ConfigError(f"device: {devices[0][1]} (in {devices[0][0]}), but the Ray cluster "
-                              f"has no GPU; expected a cluster with GPUs, or device: cpu")
+            source, device = next((n, d) for n, d in devices if d.startswith("cuda"))
+            raise ConfigError(f"device: {device} (in {source}), but the Ray cluster has no GPU; "
+                              f"expected a cluster with GPUs, or device: cpu")
         return True
     return kinds != {"cpu"} and gpus >= 1
 
@@ -183,6 +185,7 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
             t0 = time.perf_counter()
             for run, name, output, error in pool.outcomes(refs, jobs, progress, log):
                 accept(plans[run], name, output, error, strict, log)
+            wall = time.perf_counter() - t0
         finally:
             pool.kill()
         runner = {"kind": "ray", "cluster": where, "nodes": nodes, "actors": n,
@@ -190,7 +193,6 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
                   "actor_restarts": sum(len(p) - 1 for p in pool.pids.values()),
                   "frames_resent": pool.resent, "actor_nodes": pool.nodes,
                   "runs": len(plans)}
-        wall = time.perf_counter() - t0
         frames = sum(len(c) for _, c in jobs)
         runner["frames_wall_s"] = wall  # all runs' frames, from the first sent to the last written
         runner["frames_per_s"] = frames / wall if frames and wall > 0 else None

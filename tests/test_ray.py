@@ -11,7 +11,6 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
 
@@ -207,6 +206,14 @@ def test_ray_errors_are_one_line(tmp_path, local_ray, scene, capsys, monkeypatch
     a.write_text(yaml.safe_dump(yaml_a))
     assert main(["run", str(a), str(same), "--no-progress", "--ray"]) == 2
     assert "both write to" in capsys.readouterr().err
+    gpu = config(tmp_path, path, "gpu")
+    yaml_gpu = yaml.safe_load(gpu.read_text())
+    yaml_gpu["device"] = "cuda"
+    gpu.write_text(yaml.safe_dump(yaml_gpu))
+    assert main(["run", str(path), str(gpu), "--no-progress", "--ray", "--output", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert f"device: {path} asks for cpu and {gpu} for cuda; expected one kind of device" in err
+    assert not (tmp_path / "x").exists()
     monkeypatch.setitem(sys.modules, "ray", None)  # Ray not installed
     assert main(["run", str(path), "--no-progress", "--ray", "--output", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
