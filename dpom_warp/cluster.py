@@ -162,7 +162,7 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
     `sources` names each run's config and `devices` gives its device setting (for errors);
     `workers`: the number of actors (None: one per CPU, or per GPU, of the cluster).
     Nothing is written before the first actor has started."""
-    from .pipeline import accept, finish_run, open_output
+    from .pipeline import accept, finish_run, open_output, progress_bar
 
     with connect(address) as where:
         ray = import_ray()
@@ -183,7 +183,9 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
             refs = [[ray.put(p.spec), cache] for p in plans]
             jobs = [(run, chunk) for run, p in enumerate(plans) for chunk in p.chunks()]
             t0 = time.perf_counter()
-            for run, name, output, error in pool.outcomes(refs, jobs, progress, log):
+            frames = sum(len(c) for _, c in jobs)
+            outcomes = progress_bar(pool.outcomes(refs, jobs, log), frames, "dpom ray", progress)
+            for run, name, output, error in outcomes:
                 accept(plans[run], name, output, error, strict, log)
             wall = time.perf_counter() - t0
         finally:
@@ -193,7 +195,6 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
                   "actor_restarts": sum(len(p) - 1 for p in pool.pids.values()),
                   "frames_resent": pool.resent, "actor_nodes": pool.nodes,
                   "runs": len(plans)}
-        frames = sum(len(c) for _, c in jobs)
         runner["frames_wall_s"] = wall  # all runs' frames, from the first sent to the last written
         runner["frames_per_s"] = frames / wall if frames and wall > 0 else None
         # reading, sending, receiving and writing: the driver's share of a frame, the
@@ -237,61 +238,51 @@ class ActorPool:
         for a in self.actors:
             self.ray.kill(a, no_restart=True)
 
-    def outcomes(self, refs: list, jobs: list, progress: bool, log=print):
+    def outcomes(self, refs: list, jobs: list, log=print):
         """Yield (run, frame name, output, error) for every frame of `jobs` ((run, chunk of
         FrameItems), sent in order), keeping IN_FLIGHT calls on every actor that has started.
         `refs[run]`: what FrameActor.process takes for that run."""
         ray, queue, in_flight = self.ray, collections.deque((r, c, 0) for r, c in jobs), {}
-        bar = None
-        if progress:
-            from tqdm import tqdm
-            bar = tqdm(total=sum(len(c) for _, c in jobs), unit="frame", desc="dpom ray", leave=False)
-        try:
-            while queue or in_flight:
-                for i in sorted(self.live, key=lambda i: self.load[i]):
-                    while queue and self.load[i] < IN_FLIGHT:
-                        run, chunk, losses = queue.popleft()
-                        sent = [dataclasses.replace(item, data=_read(item.path)) for item in chunk]
-                        call = self.actors[i].process.remote(run, refs[run], sent)
-                        in_flight[call] = (i, run, chunk, losses)
-                        self.load[i] += 1
-                if not self.live and not self.starting:
-                    raise WorkerError("--ray: every actor has died; finished frames are kept, "
-                                      "continue with --resume")
-                t = time.perf_counter()
-                done, _ = ray.wait(list(in_flight) + list(self.starting), num_returns=1)
-                self.waited += time.perf_counter() - t
-                if done[0] in self.starting:
-                    self._started(done[0])
-                    continue
-                i, run, chunk, losses = in_flight.pop(done[0])
-                self.load[i] -= 1
-                try:
-                    info, outcomes = ray.get(done[0])
-                except self.lost as e:  # the actor is gone for good: its frames go elsewhere
-                    self.live.discard(i)
-                    log(f"ray: actor {i} died ({_cause(e)}); its frames go to the other actors")
-                    if losses + 1 >= MAX_LOSSES:
-                        for item in chunk:
-                            yield run, os.path.basename(item.path), None, (
-                                f"{item.path}: the actor inferring it died {MAX_LOSSES} times "
-                                f"(killed, or out of memory)")
-                    else:
-                        self.resent += len(chunk)
-                        queue.appendleft((run, chunk, losses + 1))
-                    continue
-                if info["pid"] not in self.pids[i]:  # Ray restarted it and retried its calls
-                    self.pids[i].add(info["pid"])
-                    self.nodes[f"actor {i}"] = info["node"]
-                    log(f"ray: actor {i} was restarted (process {info['pid']} on {info['node']}); "
-                        f"its unfinished frames were retried there")
-                for name, output, error in outcomes:
-                    yield run, name, output, error
-                if bar is not None:
-                    bar.update(len(chunk))
-        finally:
-            if bar is not None:
-                bar.close()
+        while queue or in_flight:
+            for i in sorted(self.live, key=lambda i: self.load[i]):
+                while queue and self.load[i] < IN_FLIGHT:
+                    run, chunk, losses = queue.popleft()
+                    sent = [dataclasses.replace(item, data=_read(item.path)) for item in chunk]
+                    call = self.actors[i].process.remote(run, refs[run], sent)
+                    in_flight[call] = (i, run, chunk, losses)
+                    self.load[i] += 1
+            if not self.live and not self.starting:
+                raise WorkerError("--ray: every actor has died; finished frames are kept, "
+                                  "continue with --resume")
+            t = time.perf_counter()
+            done, _ = ray.wait(list(in_flight) + list(self.starting), num_returns=1)
+            self.waited += time.perf_counter() - t
+            if done[0] in self.starting:
+                self._started(done[0])
+                continue
+            i, run, chunk, losses = in_flight.pop(done[0])
+            self.load[i] -= 1
+            try:
+                info, outcomes = ray.get(done[0])
+            except self.lost as e:  # the actor is gone for good: its frames go elsewhere
+                self.live.discard(i)
+                log(f"ray: actor {i} died ({_cause(e)}); its frames go to the other actors")
+                if losses + 1 >= MAX_LOSSES:
+                    for item in chunk:
+                        yield run, os.path.basename(item.path), None, (
+                            f"{item.path}: the actor inferring it died {MAX_LOSSES} times "
+                            f"(killed, or out of memory)")
+                else:
+                    self.resent += len(chunk)
+                    queue.appendleft((run, chunk, losses + 1))
+                continue
+            if info["pid"] not in self.pids[i]:  # Ray restarted it and retried its calls
+                self.pids[i].add(info["pid"])
+                self.nodes[f"actor {i}"] = info["node"]
+                log(f"ray: actor {i} was restarted (process {info['pid']} on {info['node']}); "
+                    f"its unfinished frames were retried there")
+            for name, output, error in outcomes:
+                yield run, name, output, error
 
 
 def _read(path: str) -> bytes | None:

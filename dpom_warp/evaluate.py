@@ -180,14 +180,13 @@ def counts(dets: Detections, truth: dict[str, list[dict]], threshold: float, pla
     """
     tp = fp = fn = n_gt = 0
     overlap = 0.0
+    memo = {} if memo is None else memo
     for frame, objs in truth.items():
         det = dets.at(frame, threshold)
         key = (frame, len(det))  # the rows above a threshold are the len(det) best-scored
-        if memo is None or key not in memo:
-            c = frame_counts(det, objs, plane, gate, hidden_visibility, penalise_hidden, cube_size)
-            if memo is None:
-                memo = {}
-            memo[key] = c
+        if key not in memo:
+            memo[key] = frame_counts(det, objs, plane, gate, hidden_visibility, penalise_hidden,
+                                     cube_size)
         f_tp, f_fp, f_fn, f_gt, f_overlap = memo[key]
         tp, fp, fn, n_gt, overlap = tp + f_tp, fp + f_fp, fn + f_fn, n_gt + f_gt, overlap + f_overlap
     return {"threshold": threshold, "tp": tp, "fp": fp, "fn": fn, "n_gt": n_gt,

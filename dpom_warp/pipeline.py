@@ -24,7 +24,7 @@ from .io import TEMP_MARK, InputError, read_depth, write_json_atomic, write_text
 from .resolution import Resolution
 from .synthetic import generate
 from .worker import (FrameItem, FrameOutput, FrameWorker, WorkerSpec, kernel_cache, make_engine,
-                     pool_outcomes, write_output)
+                     pool_outcomes, read_frame, write_output)
 
 CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
 
@@ -173,14 +173,14 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1)
     open_output(plan, overwrite, resume, log)
     if workers > 1 and len(plan.todo) > 1:
-        outcomes = pool_outcomes(plan.spec, kernel_cache(), plan.chunks(), workers, progress)
-        runner = {"kind": "processes", "workers": workers}
+        outcomes = pool_outcomes(plan.spec, kernel_cache(), plan.chunks(), workers)
+        runner, desc = {"kind": "processes", "workers": workers}, f"dpom x{workers}"
     else:
-        outcomes = _outcomes_here(plan, progress)
-        runner = {"kind": "one process"}
+        outcomes = _outcomes_here(plan)
+        runner, desc = {"kind": "one process"}, "dpom"
     t = time.perf_counter()
     try:
-        collect(plan, outcomes, strict, log)
+        collect(plan, progress_bar(outcomes, len(plan.todo), desc, progress), strict, log)
     finally:
         outcomes.close()  # stops the worker pool at once on an error or Ctrl-C
     wall = time.perf_counter() - t
@@ -286,20 +286,18 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
         log(f"resuming: {len(plan.records)} frames already done, {len(plan.todo)} to go")
 
 
-def _outcomes_here(plan: RunPlan, progress: bool):
+def _outcomes_here(plan: RunPlan):
     worker = FrameWorker(plan.spec, engine=plan.engine)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=len(plan.todo), unit="frame", desc="dpom", leave=False)
-    try:
-        for chunk in plan.chunks():
-            yield from worker.process(chunk)
-            if bar is not None:
-                bar.update(len(chunk))
-    finally:
-        if bar is not None:
-            bar.close()
+    for chunk in plan.chunks():
+        yield from worker.process(chunk)
+
+
+def progress_bar(outcomes, frames: int, desc: str, progress: bool):
+    """`outcomes` (one per frame) through a progress bar over `frames` frames (none without
+    `progress`); the bar closes when the iteration ends, whichever way."""
+    from tqdm import tqdm
+
+    return tqdm(outcomes, total=frames, unit="frame", desc=desc, leave=False, disable=not progress)
 
 
 def collect(plan: RunPlan, outcomes, strict: bool, log=print) -> None:
@@ -384,10 +382,6 @@ def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=pri
     report = {**fit.report(), "rms_m": fit.rms_m, "frames": "estimated background of "
               f"{len(files)} frames", "fit_s": time.perf_counter() - t}
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
-
-
-def read_frame(cfg: RunConfig, f: Path) -> np.ndarray:
-    return read_depth(f, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
 
 
 def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground, grown):

@@ -75,6 +75,11 @@ def resolution_of(cfg: RunConfig, camera: Camera) -> Resolution:
     return Resolution(stride, cfg.inputs.reduce, cfg.model.z_max)
 
 
+def read_frame(cfg: RunConfig, path, data: bytes | None = None) -> np.ndarray:
+    """A frame of the run's camera in metres (io.read_depth); `data`: the file's bytes."""
+    return read_depth(path, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width), data)
+
+
 def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engine:
     """The engine of a run (engine.* options) at the run's inference resolution, for `batch`
     frames per call; it takes frames reduced by engine.resolution.frames."""
@@ -98,7 +103,6 @@ class FrameWorker:
     def __init__(self, spec: WorkerSpec, name: str = "main", engine: Engine | None = None):
         self.cfg, self.name = spec.cfg, name
         self.geometry = build_geometry(spec.camera, spec.cfg.grid, spec.cfg.obj)  # full resolution
-        self.shape = (spec.camera.height, spec.camera.width)
         if engine is None:
             engine = make_engine(spec.cfg, spec.camera, spec.device, spec.cfg.engine.batch)
             if spec.background is not None:
@@ -113,7 +117,7 @@ class FrameWorker:
         for item in items:
             t = time.perf_counter()
             try:
-                depth = read_depth(item.path, self.cfg.inputs.depth_scale, self.shape, item.data)
+                depth = read_frame(self.cfg, item.path, item.data)
             except InputError as e:
                 outcomes.append((Path(item.path).name, None, str(e)))
                 continue
@@ -250,9 +254,11 @@ def install_kernel_cache(cache: dict | None) -> None:
 
 
 def _remove_orphan_caches():
+    if not os.path.isdir("/proc/self"):
+        return  # no /proc: no way to tell a dead process's cache from a live one's
     for old in Path(tempfile.gettempdir()).glob(f"{CACHE_PREFIX}*"):
         pid = old.name[len(CACHE_PREFIX):].split("-")[0]
-        if pid.isdigit() and not Path(f"/proc/{pid}").exists() and os.path.isdir("/proc/self"):
+        if pid.isdigit() and not Path(f"/proc/{pid}").exists():
             shutil.rmtree(old, ignore_errors=True)
 
 
@@ -269,8 +275,7 @@ def _pool_process(items: list[FrameItem]):
     return _pool_worker[0].process(items)
 
 
-def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], workers: int,
-                  progress: bool):
+def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], workers: int):
     """The outcomes of FrameWorker.process over `chunks`, in a pool of `workers` processes
     ('spawn': no Warp state is forked) that each build the engine once from `spec` and load
     the kernels from `cache`. Frames travel as paths: the processes share this disk."""
@@ -282,21 +287,12 @@ def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], 
 
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_pool_start, initargs=(spec, cache))
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=sum(map(len, chunks)), unit="frame", desc=f"dpom x{workers}", leave=False)
     try:
-        futures = [pool.submit(_pool_process, chunk) for chunk in chunks]
-        for fut, chunk in zip(futures, chunks):
+        for fut in [pool.submit(_pool_process, chunk) for chunk in chunks]:
             try:
                 yield from fut.result()
             except BrokenProcessPool as e:
                 raise WorkerError(f"--workers: a worker process died ({e}); finished frames are "
                                   f"kept, continue with --resume") from None
-            if bar is not None:
-                bar.update(len(chunk))
     finally:
-        if bar is not None:
-            bar.close()
         pool.shutdown(wait=True, cancel_futures=True)
