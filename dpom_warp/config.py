@@ -1,18 +1,28 @@
 """Run configuration: YAML validated once, at the edge, into typed objects.
 
-Every error is one line naming the key, what was expected and what was found.
+The config's form is a tree of pydantic models (`ConfigFile` and its sections): one source
+for validation, defaults, the JSON Schema that editors use (`dpom-warp schema`) and the
+README's config reference (`python -m bench.docs`). Every error is one line naming the key,
+what was expected and what was found. Relative paths in a config file are relative to the
+file's folder; those given with `--set` (or in a mapping) to the current folder.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
+import difflib
+import os
+import re
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 import yaml
+from pydantic import (BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, Tag,
+                      ValidationError, model_validator)
+from pydantic_core import PydanticCustomError
 
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
 from .ground import GroundOptions
@@ -26,82 +36,78 @@ class ConfigError(ValueError):
 
 
 def _fmt(v):
-    return repr(v) if not isinstance(v, (dict, list)) else type(v).__name__
+    return repr(v) if not isinstance(v, (dict, list, tuple)) else type(v).__name__
 
 
-class _Section:
-    """Reads one mapping of the config, remembering the keys used so unknown ones are errors."""
+def _fail(message: str, key: str = "") -> PydanticCustomError:
+    """An error with our own message; `key` (dotted) is appended to the error's location."""
+    return PydanticCustomError("dpom", message, {"key": key}) if key else PydanticCustomError("dpom", message)
 
-    def __init__(self, raw, path: str):
-        if raw is None:
-            raw = {}
-        if not isinstance(raw, dict):
-            raise ConfigError(f"{path or 'config'}: expected a mapping, found {_fmt(raw)}")
-        self.raw, self.path, self.used = raw, path, set()
 
-    def key(self, name):
-        return f"{self.path}.{name}" if self.path else name
+# -- value types: each checks its input and says what it expected ------------------------------
+def _number(v):
+    if isinstance(v, str):  # YAML 1.1 reads 1e-3 (no dot) as a string
+        try:
+            if np.isfinite(float(v)):
+                return float(v)
+        except ValueError:
+            pass
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise _fail(f"expected a number, found {_fmt(v)}")
+    return v
 
-    def get(self, name, default=None, required=False):
-        self.used.add(name)
-        v = self.raw.get(name)
-        if v is None:
-            if required:
-                raise ConfigError(f"{self.key(name)}: required key is missing")
-            return default
-        return v
 
-    def section(self, name) -> "_Section":
-        return _Section(self.get(name), self.key(name))
+def _integer(v):
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise _fail(f"expected an integer, found {_fmt(v)}")
+    return v
 
-    def number(self, name, default=None, *, lo=None, hi=None, lo_open=False, hi_open=False,
-               integer=False, required=False):
-        v = self.get(name, default, required)
-        if v is None:
-            return None
-        if isinstance(v, str) and not integer:  # YAML 1.1 reads 1e-3 (no dot) as a string
-            try:
-                v = float(v) if np.isfinite(float(v)) else v
-            except ValueError:
-                pass
-        ok_type = isinstance(v, int) if integer else isinstance(v, (int, float))
-        if isinstance(v, bool) or not ok_type:
-            kind = "an integer" if integer else "a number"
-            raise ConfigError(f"{self.key(name)}: expected {kind}, found {_fmt(v)}")
-        check_range(self.key(name), v, lo, hi, lo_open, hi_open)
-        return int(v) if integer else float(v)
 
-    def string(self, name, default=None, required=False, choices=None, nullable=False):
-        v = self.get(name, default, required)
-        if v is None and (nullable or default is None):
-            return None
-        if not isinstance(v, str):
-            raise ConfigError(f"{self.key(name)}: expected a string, found {_fmt(v)}")
-        if choices and v not in choices:
-            raise ConfigError(f"{self.key(name)}: expected one of {', '.join(choices)}, found {v!r}")
-        return v
+def _boolean(v):
+    if not isinstance(v, bool):
+        raise _fail(f"expected true or false, found {_fmt(v)}")
+    return v
 
-    def boolean(self, name, default):
-        v = self.get(name, default)
-        if not isinstance(v, bool):
-            raise ConfigError(f"{self.key(name)}: expected true or false, found {_fmt(v)}")
-        return v
 
-    def numbers(self, name, n, default=None, required=False):
-        v = self.get(name, default, required)
-        if v is None:
-            return None
+def _string(v):
+    if not isinstance(v, str):
+        raise _fail(f"expected a string, found {_fmt(v)}")
+    return v
+
+
+def _numbers(n: int):
+    def check(v):
         if (not isinstance(v, (list, tuple)) or len(v) != n
                 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
-            raise ConfigError(f"{self.key(name)}: expected a list of {n} numbers, found {_fmt(v)}"
-                              + (f" of length {len(v)}" if isinstance(v, list) else ""))
+            raise _fail(f"expected a list of {n} numbers, found {_fmt(v)}"
+                        + (f" of length {len(v)}" if isinstance(v, (list, tuple)) else ""))
         return tuple(float(x) for x in v)
+    return BeforeValidator(check)
 
-    def done(self):
-        unknown = sorted(set(self.raw) - self.used)
-        if unknown:
-            raise ConfigError(f"{self.key(unknown[0])}: unknown key (expected one of "
-                              f"{', '.join(sorted(self.used))})")
+
+class PathValue:
+    """Marks a config value that is a file, folder or glob: relative to the config's folder."""
+
+
+Num = Annotated[float, BeforeValidator(_number)]
+Int = Annotated[int, BeforeValidator(_integer)]
+Bool = Annotated[bool, BeforeValidator(_boolean)]
+Str = Annotated[str, BeforeValidator(_string)]
+FilePath = Annotated[str, BeforeValidator(_string), PathValue()]
+Pair = Annotated[tuple[float, float], _numbers(2)]
+Triple = Annotated[tuple[float, float, float], _numbers(3)]
+
+
+def _axis(v):
+    lo, hi, step = _numbers(3).func(v)
+    if step <= 0:
+        raise _fail(f"expected a step > 0 in [min, max, step], found {step!r}")
+    if lo >= hi:
+        raise _fail(f"expected min < max in [min, max, step], found {lo!r} >= {hi!r}")
+    return lo, hi, step
+
+
+Axis = Annotated[tuple[float, float, float], BeforeValidator(_axis)]
 
 
 def check_device(device: str, key: str = "device") -> str:
@@ -110,13 +116,481 @@ def check_device(device: str, key: str = "device") -> str:
     return device
 
 
-def check_range(key, v, lo=None, hi=None, lo_open=False, hi_open=False):
-    if lo is not None and (v < lo or (lo_open and v == lo)):
-        raise ConfigError(f"{key}: expected a value {'>' if lo_open else '>='} {lo}, found {v!r}")
-    if hi is not None and (v > hi or (hi_open and v == hi)):
-        raise ConfigError(f"{key}: expected a value {'<' if hi_open else '<='} {hi}, found {v!r}")
+def _device(v):
+    try:
+        return check_device(_string(v))
+    except ConfigError:
+        raise _fail(f"expected auto, cpu, cuda or cuda:N, found {v!r}") from None
 
 
+Device = Annotated[str, BeforeValidator(_device), Field(pattern=r"^(auto|cpu|cuda(:[0-9]+)?)$")]
+
+
+def _stride(v):
+    if v == "auto":
+        return v
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise _fail(f"expected auto or an integer >= 1, found {_fmt(v)}")
+    if not 1 <= v <= 64:
+        raise _fail(f"expected a value {'>= 1' if v < 1 else '<= 64'}, found {v}")
+    return v
+
+
+Stride = Annotated[Union[Literal["auto"], Annotated[int, Field(ge=1, le=64)]], BeforeValidator(_stride)]
+
+
+# -- the sections -------------------------------------------------------------------------------
+class Node(BaseModel):
+    """A mapping of the config: unknown keys are errors that name the closest known key."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _mapping(cls, raw):
+        if raw is None:
+            return {}
+        if not isinstance(raw, dict):
+            raise _fail(f"expected a mapping, found {_fmt(raw)}")
+        known = list(cls.model_fields)
+        for key in raw:
+            if key not in known:
+                close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+                hint = f"did you mean {close[0]}? " if close else ""
+                raise _fail(f"unknown key ({hint}expected one of {', '.join(known)})", str(key))
+        return raw
+
+
+def _d(cls, name):
+    """The default of a domain dataclass's field: one place for every default."""
+    return next(f.default for f in fields(cls) if f.name == name)
+
+
+class BackgroundAutoSection(Node):
+    """How `input.background: auto` estimates the background from the run's own frames."""
+
+    max_frames: Int = Field(_d(AutoBackground, "max_frames"), ge=1,
+                            description="frames used, evenly spread over the sequence")
+    min_frames: Int = Field(_d(AutoBackground, "min_frames"), ge=1,
+                            description="fewer frames: the floor-only model everywhere")
+    min_share: Num = Field(_d(AutoBackground, "min_share"), gt=0, le=1,
+                           description="share of the frames a cluster must hold to be the background")
+    slots: Int = Field(_d(AutoBackground, "slots"), ge=1, le=16, description="clusters kept per pixel")
+    cluster_sigmas: Num = Field(_d(AutoBackground, "cluster_sigmas"), ge=0,
+                                description="a reading joins a cluster within cluster_sigmas sensor "
+                                            "sigmas + cluster_floor of its mean")
+    cluster_floor: Num = Field(_d(AutoBackground, "cluster_floor"), ge=0, description="metres")
+
+    @model_validator(mode="after")
+    def _frames(self):
+        if self.min_frames > self.max_frames:
+            raise _fail(f"expected at most max_frames ({self.max_frames}), found {self.min_frames}",
+                        "min_frames")
+        return self
+
+
+class InputSection(Node):
+    """The depth frames and the background."""
+
+    frames: FilePath | None = Field(None, description="glob of depth frames (16-bit PNG or .npy, in depth "
+                                                      "units), processed in sorted order; "
+                                                      "required by dpom-warp run")
+    background: Union[Literal["auto"], FilePath, None] = Field(
+        None, description="glob of background frames (no people); auto: estimated from the run's own "
+                          "frames; null: the floor-only background")
+    depth_scale: Num = Field(0.001, gt=0, description="metres per unit of the files' values; 0 = no reading")
+    stride: Stride = Field("auto", description="inference on blocks of stride x stride pixels; auto: the "
+                                               "coarsest stride (up to 8) leaving 6 pixels across the "
+                                               "object at the farthest cell; pictures, boxes and the "
+                                               "floor fit stay at full resolution")
+    reduce: Literal[REDUCERS] = Field("median", description="how a block becomes one reading: median "
+                                                            "(lower median of its readings), nearest "
+                                                            "(one pixel), min")
+    background_auto: BackgroundAutoSection = BackgroundAutoSection()
+
+
+class Intrinsics(Node):
+    """Pinhole intrinsics in pixels, pixel centres at integers."""
+
+    fx: Num = Field(gt=0)
+    fy: Num = Field(gt=0)
+    cx: Num = Field(ge=0)
+    cy: Num = Field(ge=0)
+
+
+def _matrix(v):
+    if not (isinstance(v, list) and len(v) == 4 and all(
+            isinstance(row, list) and len(row) == 4
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in row) for row in v)):
+        raise _fail(f"expected a 4x4 list of numbers, found {_fmt(v)}")
+    return v
+
+
+class PoseMatrix(Node):
+    """The camera's pose as a matrix (OpenCV camera frame to world: z up, floor z = 0);
+    `dpom-warp fit-ground` output pastes in as it is (its report keys are ignored)."""
+
+    T_world_from_camera: Annotated[list[list[float]], BeforeValidator(_matrix)] = Field(
+        description="4x4 rigid transform, rows")
+    camera_height: Num | None = Field(None, description="fit-ground report (ignored)")
+    pitch_deg: Num | None = Field(None, description="fit-ground report (ignored)")
+    roll_deg: Num | None = Field(None, description="fit-ground report (ignored)")
+    inlier_count: Int | None = Field(None, description="fit-ground report (ignored)")
+
+    @model_validator(mode="after")
+    def _rigid(self):
+        m = np.array(self.T_world_from_camera, dtype=np.float64)
+        r = m[:3, :3]
+        if (not np.allclose(r.T @ r, np.eye(3), atol=1e-3) or abs(np.linalg.det(r) - 1) > 1e-3
+                or not np.allclose(m[3], [0, 0, 0, 1])):
+            raise _fail("expected a rigid transform (orthonormal rotation, last row 0 0 0 1), found "
+                        "a matrix that is not", "T_world_from_camera")
+        return self
+
+
+class PoseAngles(Node):
+    """The camera at (x, y, height) looking along +y, tilted down by pitch."""
+
+    height: Num = Field(gt=0, description="metres above the floor")
+    pitch_deg: Num = Field(0.0, ge=-90, le=90, description="downward tilt, degrees")
+    roll_deg: Num = Field(0.0, ge=-180, le=180)
+    yaw_deg: Num = Field(0.0, ge=-360, le=360)
+    x: Num = 0.0
+    y: Num = 0.0
+
+
+EXTRINSICS_EXPECTED = "auto, {T_world_from_camera: 4x4} or {height, pitch_deg, roll_deg}"
+
+
+def _pose_kind(v):
+    if v == "auto":
+        return "<auto>"
+    if isinstance(v, dict):
+        return "<matrix>" if "T_world_from_camera" in v else "<angles>"
+    return None
+
+
+def _extrinsics(v):
+    if _pose_kind(v) is None and not isinstance(v, BaseModel):
+        raise _fail(f"expected {EXTRINSICS_EXPECTED}, found {_fmt(v)}")
+    return v
+
+
+Extrinsics = Annotated[
+    Annotated[Union[Annotated[Literal["auto"], Tag("<auto>")], Annotated[PoseMatrix, Tag("<matrix>")],
+                    Annotated[PoseAngles, Tag("<angles>")]], Discriminator(_pose_kind)],
+    BeforeValidator(_extrinsics)]
+
+
+class GroundSection(Node):
+    """Floor fitting for `extrinsics: auto`."""
+
+    frames: Int = Field(5, ge=1, description="first frames used when there are no background frames")
+    up: Triple = Field(_d(GroundOptions, "up"), description="prior up direction in the camera frame")
+    max_angle_deg: Num = Field(_d(GroundOptions, "max_angle_deg"), gt=0, le=90,
+                               description="largest angle between the floor normal and `up`")
+    distance_threshold: Num = Field(_d(GroundOptions, "distance_threshold"), gt=0,
+                                    description="RANSAC inlier distance, metres")
+    depth_max: Num = Field(_d(GroundOptions, "depth_max"), gt=0, description="readings beyond are not used, metres")
+    min_inliers: Int = Field(_d(GroundOptions, "min_inliers"), ge=3)
+    stride: Int = Field(_d(GroundOptions, "stride"), ge=1, description="every stride-th pixel")
+    max_planes: Int = Field(_d(GroundOptions, "max_planes"), ge=1, description="planes peeled off, largest first")
+    voxel: Num = Field(_d(GroundOptions, "voxel"), gt=0, description="downsampling voxel, metres")
+    noise: Pair = Field(_d(GroundOptions, "noise"), description="depth noise a + b z^2 of the refinement, metres")
+
+    @model_validator(mode="after")
+    def _up(self):
+        if np.linalg.norm(self.up) == 0:
+            raise _fail(f"expected a non-zero direction, found {list(self.up)}", "up")
+        return self
+
+
+def _inside_image(camera):
+    """The principal point within the image (a camera section or file)."""
+    i = camera.intrinsics
+    for key, value, size in (("cx", i.cx, camera.width), ("cy", i.cy, camera.height)):
+        if value > size:
+            raise _fail(f"expected a value <= {size}, found {value:g}", f"intrinsics.{key}")
+    return camera
+
+
+class CameraSection(Node):
+    """The depth camera: image size, intrinsics, pose, lens."""
+
+    width: Int = Field(ge=1, description="image width in pixels; frames must match")
+    height: Int = Field(ge=1, description="image height in pixels")
+    intrinsics: Intrinsics
+    extrinsics: Extrinsics = Field(description="auto (fit the floor), {T_world_from_camera: 4x4} or "
+                                               "{height, pitch_deg, roll_deg, yaw_deg, x, y}")
+    distortion: Annotated[tuple[float, float, float, float, float], _numbers(5)] | None = Field(
+        None, description="[k1, k2, p1, p2, k3] (OpenCV model)")
+    ground: GroundSection = GroundSection()
+
+    @model_validator(mode="after")
+    def _principal_point(self):
+        return _inside_image(self)
+
+
+class GridSection(Node):
+    """The locations: cells of a ground grid or voxels of a 3D grid."""
+
+    mode: Literal["ground", "voxel"] = Field("ground", description="ground: objects standing on cells "
+                                                                   "of the floor; voxel: objects centred "
+                                                                   "on voxels")
+    x: Axis = Field(description="[min, max, step] metres; cells tile [min, max]")
+    y: Axis = Field(description="[min, max, step] metres")
+    z: Axis | None = Field(None, description="[min, max, step] metres; voxel mode only")
+
+    @model_validator(mode="after")
+    def _z(self):
+        if self.mode == "ground" and self.z is not None:
+            raise _fail("expected no z axis in ground mode (objects stand on the floor); use mode: "
+                        "voxel for a 3D grid", "z")
+        if self.mode == "voxel" and self.z is None:
+            raise _fail("required key is missing", "z")
+        return self
+
+
+class ObjectSection(Node):
+    """The object's box, metres."""
+
+    width: Num = Field(0.5, gt=0)
+    height: Num = Field(1.8, gt=0)
+    depth: Num | None = Field(None, gt=0, description="default: = width")
+
+
+class ModelSection(Node):
+    """The DPOM pixel models and mean-field inference (../shared/MODEL.md)."""
+
+    prior: Num = Field(_d(ModelParams, "prior"), gt=0, lt=1, description="prior occupancy of every cell")
+    sigma_object: Num = Field(_d(ModelParams, "sigma_object"), gt=0,
+                              description="spread of an object's surface about its facing plane, metres")
+    sensor_noise: Pair = Field(_d(ModelParams, "sensor_noise"),
+                               description="sensor sigma(z) = a + b z^2, metres; adds to sigma_object "
+                                           "and floors the background spread")
+    outlier_prob: Num = Field(_d(ModelParams, "outlier_prob"), gt=0, lt=1, description="pi_out")
+    missing_prob: Num = Field(_d(ModelParams, "missing_prob"), ge=0, lt=1,
+                              description="pi_inf of objects and of the floor-only background")
+    z_max: Num = Field(_d(ModelParams, "z_max"), gt=0, description="sensor range, metres")
+    alpha: Num = Field(_d(ModelParams, "alpha"), description="soft threshold rho* = sigmoid(alpha e + beta) rho")
+    beta: Num = Field(_d(ModelParams, "beta"), description="see alpha")
+    damping: Num = Field(_d(ModelParams, "damping"), gt=0, le=1,
+                         description="lambda of the damped update at the first iteration")
+    damping_growth: Num = Field(_d(ModelParams, "damping_growth"), ge=1, description="growth of lambda per iteration")
+    damping_max: Num | None = Field(None, gt=0, le=1,
+                                    description=f"cap of lambda (default {_d(ModelParams, 'damping_max')}, "
+                                                f"never below damping)")
+    tolerance: Num = Field(_d(ModelParams, "tolerance"), gt=0,
+                           description="stop when max |rho_new - rho| is below it")
+    max_iterations: Int = Field(_d(ModelParams, "max_iterations"), ge=1,
+                                description="iteration cap; frames that reach it unconverged are counted")
+    check_every: Int = Field(_d(ModelParams, "check_every"), ge=1,
+                             description="iterations between convergence checks")
+    missing_clip: Num = Field(_d(ModelParams, "missing_clip"), gt=0, lt=0.5,
+                              description="background pi_inf is clipped to [c, 1 - c]")
+    background_outside_grid: Bool = Field(_d(ModelParams, "background_outside_grid"),
+                                          description="floor-only background: readings out of every "
+                                                      "object box are background")
+    background_occludes: Bool = Field(_d(ModelParams, "background_occludes"),
+                                      description="a location does not claim pixels where the known "
+                                                  "background is in front of it by occlusion_margin")
+    occlusion_margin: Num = Field(_d(ModelParams, "occlusion_margin"), ge=0, description="metres")
+    sparse_epsilon: Num = Field(_d(ModelParams, "sparse_epsilon"), ge=0, le=0.5,
+                                description="sparse iterations: cells whose rho and rho_new are below "
+                                            "it leave the lists until a full pass; 0: every pass full")
+    warm_start: Bool = Field(_d(ModelParams, "warm_start"),
+                             description="start each frame from the previous frame's rho capped at the "
+                                         "prior (not with --workers or --ray)")
+    top_support: Num = Field(_d(ModelParams, "top_support"), ge=0, le=1,
+                             description="the top-band test: rho* x sigmoid(top_slope (u - top_support)); 0: off")
+    top_band: Num = Field(_d(ModelParams, "top_band"), ge=0, lt=1,
+                          description="the band starts at top_band x the object height")
+    top_hidden: Num = Field(_d(ModelParams, "top_hidden"), ge=0, le=1,
+                            description="a hidden band pixel counts as this much of a supporting one")
+    top_slope: Num = Field(_d(ModelParams, "top_slope"), gt=0)
+    top_min_pixels: Int = Field(_d(ModelParams, "top_min_pixels"), ge=1,
+                                description="fewer readings in the band: not judged")
+
+    @model_validator(mode="after")
+    def _checks(self):
+        if min(self.sensor_noise) < 0:
+            raise _fail(f"expected [a, b] >= 0, found {list(self.sensor_noise)}", "sensor_noise")
+        if self.damping_max is not None and self.damping_max < self.damping:
+            raise _fail(f"expected at least model.damping ({self.damping}), found {self.damping_max}",
+                        "damping_max")
+        return self
+
+
+class DetectionSection(Node):
+    """Detections from the rho* map."""
+
+    threshold: Num = Field(0.5, gt=0, lt=1, description="minimum rho* of a detection (a local maximum)")
+    nms_radius: Num = Field(0.4, ge=0, description="greedy non-maximum suppression radius, metres")
+
+
+class EvaluationSection(Node):
+    """Scores against ground truth."""
+
+    ground_truth: FilePath | None = Field(None, description="ground-truth JSON; scores go into summary.json")
+    match_distance: Num = Field(0.5, gt=0, description="matching gate on the ground plane, metres")
+    hidden_visibility: Num = Field(0.1, ge=0, le=1,
+                                   description="people less visible than this are not penalised in "
+                                               "the second protocol")
+    plots: Bool = Field(False, description="also write the evaluation figures into plots/")
+
+
+class OutputSection(Node):
+    """What the run writes."""
+
+    dir: FilePath = Field("runs/out", description="output folder (--output overrides)")
+    images: Bool = Field(True, description="a picture per frame")
+    ply: Bool = Field(False, description="the frame's points and the detected boxes as .ply files")
+
+
+class EngineSection(Node):
+    """The Warp engine's buffers and launches."""
+
+    entries_per_pixel: Num = Field(8.0, gt=0, description="initial mask-list capacity per pixel")
+    max_entries: Int | None = Field(None, ge=1, description="hard cap on the list capacity; a frame "
+                                                            "above it is refused, never truncated")
+    memory_gb: Num | None = Field(8.0, gt=0, description="memory budget of the engine's buffers, GiB")
+    batch: Int = Field(1, ge=1, description="frames per engine call (for GPUs)")
+    graph: Literal["auto", "on", "off"] = Field("auto", description="replay the iteration loop as a "
+                                                                    "captured graph; auto: on CUDA only")
+    exact: Bool = Field(False, description="the exact path: full resolution, every pass full, no warm "
+                                           "start (the NumPy reference's results to 1e-6)")
+
+
+def _sd(name):
+    return _d(SceneSpec, name)
+
+
+class SyntheticSection(Node):
+    """Render a synthetic sequence before the run (once; later runs reuse it)."""
+
+    cache: FilePath = Field(description="folder of the rendered frames, background and ground truth")
+    seed: Int = Field(_sd("seed"), ge=0)
+    frames: Int = Field(_sd("frames"), ge=1)
+    background_frames: Int = Field(_sd("background_frames"), ge=0, description="frames of the empty room")
+    people: Int = Field(_sd("people"), ge=0, description="people walking, or drones flying")
+    kind: Literal["people", "drones"] = _sd("kind")
+    area: Annotated[tuple[float, float, float, float], _numbers(4)] = Field(
+        _sd("area"), description="x_min, x_max, y_min, y_max where they move, metres")
+    altitude: Pair = Field(_sd("altitude"), description="drones' heights, metres")
+    obstacles: Int = Field(_sd("obstacles"), ge=0, description="free-standing cabinets")
+    room: Annotated[tuple[float, float, float, float, float], _numbers(5)] = Field(
+        _sd("room"), description="x_min, x_max, y_min, y_max, height of the walls, metres")
+    furniture: Int = Field(_sd("furniture"), ge=0)
+    step_m: Num = Field(_sd("step_m"), ge=0, description="walk per frame, metres")
+    pair_gap: Num = Field(_sd("pair_gap"), ge=0, description="> 0: people walk in pairs this far apart")
+    noise: Pair = Field(_sd("noise"), description="depth noise a + b z^2, metres")
+    dropout: Num = Field(_sd("dropout"), ge=0, le=1, description="share of pixels with no reading")
+    edge_holes: Num = Field(_sd("edge_holes"), ge=0, le=1)
+    range_m: Pair = Field(_sd("range_m"), description="near, far sensor range, metres")
+
+
+class ConfigFile(Node):
+    """A dpom-warp run config (`dpom-warp run CONFIG`)."""
+
+    model_config = ConfigDict(title="dpom-warp run config")
+
+    device: Device = Field("auto", description="auto (first CUDA device, else the CPU), cpu, cuda, cuda:N")
+    input: InputSection
+    camera: CameraSection
+    grid: GridSection
+    object: ObjectSection = ObjectSection()
+    model: ModelSection = ModelSection()
+    detection: DetectionSection = DetectionSection()
+    evaluation: EvaluationSection = EvaluationSection()
+    output: OutputSection = OutputSection()
+    engine: EngineSection = EngineSection()
+    synthetic: SyntheticSection | None = None
+
+    @model_validator(mode="after")
+    def _across_sections(self):
+        grid, obj = self.grid, self.object
+        sizes = [("x", "width", obj.width), ("y", "depth" if obj.depth else "width", obj.depth or obj.width)]
+        if grid.mode == "voxel":
+            sizes.append(("z", "height", obj.height))
+        for axis, key, size in sizes:
+            lo, hi, _ = getattr(grid, axis)
+            if size > hi - lo:
+                raise _fail(f"expected at most the grid's {axis} extent {hi - lo:g} m, found {size:g}",
+                            f"object.{key}")
+        if self.synthetic is not None and self.camera.extrinsics == "auto":
+            raise _fail("rendering needs a camera pose; expected camera.extrinsics given as "
+                        "{height, pitch_deg, ...} or a matrix, found auto", "synthetic")
+        return self
+
+
+def json_schema() -> dict:
+    """The JSON Schema of a run config (what `dpom-warp schema` writes)."""
+    schema = ConfigFile.model_json_schema()
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **schema}
+
+
+def path_keys(model: type[BaseModel] = ConfigFile, prefix: str = "") -> list[str]:
+    """Dotted keys of the config values that are paths (PathValue), from the models."""
+    keys = []
+    for name, info in model.model_fields.items():
+        key = f"{prefix}{name}"
+        if any(isinstance(m, PathValue) for m in info.metadata) or _has_path(info.annotation):
+            keys.append(key)
+        for sub in _sections(info.annotation):
+            keys += path_keys(sub, key + ".")
+    return keys
+
+
+def _args(tp):
+    return getattr(tp, "__args__", ()) or ()
+
+
+def _has_path(tp) -> bool:
+    meta = getattr(tp, "__metadata__", ())
+    return any(isinstance(m, PathValue) for m in meta) or any(_has_path(a) for a in _args(tp))
+
+
+def _sections(tp) -> list[type[BaseModel]]:
+    if isinstance(tp, type) and issubclass(tp, Node):
+        return [tp]
+    return [s for a in _args(tp) for s in _sections(a)]
+
+
+# -- errors as one line -------------------------------------------------------------------------
+def _g(x):
+    return f"{x:g}" if isinstance(x, (int, float)) else str(x)
+
+
+def _one_line(error: dict) -> str:
+    loc = [str(p) for p in error["loc"] if not str(p).startswith("<")]
+    ctx = error.get("ctx") or {}
+    if ctx.get("key"):
+        loc.append(ctx["key"])
+    key = ".".join(loc) or "config"
+    kind, found = error["type"], _fmt(error.get("input"))
+    bounds = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<", "less_than_equal": "<="}
+    if kind == "missing":
+        text = "required key is missing"
+    elif kind in bounds:
+        limit = ctx.get({">": "gt", ">=": "ge", "<": "lt", "<=": "le"}[bounds[kind]])
+        text = f"expected a value {bounds[kind]} {_g(limit)}, found {found}"
+    elif kind == "literal_error":
+        choices = re.findall(r"'([^']*)'", str(ctx.get("expected", "")))
+        text = f"expected one of {', '.join(choices)}, found {found}"
+    elif kind == "dpom":
+        text = error["msg"]
+    else:
+        text = f"{error['msg'][0].lower()}{error['msg'][1:]}, found {found}"
+    return f"{key}: {text}"
+
+
+def _first_error(e: ValidationError) -> str:
+    errors = e.errors(include_url=False)
+    unknown = [x for x in errors if x["type"] == "dpom" and x["msg"].startswith("unknown key")]
+    return _one_line((unknown or errors)[0])
+
+
+# -- the typed run config the pipeline uses ----------------------------------------------------
 @dataclass(frozen=True)
 class Detection:
     threshold: float = 0.5
@@ -133,7 +607,7 @@ class Evaluation:
 
 @dataclass(frozen=True)
 class Inputs:
-    frames: str
+    frames: str | None = None
     background: str | None = None
     depth_scale: float = 0.001
     stride: int | str = "auto"  # "auto" or an integer >= 1 (dpom_warp.resolution)
@@ -188,259 +662,70 @@ class RunConfig:
     ground_frames: int = 5
 
 
-def _axis(sec: _Section, name, required=True):
-    v = sec.numbers(name, 3, required=required)
-    if v is None:
-        return None
-    lo, hi, step = v
-    if step <= 0:
-        raise ConfigError(f"{sec.key(name)}: expected a step > 0 in [min, max, step], found {step!r}")
-    if lo >= hi:
-        raise ConfigError(f"{sec.key(name)}: expected min < max in [min, max, step], found {lo!r} >= {hi!r}")
-    return v
-
-
-FIT_REPORT_KEYS = ("camera_height", "pitch_deg", "roll_deg", "inlier_count")
-
-
-def _pose(sec: _Section):
-    if "T_world_from_camera" in sec.raw:
-        t = sec.get("T_world_from_camera")
-        if not (isinstance(t, list) and len(t) == 4 and all(
-                isinstance(row, list) and len(row) == 4
-                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in row)
-                for row in t)):
-            raise ConfigError(f"{sec.key('T_world_from_camera')}: expected a 4x4 list of numbers, "
-                              f"found {_fmt(t)}")
-        sec.used.update(FIT_REPORT_KEYS)  # `dpom-warp fit-ground` output pastes in as it is
-        m = np.array(t, dtype=np.float64)
-        r = m[:3, :3]
-        if (not np.allclose(r.T @ r, np.eye(3), atol=1e-3) or abs(np.linalg.det(r) - 1) > 1e-3
-                or not np.allclose(m[3], [0, 0, 0, 1])):
-            raise ConfigError(f"{sec.key('T_world_from_camera')}: expected a rigid transform "
-                              f"(orthonormal rotation, last row 0 0 0 1), found a matrix that is not")
-        sec.done()
-        return m, {"T_world_from_camera": m.tolist()}
-    h = sec.number("height", required=True, lo=0, lo_open=True)
-    pitch = sec.number("pitch_deg", 0.0, lo=-90, hi=90)
-    roll = sec.number("roll_deg", 0.0, lo=-180, hi=180)
-    yaw = sec.number("yaw_deg", 0.0, lo=-360, hi=360)
-    x, y = sec.number("x", 0.0), sec.number("y", 0.0)
-    sec.done()
-    m = pose_from_angles(h, pitch, roll, yaw, x, y)
-    return m, {"height": h, "pitch_deg": pitch, "roll_deg": roll, "yaw_deg": yaw, "x": x, "y": y}
+def _fill(cls, section: BaseModel, **changes):
+    """A domain dataclass from a validated section (the fields they share)."""
+    names = {f.name for f in fields(cls)} - set(changes)
+    return cls(**{k: v for k, v in section.model_dump().items() if k in names}, **changes)
 
 
 def parse_config(raw: dict[str, Any]) -> RunConfig:
     """Validate a config mapping (as loaded from YAML) into a RunConfig."""
-    top = _Section(raw, "")
-    device = check_device(top.string("device", "auto"))
-
-    s = top.section("input")
-    stride = s.get("stride", "auto")
-    if isinstance(stride, str) and stride != "auto":
-        raise ConfigError(f"input.stride: expected auto or an integer >= 1, found {stride!r}")
-    if stride != "auto":
-        stride = s.number("stride", integer=True, lo=1, hi=64)
-    a = s.section("background_auto")
-    d = AutoBackground()
-    auto = AutoBackground(max_frames=a.number("max_frames", d.max_frames, integer=True, lo=1),
-                          min_frames=a.number("min_frames", d.min_frames, integer=True, lo=1),
-                          min_share=a.number("min_share", d.min_share, lo=0, hi=1, lo_open=True),
-                          slots=a.number("slots", d.slots, integer=True, lo=1, hi=16),
-                          cluster_sigmas=a.number("cluster_sigmas", d.cluster_sigmas, lo=0),
-                          cluster_floor=a.number("cluster_floor", d.cluster_floor, lo=0))
-    a.done()
-    if auto.min_frames > auto.max_frames:
-        raise ConfigError(f"input.background_auto.min_frames: expected at most max_frames "
-                          f"({auto.max_frames}), found {auto.min_frames}")
-    inputs = Inputs(frames=s.string("frames", required=True),
-                    background=s.string("background", None, nullable=True),
-                    depth_scale=s.number("depth_scale", 0.001, lo=0, lo_open=True),
-                    stride=stride,
-                    reduce=s.string("reduce", "median", choices=REDUCERS),
-                    background_auto=auto)
-    s.done()
-
-    s = top.section("camera")
-    width = s.number("width", required=True, integer=True, lo=1)
-    height = s.number("height", required=True, integer=True, lo=1)
-    i = s.section("intrinsics")
-    fx = i.number("fx", required=True, lo=0, lo_open=True)
-    fy = i.number("fy", required=True, lo=0, lo_open=True)
-    cx = i.number("cx", required=True, lo=0, hi=width)
-    cy = i.number("cy", required=True, lo=0, hi=height)
-    i.done()
-    ext = s.get("extrinsics", required=True)
+    try:
+        c = ConfigFile.model_validate(raw)
+    except ValidationError as e:
+        raise ConfigError(_first_error(e)) from None
+    s = c.input
+    inputs = Inputs(frames=s.frames, background=s.background, depth_scale=s.depth_scale, stride=s.stride,
+                    reduce=s.reduce, background_auto=_fill(AutoBackground, s.background_auto))
+    cam, ext = c.camera, c.camera.extrinsics
     pose_auto = ext == "auto"
     if pose_auto:
         pose, pose_resolved = np.eye(4), "auto"
-    elif isinstance(ext, str):
-        raise ConfigError(f"camera.extrinsics: expected auto, {{T_world_from_camera: 4x4}} or "
-                          f"{{height, pitch_deg, roll_deg}}, found {ext!r}")
+    elif isinstance(ext, PoseMatrix):
+        pose = np.array(ext.T_world_from_camera, dtype=np.float64)
+        pose_resolved = {"T_world_from_camera": pose.tolist()}
     else:
-        pose, pose_resolved = _pose(_Section(ext, "camera.extrinsics"))
-    distortion = s.numbers("distortion", 5, None)
-    g = s.section("ground")
-    d = GroundOptions()
-    ground = GroundOptions(
-        up=g.numbers("up", 3, d.up),
-        max_angle_deg=g.number("max_angle_deg", d.max_angle_deg, lo=0, hi=90, lo_open=True),
-        distance_threshold=g.number("distance_threshold", d.distance_threshold, lo=0, lo_open=True),
-        depth_max=g.number("depth_max", d.depth_max, lo=0, lo_open=True),
-        min_inliers=g.number("min_inliers", d.min_inliers, integer=True, lo=3),
-        stride=g.number("stride", d.stride, integer=True, lo=1),
-        max_planes=g.number("max_planes", d.max_planes, integer=True, lo=1),
-        voxel=g.number("voxel", d.voxel, lo=0, lo_open=True),
-        noise=g.numbers("noise", 2, d.noise),
-    )
-    ground_frames = g.number("frames", 5, integer=True, lo=1)
-    if np.linalg.norm(ground.up) == 0:
-        raise ConfigError(f"camera.ground.up: expected a non-zero direction, found {list(ground.up)}")
-    g.done()
-    s.done()
-    camera = Camera(width, height, fx, fy, cx, cy, pose, distortion)
-
-    s = top.section("grid")
-    mode = s.string("mode", "ground", choices=("ground", "voxel"))
-    x_axis, y_axis = _axis(s, "x"), _axis(s, "y")
-    z_axis = _axis(s, "z", required=mode == "voxel")
-    if mode == "ground" and z_axis is not None:
-        raise ConfigError("grid.z: expected no z axis in ground mode (objects stand on the floor); "
-                          "use mode: voxel for a 3D grid")
-    grid = Grid(x=x_axis, y=y_axis, mode=mode, z=z_axis)
-    s.done()
-
-    s = top.section("object")
-    obj = ObjectBox(width=s.number("width", 0.5, lo=0, lo_open=True),
-                    height=s.number("height", 1.8, lo=0, lo_open=True),
-                    depth=s.number("depth", None, lo=0, lo_open=True))
-    s.done()
-    sizes = [("x", "width", obj.width), ("y", "depth" if obj.depth else "width", obj.depth or obj.width)]
-    if mode == "voxel":
-        sizes.append(("z", "height", obj.height))
-    for axis, key, size in sizes:
-        lo, hi, _ = getattr(grid, axis)
-        if size > hi - lo:
-            raise ConfigError(f"object.{key}: expected at most the grid's {axis} extent "
-                              f"{hi - lo:g} m, found {size:g}")
-
-    s = top.section("model")
-    d = ModelParams()
-    model = ModelParams(
-        prior=s.number("prior", d.prior, lo=0, hi=1, lo_open=True, hi_open=True),
-        sigma_object=s.number("sigma_object", d.sigma_object, lo=0, lo_open=True),
-        sensor_noise=s.numbers("sensor_noise", 2, d.sensor_noise),
-        outlier_prob=s.number("outlier_prob", d.outlier_prob, lo=0, hi=1, lo_open=True, hi_open=True),
-        missing_prob=s.number("missing_prob", d.missing_prob, lo=0, hi=1, hi_open=True),
-        z_max=s.number("z_max", d.z_max, lo=0, lo_open=True),
-        alpha=s.number("alpha", d.alpha),
-        beta=s.number("beta", d.beta),
-        damping=s.number("damping", d.damping, lo=0, hi=1, lo_open=True),
-        damping_growth=s.number("damping_growth", d.damping_growth, lo=1),
-        damping_max=s.number("damping_max", None, lo=0, hi=1, lo_open=True),
-        tolerance=s.number("tolerance", d.tolerance, lo=0, lo_open=True),
-        max_iterations=s.number("max_iterations", d.max_iterations, integer=True, lo=1),
-        check_every=s.number("check_every", d.check_every, integer=True, lo=1),
-        missing_clip=s.number("missing_clip", d.missing_clip, lo=0, hi=0.5, lo_open=True, hi_open=True),
-        background_outside_grid=s.boolean("background_outside_grid", d.background_outside_grid),
-        background_occludes=s.boolean("background_occludes", d.background_occludes),
-        occlusion_margin=s.number("occlusion_margin", d.occlusion_margin, lo=0),
-        sparse_epsilon=s.number("sparse_epsilon", d.sparse_epsilon, lo=0, hi=0.5),
-        warm_start=s.boolean("warm_start", d.warm_start),
-        top_support=s.number("top_support", d.top_support, lo=0, hi=1),
-        top_band=s.number("top_band", d.top_band, lo=0, hi=1, hi_open=True),
-        top_hidden=s.number("top_hidden", d.top_hidden, lo=0, hi=1),
-        top_slope=s.number("top_slope", d.top_slope, lo=0, lo_open=True),
-        top_min_pixels=s.number("top_min_pixels", d.top_min_pixels, integer=True, lo=1),
-    )
-    if "damping_max" not in s.raw:  # default cap, never below the starting damping
-        model = dataclasses.replace(model, damping_max=max(d.damping_max, model.damping))
-    if model.damping_max < model.damping:
-        raise ConfigError(f"model.damping_max: expected at least model.damping "
-                          f"({model.damping}), found {model.damping_max}")
-    if min(model.sensor_noise) < 0:
-        raise ConfigError(f"model.sensor_noise: expected [a, b] >= 0, found {list(model.sensor_noise)}")
-    s.done()
-
-    s = top.section("detection")
-    detection = Detection(threshold=s.number("threshold", 0.5, lo=0, hi=1, lo_open=True, hi_open=True),
-                          nms_radius=s.number("nms_radius", 0.4, lo=0))
-    s.done()
-
-    s = top.section("evaluation")
-    evaluation = Evaluation(ground_truth=s.string("ground_truth", None, nullable=True),
-                            match_distance=s.number("match_distance", 0.5, lo=0, lo_open=True),
-                            hidden_visibility=s.number("hidden_visibility", 0.1, lo=0, hi=1),
-                            plots=s.boolean("plots", False))
-    s.done()
-
-    s = top.section("output")
-    output = Output(dir=s.string("dir", "runs/out"), images=s.boolean("images", True),
-                    ply=s.boolean("ply", False))
-    s.done()
-
-    s = top.section("engine")
-    engine = EngineOptions(entries_per_pixel=s.number("entries_per_pixel", 8.0, lo=0, lo_open=True),
-                           max_entries=s.number("max_entries", None, integer=True, lo=1),
-                           memory_gb=s.number("memory_gb", 8.0, lo=0, lo_open=True),
-                           batch=s.number("batch", 1, integer=True, lo=1),
-                           graph=s.string("graph", "auto", choices=("auto", "on", "off")),
-                           exact=s.boolean("exact", False))
-    s.done()
+        pose_resolved = ext.model_dump()
+        pose = pose_from_angles(ext.height, ext.pitch_deg, ext.roll_deg, ext.yaw_deg, ext.x, ext.y)
+    i = cam.intrinsics
+    camera = Camera(cam.width, cam.height, i.fx, i.fy, i.cx, i.cy, pose, cam.distortion)
+    ground = _fill(GroundOptions, cam.ground)
+    grid = Grid(x=c.grid.x, y=c.grid.y, mode=c.grid.mode, z=c.grid.z)
+    obj = ObjectBox(width=c.object.width, height=c.object.height, depth=c.object.depth)
+    m = c.model
+    damping_max = m.damping_max if m.damping_max is not None else max(_d(ModelParams, "damping_max"), m.damping)
+    model = _fill(ModelParams, m, damping_max=damping_max)
+    detection = _fill(Detection, c.detection)
+    evaluation = _fill(Evaluation, c.evaluation)
+    output = _fill(Output, c.output)
+    engine = _fill(EngineOptions, c.engine)
     if engine.exact:  # the exact path: full resolution, every pass full, no warm start
         inputs = dataclasses.replace(inputs, stride=1)
         model = dataclasses.replace(model, sparse_epsilon=0.0, warm_start=False)
+    synthetic = _fill(SceneSpec, c.synthetic) if c.synthetic is not None else None
+    cache = c.synthetic.cache if c.synthetic is not None else None
 
-    synthetic, cache = None, None
-    if top.get("synthetic") is not None and pose_auto:
-        raise ConfigError("synthetic: rendering needs a camera pose; expected camera.extrinsics "
-                          "given as {height, pitch_deg, ...} or a matrix, found auto")
-    if top.get("synthetic") is not None:
-        s = top.section("synthetic")
-        d = SceneSpec()
-        cache = s.string("cache", required=True)
-        synthetic = SceneSpec(
-            seed=s.number("seed", d.seed, integer=True, lo=0),
-            frames=s.number("frames", d.frames, integer=True, lo=1),
-            background_frames=s.number("background_frames", d.background_frames, integer=True, lo=0),
-            people=s.number("people", d.people, integer=True, lo=0),
-            kind=s.string("kind", d.kind, choices=("people", "drones")),
-            area=s.numbers("area", 4, d.area),
-            altitude=s.numbers("altitude", 2, d.altitude),
-            obstacles=s.number("obstacles", d.obstacles, integer=True, lo=0),
-            room=s.numbers("room", 5, d.room),
-            furniture=s.number("furniture", d.furniture, integer=True, lo=0),
-            step_m=s.number("step_m", d.step_m, lo=0),
-            pair_gap=s.number("pair_gap", d.pair_gap, lo=0),
-            noise=s.numbers("noise", 2, d.noise),
-            dropout=s.number("dropout", d.dropout, lo=0, hi=1),
-            edge_holes=s.number("edge_holes", d.edge_holes, lo=0, hi=1),
-            range_m=s.numbers("range_m", 2, d.range_m),
-        )
-        s.done()
-    top.done()
+    def plain(v):
+        return list(v) if isinstance(v, tuple) else v
 
     resolved = {
-        "device": device,
+        "device": c.device,
         "input": {**vars_of(inputs), "background_auto": vars_of(inputs.background_auto)},
-        "camera": {"width": width, "height": height,
-                   "intrinsics": {"fx": fx, "fy": fy, "cx": cx, "cy": cy},
-                   "extrinsics": pose_resolved, "distortion": list(distortion) if distortion else None,
-                   "ground": {"frames": ground_frames, **{k: (list(v) if isinstance(v, tuple) else v)
-                                                          for k, v in vars_of(ground).items()}}},
-        "grid": {"mode": mode, "x": list(grid.x), "y": list(grid.y),
-                 **({"z": list(grid.z)} if grid.z else {})},
+        "camera": {"width": cam.width, "height": cam.height,
+                   "intrinsics": {"fx": i.fx, "fy": i.fy, "cx": i.cx, "cy": i.cy},
+                   "extrinsics": pose_resolved,
+                   "distortion": list(cam.distortion) if cam.distortion else None,
+                   "ground": {"frames": cam.ground.frames, **{k: plain(v) for k, v in vars_of(ground).items()}}},
+        "grid": {"mode": grid.mode, "x": list(grid.x), "y": list(grid.y), **({"z": list(grid.z)} if grid.z else {})},
         "object": {"width": obj.width, "height": obj.height, "depth": obj.depth},
-        "model": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars_of(model).items()},
+        "model": {k: plain(v) for k, v in vars_of(model).items()},
         "detection": vars_of(detection), "evaluation": vars_of(evaluation),
         "output": vars_of(output), "engine": vars_of(engine),
     }
     if synthetic is not None:
-        resolved["synthetic"] = {"cache": cache, **{k: (list(v) if isinstance(v, tuple) else v)
-                                                    for k, v in vars_of(synthetic).items()}}
-    return RunConfig(device, inputs, camera, grid, obj, model, detection, evaluation, output,
-                     engine, synthetic, cache, resolved, pose_auto, ground, ground_frames)
+        resolved["synthetic"] = {"cache": cache, **{k: plain(v) for k, v in vars_of(synthetic).items()}}
+    return RunConfig(c.device, inputs, camera, grid, obj, model, detection, evaluation, output,
+                     engine, synthetic, cache, resolved, pose_auto, ground, cam.ground.frames)
 
 
 def vars_of(dc) -> dict:
@@ -469,6 +754,23 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
     return out
 
 
+def resolve_paths(raw: dict, base: str | Path) -> dict:
+    """A copy of `raw` whose relative path values (path_keys) are joined to `base`, the config
+    file's folder (normalised, so a config in configs/ naming ../x gives x)."""
+    out = copy.deepcopy(raw)
+    for key in path_keys():
+        *parents, last = key.split(".")
+        node = out
+        for p in parents:
+            node = node.get(p) if isinstance(node, dict) else None
+        if not isinstance(node, dict):
+            continue
+        v = node.get(last)
+        if isinstance(v, str) and v != "auto" and not os.path.isabs(os.path.expanduser(v)):
+            node[last] = os.path.normpath(os.path.join(base, v))
+    return out
+
+
 def _read_yaml(path: Path, what: str):
     if not path.is_file():
         raise ConfigError(f"{path}: no such {what}")
@@ -480,16 +782,37 @@ def _read_yaml(path: Path, what: str):
         raise ConfigError(f"{path}: not valid YAML{where} ({getattr(e, 'problem', e)})") from None
 
 
-def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConfig:
-    """Read, override and validate a YAML run config."""
+def read_config(path: str | Path) -> dict:
+    """A config file's mapping, its relative paths made relative to the current folder."""
     path = Path(path)
     raw = _read_yaml(path, "config file")
     if not isinstance(raw, dict):
         raise ConfigError(f"{path}: expected a YAML mapping at the top, found {_fmt(raw)}")
+    return resolve_paths(raw, path.parent)
+
+
+def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConfig:
+    """Read, override and validate a YAML run config. Relative paths in the file are relative
+    to its folder; those in `overrides` to the current folder."""
+    raw = read_config(path)
     try:
         return parse_config(apply_overrides(raw, overrides or []))
     except ConfigError as e:
         raise ConfigError(f"{path}: {e}") from None
+
+
+class CameraFile(Node):
+    """A camera file as in shared/data/real/*/camera.yaml."""
+
+    width: Int = Field(ge=1)
+    height: Int = Field(ge=1)
+    intrinsics: Intrinsics
+    depth_scale: Num = Field(0.001, gt=0)
+    distortion: Annotated[tuple[float, float, float, float, float], _numbers(5)] | None = None
+
+    @model_validator(mode="after")
+    def _principal_point(self):
+        return _inside_image(self)
 
 
 def load_camera_file(path: str | Path) -> tuple[Camera, float]:
@@ -502,18 +825,8 @@ def load_camera_file(path: str | Path) -> tuple[Camera, float]:
     path = Path(path)
     raw = _read_yaml(path, "camera file")
     try:
-        s = _Section(raw, "")
-        width = s.number("width", required=True, integer=True, lo=1)
-        height = s.number("height", required=True, integer=True, lo=1)
-        i = s.section("intrinsics")
-        cam = Camera(width, height, i.number("fx", required=True, lo=0, lo_open=True),
-                     i.number("fy", required=True, lo=0, lo_open=True),
-                     i.number("cx", required=True, lo=0, hi=width),
-                     i.number("cy", required=True, lo=0, hi=height),
-                     distortion=s.numbers("distortion", 5, None))
-        i.done()
-        scale = s.number("depth_scale", 0.001, lo=0, lo_open=True)
-        s.done()
-    except ConfigError as e:
-        raise ConfigError(f"{path}: {e}") from None
-    return cam, scale
+        c = CameraFile.model_validate(raw)
+    except ValidationError as e:
+        raise ConfigError(f"{path}: {_first_error(e)}") from None
+    i = c.intrinsics
+    return Camera(c.width, c.height, i.fx, i.fy, i.cx, i.cy, distortion=c.distortion), c.depth_scale
