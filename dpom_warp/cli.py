@@ -1,9 +1,13 @@
-"""dpom-warp: people (and other objects) from single depth images with DPOM on Warp kernels.
+"""dpom-warp: people (and other objects) in depth images, with DPOM on Warp kernels.
 
-  dpom-warp run CONFIG... [--output DIR] [--device D] [--set key.path=value ...]
+commands:
+  dpom-warp run CONFIG... [--output DIR] [--device D] [--set KEY.PATH=VALUE ...]
                 [--workers N] [--ray [ADDRESS]] [--resume | --overwrite]
   dpom-warp fit-ground DEPTH... --camera CAMERA.yaml [--output POSE.yaml]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
+  dpom-warp schema [--output FILE]
+
+`dpom-warp COMMAND --help` explains each; the README has the config reference.
 """
 
 from __future__ import annotations
@@ -82,6 +86,11 @@ def output_dirs(sources: list[str], cfgs: list, output: str | None) -> list[str]
 def _report(summary: dict, out: str) -> None:
     if summary["skipped"]:
         print(f"{len(summary['skipped'])} frame(s) skipped (reasons in summary.json)")
+    if summary.get("unconverged"):
+        names = summary["unconverged"]
+        cap = summary["config"]["model"]["max_iterations"]
+        print(f"{len(names)} frame(s) stopped at model.max_iterations ({cap}) without converging: "
+              f"{', '.join(names[:5])}{', ...' if len(names) > 5 else ''} (listed in summary.json)")
     t = summary["timings"]
     print(f"{summary['frames']} frames, {summary['detections']} detections; median "
           f"{1000 * t['median_infer_s']:.0f} ms per frame ({t['median_iterations']:.0f} iterations) "
@@ -116,17 +125,30 @@ def _fit_ground(args) -> int:
     return 0
 
 
-def _eval(args) -> int:
+def eval_output(run: str, compare: list[str], output: str | None):
+    """Where `eval` writes: --output; else the run's folder (beside a CSV); with --compare a
+    folder of its own beside the first run, named after what was compared, so a run's own
+    eval.json and plots are never replaced."""
     from pathlib import Path
 
+    if output:
+        return Path(output)
+    first = Path(run)
+    home = first if first.is_dir() else first.parent
+    if not compare:
+        return home
+    names = [Path(p).name if Path(p).is_dir() else Path(p).stem for p in [run] + compare]
+    return home.parent / ("eval_" + "_vs_".join(names))
+
+
+def _eval(args) -> int:
     from .evaluate import evaluate_runs, markdown_table
     from .io import write_json_atomic
     from .pipeline import _jsonable
 
     results = evaluate_runs([args.run] + args.compare, args.ground_truth, args.hidden_visibility,
                             args.min_rho)
-    out = Path(args.output) if args.output else (Path(args.run) if Path(args.run).is_dir()
-                                                  else Path(args.run).parent)
+    out = eval_output(args.run, args.compare, args.output)
     write_json_atomic(out / "eval.json", _jsonable(results))
     print(markdown_table(results))
     print(f"\ncurves in {out / 'eval.json'}")
@@ -138,52 +160,99 @@ def _eval(args) -> int:
     return 0
 
 
+def _schema(args) -> int:
+    import json
+
+    from .config import json_schema
+    from .io import write_text_atomic
+
+    text = json.dumps(json_schema(), indent=2) + "\n"
+    if args.output:
+        write_text_atomic(args.output, text)
+        print(f"JSON Schema of the run config written to {args.output}")
+    else:
+        print(text, end="")
+    return 0
+
+
 def _terminate(signum, frame):
     raise KeyboardInterrupt
 
 
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions as written (one usage line each), and each option's default in its help
+    (options without a default say in their own words what happens without them)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if ("%(default)" in text or action.default in (None, False, [], argparse.SUPPRESS)
+                or not action.option_strings):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="dpom-warp", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("run", help="run DPOM over a sequence of depth frames")
-    p.add_argument("config", nargs="+", help="YAML run config (see README); several: one run each, "
+    from . import __version__
+
+    parser = argparse.ArgumentParser(prog="dpom-warp", description=__doc__, formatter_class=HelpFormatter)
+    parser.add_argument("--version", action="version", version=f"dpom-warp {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name, text, description):
+        return sub.add_parser(name, help=text, description=description, formatter_class=HelpFormatter)
+
+    p = command("run", "run DPOM over a sequence of depth frames",
+                "Run DPOM over a config's depth frames: detections.csv, maps, pictures, summary.json\n"
+                "(and scores with ground truth) in the output folder. Relative paths in a config are\n"
+                "relative to the config file's folder; paths given with --set, to this folder.")
+    p.add_argument("config", nargs="+", metavar="CONFIG", help="YAML run config (see README); several: one run each, "
                                              "each to its own output")
-    p.add_argument("--output", help="output folder (overrides output.dir); with several configs "
-                                    "each run writes to OUTPUT/<config name>")
-    p.add_argument("--device", help="auto, cpu or cuda:N (overrides device)")
+    p.add_argument("--output", metavar="DIR", help="output folder (default: the config's output.dir); with several "
+                                    "configs each run writes to OUTPUT/<config name>")
+    p.add_argument("--device", metavar="DEVICE", help="auto, cpu or cuda:N (default: the config's device)")
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
-                   help="override a config value, e.g. --set model.damping=0.2")
+                   help="override a config value (parsed as YAML), e.g. --set model.damping=0.2; "
+                        "repeatable")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--strict", action="store_true", help="a bad frame is fatal instead of skipped")
-    p.add_argument("--workers", type=int, default=None,
+    p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="infer frames in this many processes (Warp runs CPU kernels on one thread); "
-                        "with --ray, this many actors (default: one per CPU, or GPU, of the cluster)")
+                        "with --ray, this many actors (default: 1; with --ray one actor per CPU, or "
+                        "GPU, of the cluster)")
     p.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
                    help="infer frames on Ray actors: of the cluster at ADDRESS (or $RAY_ADDRESS; "
                         "'auto': the one `ray start` runs here), else of a new local Ray instance; "
-                        "needs the [ray] extra")
+                        "needs the [ray] extra (default: no Ray)")
     p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty output folder")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in its output folder, skipping finished frames")
-    g = sub.add_parser("fit-ground", help="find the floor and the camera pose from depth frames")
+    g = command("fit-ground", "find the floor and the camera pose from depth frames",
+                "Fit the floor plane in depth frames of one camera and print (or write) the pose to\n"
+                "paste under a config's camera.extrinsics.")
     g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy) of the same camera")
     g.add_argument("--camera", required=True, help="camera YAML: width, height, intrinsics, depth_scale")
-    g.add_argument("--output", help="write the pose YAML here")
+    g.add_argument("--output", help="write the pose YAML here (default: print it)")
     g.add_argument("--max-angle", type=float, default=45.0,
                    help="largest angle between the floor normal and the image's up (degrees)")
     g.add_argument("--depth-max", type=float, default=6.0, help="ignore readings beyond (metres)")
-    e = sub.add_parser("eval", help="score runs (or detection CSVs) against ground truth: MODA "
-                                     "curves, precision-recall, plots")
+    e = command("eval", "score runs (or detection CSVs) against ground truth",
+                "Score a run folder (and, with --compare, more runs or detection CSVs) against ground\n"
+                "truth: MODA and MODP curves, precision-recall, average precision, plots.")
     e.add_argument("run", help="a dpom-warp run folder, or a detections CSV")
     e.add_argument("--ground-truth", help="ground-truth JSON (default: the run's evaluation.ground_truth)")
     e.add_argument("--compare", nargs="+", default=[], metavar="RUN_OR_CSV",
                    help="more run folders or detections CSVs on the same plots and table")
     e.add_argument("--plots", action="store_true", help="write PNG figures into OUTPUT/plots")
-    e.add_argument("--output", help="where eval.json and plots go (default: the run folder)")
+    e.add_argument("--output", help="where eval.json and plots go (default: the run's folder; with "
+                                    "--compare, eval_RUN_vs_OTHER... beside it)")
     e.add_argument("--hidden-visibility", type=float, default=0.1,
                    help="people less visible than this are not penalised in the second protocol")
     e.add_argument("--min-rho", type=float, default=0.05,
                    help="lowest rho* re-detected from the maps for the threshold sweep")
+    m = command("schema", "write the JSON Schema of run configs (for editors)",
+                "Write the JSON Schema of run configs: point an editor's YAML support at it to\n"
+                "complete and check configs (configs/dpom-warp.schema.json is this output).")
+    m.add_argument("--output", help="write it to this file (default: print it)")
     args = parser.parse_args(argv)
     signal.signal(signal.SIGTERM, _terminate)  # a kill unwinds like Ctrl-C: no partial files
     try:
@@ -193,6 +262,8 @@ def main(argv: list[str] | None = None) -> int:
             return _fit_ground(args)
         if args.command == "eval":
             return _eval(args)
+        if args.command == "schema":
+            return _schema(args)
     except (ConfigError, InputError) as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 2

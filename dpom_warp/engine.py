@@ -97,6 +97,7 @@ class FrameResult:
     timings: dict = field(default_factory=dict)
     max_change: np.ndarray | None = None
     live: int | None = None  # live locations at the end (sparse iterations)
+    converged: bool = True  # False: stopped at max_iterations above the tolerance
 
 
 class Engine:
@@ -445,7 +446,7 @@ class Engine:
                           p.top_min_pixels, self.share, self.rho_star])
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))
-        iterations, max_change = self.iterations.numpy(), self.max_change.numpy()
+        iterations, max_change, done = self.iterations.numpy(), self.max_change.numpy(), self.done.numpy()
         live = self.live.numpy().reshape(self.batch, self.n_locations).sum(1)
         self._last_rho = rho[n - 1].copy()
         t3 = time.perf_counter()
@@ -455,5 +456,5 @@ class Engine:
         return [FrameResult(rho=rho[f].copy(), rho_star=rho_star[f].copy(), evidence_share=share[f].copy(),
                             iterations=int(iterations[f]), entries=int(counts[f].sum()),
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
-                            live=int(live[f]))
+                            live=int(live[f]), converged=bool(done[f]))
                 for f in range(n)]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import glob
 import json
+import os
 import platform
 import shutil
 import statistics
@@ -31,10 +32,12 @@ CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
 
 
 def expand(pattern: str, key: str) -> list[Path]:
-    files = sorted(Path(p) for p in glob.glob(pattern))
+    files = sorted(Path(p) for p in glob.glob(os.path.expanduser(pattern)))
     files = [f for f in files if f.is_file()]
     if not files:
-        raise InputError(f"{key}: no files match {pattern!r}")
+        where = os.path.abspath(os.path.expanduser(pattern))
+        raise InputError(f"{key}: no files match {pattern!r} (looked for {where}; relative paths in a "
+                         f"config file are relative to its folder)")
     return files
 
 
@@ -46,8 +49,9 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
         InputError: naming the frames, when no floor plane is found in them.
     """
     t = time.perf_counter()
-    fit = fit_ground_files(files, cfg.camera, cfg.inputs.depth_scale, cfg.ground)
     kind = "background frame" if cfg.inputs.background else "frame"
+    log(f"fitting the floor on {len(files)} {kind}{'s' if len(files) > 1 else ''} ...")
+    fit = fit_ground_files(files, cfg.camera, cfg.inputs.depth_scale, cfg.ground)
     log(f"ground plane from {len(files)} {kind}{'s' if len(files) > 1 else ''}: camera "
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
         f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")
@@ -196,19 +200,12 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     engine here only compiles the kernels (into the cache they are given) and is dropped."""
     t_start = time.perf_counter()
     out = Path(output_dir or cfg.output.dir)
-    if cfg.synthetic is not None:
-        t = time.perf_counter()
-        cached = (Path(cfg.synthetic_cache) / "scene.json").exists()
-        generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
-        log(f"synthetic scene: {cfg.synthetic.frames} frames in {cfg.synthetic_cache} "
-            f"({'checked' if cached else 'generated'} in {time.perf_counter() - t:.1f} s)")
+    render_synthetic(cfg, log)
+    if cfg.inputs.frames is None:
+        raise ConfigError("input.frames: required key is missing (the frames to run on)")
     shape = (cfg.camera.height, cfg.camera.width)
-    scale = cfg.inputs.depth_scale
-    frames, skipped = check_frames(expand(cfg.inputs.frames, "input.frames"), scale, shape, strict)
-    auto_bg = cfg.inputs.auto_background
-    bg_files = (expand(cfg.inputs.background, "input.background")
-                if cfg.inputs.background and not auto_bg else [])
-    bg_frames = [read_frame(cfg, f) for f in bg_files]  # a bad one is fatal
+    frames, skipped = check_frames(expand(cfg.inputs.frames, "input.frames"), cfg.inputs.depth_scale,
+                                   shape, strict)
     for item in skipped:
         log(f"skipping {item['reason']}")
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
@@ -216,6 +213,50 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         missing = [f.name for f in frames if f.name not in truth]
         if missing:
             raise InputError(f"{cfg.evaluation.ground_truth}: no ground truth for frame {missing[0]}")
+    s = set_up(cfg, frames, device, log, parallel)
+    return RunPlan(cfg, out, frames, skipped, truth, s.device, s.spec, s.geometry, s.ground,
+                   s.background, s.auto_report, s.inference, s.engine, t_start, s.setup_s)
+
+
+def render_synthetic(cfg: RunConfig, log=print) -> None:
+    """A config with a `synthetic` section: render its sequence (once: later calls check it)."""
+    if cfg.synthetic is None:
+        return
+    t = time.perf_counter()
+    cached = (Path(cfg.synthetic_cache) / "scene.json").exists()
+    if not cached:
+        log(f"rendering the synthetic scene ({cfg.synthetic.frames} frames) into {cfg.synthetic_cache} ...")
+    generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
+    log(f"synthetic scene: {cfg.synthetic.frames} frames in {cfg.synthetic_cache} "
+        f"({'checked' if cached else 'generated'} in {time.perf_counter() - t:.1f} s)")
+
+
+@dataclasses.dataclass
+class Setup:
+    """What a run infers with, built from its config: the device, the posed camera, the
+    full-resolution geometry (boxes, pictures, scores) and the engine with its background."""
+
+    device: str
+    spec: WorkerSpec
+    geometry: object
+    ground: dict | None
+    background: str
+    auto_report: dict | None
+    inference: dict
+    engine: Engine | None
+    setup_s: float
+
+
+def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=print,
+           parallel: bool = False) -> Setup:
+    """The pose (fitted with extrinsics: auto), the background (frames, auto from `frames`,
+    or the floor) and the engine of a run: what `dpom-warp run` and the Python API's
+    Detector both infer with. `frames`: the run's frames (read only for `auto` background
+    and for a floor fit without background frames)."""
+    auto_bg = cfg.inputs.auto_background
+    bg_files = (expand(cfg.inputs.background, "input.background")
+                if cfg.inputs.background and not auto_bg else [])
+    bg_frames = [read_frame(cfg, f) for f in bg_files]  # a bad one is fatal
     try:
         dev = resolve_device(device or cfg.device)
     except ValueError as e:
@@ -227,13 +268,18 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         if auto_bg and len(sample) >= cfg.inputs.background_auto.min_frames:
             camera, ground = fit_pose_on_estimate(cfg, sample, dev, log)
         else:
-            camera, ground = fit_camera_pose(cfg, bg_files or frames[:cfg.ground_frames], log)
+            fit_on = bg_files or frames[:cfg.ground_frames]
+            if not fit_on:
+                raise ConfigError("camera.extrinsics: auto needs frames to fit the floor on; expected "
+                                  "input.frames or input.background, found neither")
+            camera, ground = fit_camera_pose(cfg, fit_on, log)
 
     t = time.perf_counter()
     geometry = build_geometry(camera, cfg.grid, cfg.obj)  # full resolution: boxes, pictures
     if parallel and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers or --ray with it")
+    log("setting up the engine (tile index; Warp kernels compiled on first use, then cached) ...")
     try:
         engine = make_engine(cfg, camera, dev, cfg.engine.batch)
     except MemoryBudgetError as e:
@@ -244,6 +290,8 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         given = (engine.background(0), None) if parallel else None
         background = f"{len(bg_files)} background frames"
     elif auto_bg:
+        if len(sample) >= cfg.inputs.background_auto.min_frames:
+            log(f"estimating the background from {len(sample)} frames ...")
         estimator, auto_report = estimate_background(cfg, sample, engine.height, engine.width, dev,
                                                      engine.resolution)
         given = estimator.result()  # (Background, fallback): also what other workers take
@@ -262,9 +310,8 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     if parallel:  # an empty frame compiles every kernel into the cache the workers are given
         engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))
         engine = None
-    return RunPlan(cfg, out, frames, skipped, truth, dev, WorkerSpec(cfg, camera, dev, given),
-                   geometry, ground, background, auto_report, inference, engine, t_start,
-                   time.perf_counter() - t)
+    return Setup(dev, WorkerSpec(cfg, camera, dev, given), geometry, ground, background, auto_report,
+                 inference, engine, time.perf_counter() - t)
 
 
 def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None:
@@ -368,6 +415,7 @@ def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=pri
     from .ground import GroundFitError, fit_ground_frames
 
     t = time.perf_counter()
+    log(f"fitting the floor on the background estimated from {len(files)} frames ...")
     estimator, _ = estimate_background(cfg, files, cfg.camera.height, cfg.camera.width, device)
     bg, fallback = estimator.result()
     depth = np.where(fallback | (bg.outlier >= 1), 0.0, bg.mu)
@@ -398,6 +446,7 @@ def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background
         "device": dev, "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
         "background": background, "ground_fit": ground, "frames": len(done),
         "skipped": skipped, "detections": sum(p["detections"] for p in per_frame),
+        "unconverged": [p["frame"] for p in per_frame if not p.get("converged", True)],
         "list_capacity_growth": grown,
         "timings": {"median_read_s": median("read_s"), "median_infer_s": median("infer_s"),
                     "median_lists_s": median("engine_lists_s"),

@@ -116,6 +116,27 @@ class MapPanel:
             draw.ellipse((px - 7, py - 7, px + 7, py + 7), outline=(0, 255, 255), width=2)
 
 
+def place_label(draw: ImageDraw.ImageDraw, label: str, at, taken: list, bounds) -> tuple:
+    """The rectangle of a label drawn with its lower left at `at`, moved up (then down) by
+    whole label heights until it covers none of the labels in `taken` and stays inside
+    `bounds`; it is added to `taken`."""
+    x0, y0, x1, y1 = draw.textbbox(at, label, font=font(11), anchor="lb")
+    w, h = x1 - x0 + 2, y1 - y0 + 2
+    left = min(max(at[0], bounds[0]), bounds[2] - w)
+    base = at[1]
+    for k in [0] + [s * i for i in range(1, 20) for s in (-1, 1)]:
+        top = base - h + k * h
+        rect = (left, top, left + w, top + h)
+        inside = bounds[1] <= top and top + h <= bounds[3]
+        if inside and not any(rect[0] < r[2] and r[0] < rect[2] and rect[1] < r[3] and r[1] < rect[3]
+                              for r in taken):
+            break
+    else:
+        rect = (left, max(bounds[1], base - h), left + w, max(bounds[1], base - h) + h)
+    taken.append(rect)
+    return rect
+
+
 def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, title="",
                   z_max=None) -> bytes:
     """A PNG file's bytes: left the depth frame with detection boxes (solid, with rho*) and
@@ -123,7 +144,7 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     detections (circles), ground truth (crosses) and the camera position; for a voxel grid
     also a side view (maximum over y)."""
     voxel = rho_map.ndim == 3
-    truth = truth or []
+    has_truth, truth = truth is not None, truth or []
     depth = np.asarray(depth_m, dtype=np.float32)
     seen = depth > 0
     vmax = z_max or (float(np.percentile(depth[seen], 99)) if seen.any() else 1.0)
@@ -155,13 +176,15 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
         if "bbox" in o:
             u0, v0, u1, v1 = (np.asarray(o["bbox"], float) + [-0.5, -0.5, 0.5, 0.5]) * zoom
             dashed_rectangle(draw, (ox + u0, oy + v0, ox + u1, oy + v1), (0, 255, 0))
-    for d in detections:
-        u0, v0, u1, v1 = (np.asarray(d.box, float) + [-0.5, -0.5, 0.5, 0.5]) * zoom
+    boxes = [(np.asarray(d.box, float) + [-0.5, -0.5, 0.5, 0.5]) * zoom for d in detections]
+    for u0, v0, u1, v1 in boxes:
         draw.rectangle((ox + u0, oy + v0, ox + u1, oy + v1), outline=(255, 255, 255), width=2)
+    taken = []
+    for d, (u0, v0, u1, v1) in zip(detections, boxes):
         label = f"{d.rho:.2f}"
-        tb = draw.textbbox((ox + u0, oy + v0 - 2), label, font=font(11), anchor="lb")
+        tb = place_label(draw, label, (ox + u0, oy + v0 - 2), taken, (ox, oy, ox + depth_img.width, oy + PANEL_H))
         draw.rectangle(tb, fill=(0, 0, 0))
-        draw.text((ox + u0, oy + v0 - 2), label, fill=(255, 255, 255), font=font(11), anchor="lb")
+        draw.text((tb[0] + 1, tb[3] - 1), label, fill=(255, 255, 255), font=font(11), anchor="lb")
     draw.rectangle((ox - 1, oy - 1, ox + depth_img.width, oy + PANEL_H), outline=INK)
     draw.text((ox + depth_img.width / 2, oy - 8), f"{title}  ({len(detections)} detections)",
               fill=INK, font=font(13), anchor="md")
@@ -181,7 +204,8 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     else:
         ox += top.w
     colour_bar(draw, ox + 10, oy + 16, PANEL_H - 32, "magma", 0.0, 1.0, "rho*")
-    legend = [((0, 255, 0), "x ground truth"), ((0, 255, 255), "o detections"), ((255, 255, 255), "^ camera")]
+    legend = ([((0, 255, 0), "x ground truth")] if has_truth else []) + [
+        ((0, 255, 255), "o detections"), ((255, 255, 255), "^ camera")]
     for i, (c, text) in enumerate(legend):
         draw.text((PAD + 4 + 120 * i, height - 12), text, fill=tuple(int(v * 0.7) for v in c) if c != (255, 255, 255) else INK,
                   font=font(11), anchor="lm")

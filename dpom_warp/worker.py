@@ -146,14 +146,20 @@ class FrameWorker:
                                          engine.grown[grown:]))
         return outcomes
 
+    def detections(self, res) -> tuple[np.ndarray, list]:
+        """The rho* map (grid-shaped) of an engine result and its detections, located and
+        boxed on the full-resolution geometry."""
+        cfg, geometry = self.cfg, self.geometry
+        rho_map = res.rho_star.reshape(cfg.grid.shape)
+        return rho_map, detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
+                               cfg.detection.nms_radius)
+
     def _finish(self, item: FrameItem, depth, res, read_s: float, infer_s: float, grown: list):
         """Detections, map, picture and record of an inferred frame; `infer_s` is the
         frame's share of a batch."""
         cfg, geometry, f = self.cfg, self.geometry, Path(item.path)
         t1 = time.perf_counter()
-        rho_map = res.rho_star.reshape(cfg.grid.shape)
-        dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
-                      cfg.detection.nms_radius)
+        rho_map, dets = self.detections(res)
         t2 = time.perf_counter()
         files = {}
         if cfg.output.images:
@@ -170,6 +176,7 @@ class FrameWorker:
                      f"{d.box[2]},{d.box[3]}" for d in dets],
             "xy": [[d.x, d.y, d.z] if cfg.grid.mode == "voxel" else [d.x, d.y] for d in dets],
             "stats": {"frame": f.name, "detections": len(dets), "iterations": res.iterations,
+                      "converged": res.converged,
                       "live": res.live, "entries": res.entries, "read_s": read_s,
                       "infer_s": infer_s, "detect_s": t2 - t1, "render_s": t3 - t2,
                       "worker": self.name, **{f"engine_{k}": v for k, v in res.timings.items()}},

@@ -1,0 +1,240 @@
+"""The face of the package: the Python API against the CLI, the config schema, the config
+errors users hit first, --version, help, unconverged frames, pictures and eval --compare."""
+
+import csv
+import json
+import os
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+import yaml
+from PIL import Image
+
+from dpom_warp import Detector, __version__
+from dpom_warp.cli import main
+from dpom_warp.config import ConfigError, json_schema, load_config
+from dpom_warp.io import InputError, read_depth
+
+from test_cli import small_config
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = sorted((ROOT / "configs").glob("*.yaml"))
+SCHEMA = ROOT / "configs" / "dpom-warp.schema.json"
+
+
+def csv_rows(path):
+    return [r for r in csv.reader(open(path))][1:]
+
+
+def api_rows(name, result):
+    return [[name, f"{d.x:.4f}", f"{d.y:.4f}", f"{d.z:.4f}", f"{d.rho:.6f}", *map(str, d.box)]
+            for d in result.detections]
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory):
+    """The people demo through `dpom-warp run` (its scene rendered into .cache/demo_people,
+    shared with the quick start)."""
+    out = tmp_path_factory.mktemp("demo") / "run"
+    os.chdir(ROOT)
+    assert main(["run", "configs/demo_people.yaml", "--no-progress", "--output", str(out),
+                 "--set", "output.images=false"]) == 0
+    return out
+
+
+def test_api_gives_the_cli_detections_on_the_demo(demo_run):
+    det = Detector.from_config(ROOT / "configs" / "demo_people.yaml")
+    cfg = det.config
+    summary = json.loads((demo_run / "summary.json").read_text())
+    assert summary["inference"]["stride"] == det.engine.resolution.stride > 1  # the fast path
+    assert cfg.model.sparse_epsilon > 0
+    frames = sorted((ROOT / ".cache" / "demo_people" / "frames").glob("*.png"))
+    assert len(frames) == summary["frames"] == 20
+    rows, iterations = [], []
+    for f in frames:
+        depth = np.asarray(Image.open(f))  # uint16 in the config's depth units
+        result = det.detect(depth)
+        rows += api_rows(f.name, result)
+        iterations.append(result.iterations)
+        assert result.rho_star.shape == cfg.grid.shape and result.timings["total_s"] > 0
+    assert rows == csv_rows(demo_run / "detections.csv")
+    assert iterations == [p["iterations"] for p in summary["per_frame"]]  # the same work per frame
+
+
+def test_api_float_metres_and_batches_match_single_frames(tmp_path):
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    frames = sorted((tmp_path / "scene" / "frames").glob("*.png"))
+    metres = [read_depth(f, 0.001) for f in frames]
+    single = Detector.from_config(path)
+    batched = Detector.from_config(path, overrides={"engine.batch": 2})
+    one = [single.detect(np.asarray(Image.open(f))) for f in frames]
+    floats = [single.detect(m) for m in metres]
+    many = batched.detect_batch(np.stack(metres))
+    expected = csv_rows(tmp_path / "out" / "detections.csv")
+    for results in (one, floats, many):
+        assert [r for f, res in zip(frames, results) for r in api_rows(f.name, res)] == expected
+    np.testing.assert_array_equal(many[1].rho_star, one[1].rho_star)
+
+
+def test_api_errors(tmp_path):
+    path = small_config(tmp_path)
+    det = Detector.from_config(path)
+    with pytest.raises(InputError, match=r"expected an array of shape \(106, 128\).*found \(106, 127\)"):
+        det.detect(np.zeros((106, 127), np.uint16))
+    with pytest.raises(InputError, match="expected metres >= 0"):
+        det.detect(np.full((106, 128), -1.0))
+    raw = yaml.safe_load(path.read_text())
+    raw["modle"] = {}
+    with pytest.raises(ConfigError, match=r"^config: modle: unknown key \(did you mean model\?"):
+        Detector.from_config(raw)
+
+
+def test_schema_file_is_current_and_every_config_validates():
+    schema = json.loads(SCHEMA.read_text())
+    assert schema == json_schema(), "configs/dpom-warp.schema.json is stale: run dpom-warp schema --output it"
+    assert len(CONFIGS) >= 3
+    for path in CONFIGS:
+        jsonschema.validate(yaml.safe_load(path.read_text()), schema)
+        assert path.read_text().startswith("# yaml-language-server: $schema=dpom-warp.schema.json")
+
+
+@pytest.mark.parametrize("damage", [
+    lambda c: c.update(gird=c.pop("grid")),
+    lambda c: c["model"].update(prior=1.5),
+    lambda c: c["model"].update(damping="fast"),
+    lambda c: c["camera"].update(extrinsics="guess"),
+    lambda c: c["grid"].update(x=[0, 1]),
+    lambda c: c["output"].update(images="yes"),
+])
+def test_schema_rejects_a_broken_config(damage):
+    cfg = yaml.safe_load((ROOT / "configs" / "demo_people.yaml").read_text())
+    damage(cfg)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(cfg, json.loads(SCHEMA.read_text()))
+
+
+def test_schema_command(tmp_path, capsys):
+    assert main(["schema"]) == 0
+    assert json.loads(capsys.readouterr().out) == json_schema()
+    assert main(["schema", "--output", str(tmp_path / "s.json")]) == 0
+    assert json.loads((tmp_path / "s.json").read_text()) == json_schema()
+
+
+def test_misspelt_section_is_reported_as_unknown(tmp_path, capsys):
+    cfg = yaml.safe_load(small_config(tmp_path).read_text())
+    cfg["gird"] = cfg.pop("grid")
+    (tmp_path / "typo.yaml").write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(tmp_path / "typo.yaml"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "typo.yaml: gird: unknown key (did you mean grid? expected one of device, input" in err
+    assert len(err.splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
+def test_relative_paths_are_relative_to_the_config_folder(tmp_path, capsys, monkeypatch):
+    small_config(tmp_path)  # renders nothing yet; the config below renders into its folder
+    cfg = yaml.safe_load((tmp_path / "config.yaml").read_text())
+    folder = tmp_path / "configs"
+    folder.mkdir()
+    cfg["synthetic"]["cache"] = "../scene"
+    cfg["input"].update(frames="../scene/frames/*.png", background="../scene/background/*.png")
+    cfg["evaluation"]["ground_truth"] = "../scene/ground_truth.json"
+    cfg["output"]["dir"] = "../out"
+    (folder / "run.yaml").write_text(yaml.safe_dump(cfg))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    loaded = load_config(folder / "run.yaml", ["output.images=false"])
+    assert loaded.inputs.frames == str(tmp_path / "scene" / "frames" / "*.png")
+    assert loaded.output.dir == str(tmp_path / "out")
+    assert main(["run", str(folder / "run.yaml"), "--no-progress"]) == 0
+    assert (tmp_path / "out" / "detections.csv").exists() and (tmp_path / "scene" / "frames").is_dir()
+    capsys.readouterr()
+    # a --set path is relative to the current folder, and a failed glob says where it looked
+    assert main(["run", str(folder / "run.yaml"), "--no-progress", "--overwrite",
+                 "--set", "input.frames=frames/*.png"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"input.frames: no files match 'frames/*.png' (looked for {elsewhere}/frames/*.png;" in err
+    assert "relative to its folder" in err and len(err.splitlines()) == 1
+
+
+def test_version_and_help(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.strip() == f"dpom-warp {__version__}"
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    top = capsys.readouterr().out
+    assert "\n  dpom-warp run CONFIG..." in top and "\n  dpom-warp eval RUN_DIR" in top  # one per line
+    with pytest.raises(SystemExit):
+        main(["eval", "--help"])
+    assert "(default: 0.05)" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["fit-ground", "--help"])
+    assert "(default: 45.0)" in capsys.readouterr().out
+
+
+def test_unconverged_frames_are_counted_and_named(tmp_path, capsys, demo_run):
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress", "--set", "model.max_iterations=3",
+                 "--set", "model.check_every=1"]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["unconverged"] == [p["frame"] for p in summary["per_frame"]] and summary["unconverged"]
+    out = capsys.readouterr().out
+    assert f"{len(summary['unconverged'])} frame(s) stopped at model.max_iterations (3) without converging" in out
+    demo = json.loads((demo_run / "summary.json").read_text())  # converges in ~60 iterations
+    assert demo["unconverged"] == [] and all(p["converged"] for p in demo["per_frame"])
+
+
+def test_setup_steps_are_announced(tmp_path, capsys):
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("rendering the synthetic scene (3 frames)")
+    assert any(line.startswith("setting up the engine") for line in out)
+
+
+def test_picture_legend_and_labels():
+    from dpom_warp.detect import Detected
+    from dpom_warp.geometry import Grid
+    from dpom_warp.render import frame_picture, place_label
+    from PIL import ImageDraw
+
+    grid = Grid(x=(-1, 1, 0.1), y=(1, 3, 0.1))
+    rho = np.zeros(grid.shape)
+    dets = [Detected(0, 0.0, 2.0, 0.0, 0.9, (10, 10, 40, 80)), Detected(1, 0.1, 2.0, 0.0, 0.8, (12, 11, 42, 80))]
+    depth = np.full((106, 128), 2.0, np.float32)
+
+    def green_legend(png):
+        im = np.asarray(Image.open(__import__("io").BytesIO(png)).convert("RGB"))
+        band = im[-20:, :200].reshape(-1, 3)
+        return bool(np.any((band[:, 1] > 120) & (band[:, 0] < 60) & (band[:, 2] < 60)))
+
+    assert not green_legend(frame_picture(depth, rho, grid, dets, (0, 0)))
+    assert green_legend(frame_picture(depth, rho, grid, dets, (0, 0), truth=[]))
+    draw = ImageDraw.Draw(Image.new("RGB", (300, 300)))
+    taken = []
+    rects = [place_label(draw, "0.99", (50, 60 + i), taken, (0, 0, 300, 300)) for i in range(4)]
+    for i, a in enumerate(rects):
+        assert 0 <= a[1] and a[3] <= 300
+        for b in rects[:i]:
+            assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1]
+
+
+def test_eval_compare_leaves_the_runs_untouched(tmp_path, capsys):
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress", "--set", "evaluation.plots=true"]) == 0
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "floor"),
+                 "--set", "input.background=null"]) == 0
+    before = {p: p.read_bytes() for p in [out / "eval.json", tmp_path / "floor" / "eval.json",
+                                          *sorted((out / "plots").glob("*.png"))]}
+    assert main(["eval", str(out), "--compare", str(tmp_path / "floor"), "--plots"]) == 0
+    assert {p: p.read_bytes() for p in before} == before
+    target = tmp_path / "eval_out_vs_floor"
+    results = json.loads((target / "eval.json").read_text())
+    assert len(results) == 2
+    assert (target / "plots" / "moda_ground.png").exists()
+    assert f"curves in {target / 'eval.json'}" in capsys.readouterr().out
