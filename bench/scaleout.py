@@ -30,14 +30,14 @@ import sys
 import time
 from pathlib import Path
 
-import yaml
 
 
 def sets_for(config: str, frames: int | None) -> list[str]:
     if not frames:
         return []
-    cfg = yaml.safe_load(Path(config).read_text())
-    cache = f"{cfg['synthetic']['cache']}_{frames}"
+    from dpom_warp.config import read_config
+
+    cache = f"{read_config(config)['synthetic']['cache']}_{frames}"  # paths as the run reads them
     return [f"synthetic.frames={frames}", f"synthetic.cache={cache}",
             f"input.frames={cache}/frames/*.png", f"input.background={cache}/background/*.png",
             f"evaluation.ground_truth={cache}/ground_truth.json"]

@@ -212,10 +212,10 @@ class InputSection(Node):
 class Intrinsics(Node):
     """Pinhole intrinsics in pixels, pixel centres at integers."""
 
-    fx: Num = Field(gt=0)
-    fy: Num = Field(gt=0)
-    cx: Num = Field(ge=0)
-    cy: Num = Field(ge=0)
+    fx: Num = Field(gt=0, description="focal length along x, pixels")
+    fy: Num = Field(gt=0, description="focal length along y, pixels")
+    cx: Num = Field(ge=0, description="principal point x, pixels (pixel centres at integers)")
+    cy: Num = Field(ge=0, description="principal point y, pixels")
 
 
 def _matrix(v):
@@ -253,10 +253,10 @@ class PoseAngles(Node):
 
     height: Num = Field(gt=0, description="metres above the floor")
     pitch_deg: Num = Field(0.0, ge=-90, le=90, description="downward tilt, degrees")
-    roll_deg: Num = Field(0.0, ge=-180, le=180)
-    yaw_deg: Num = Field(0.0, ge=-360, le=360)
-    x: Num = 0.0
-    y: Num = 0.0
+    roll_deg: Num = Field(0.0, ge=-180, le=180, description="degrees")
+    yaw_deg: Num = Field(0.0, ge=-360, le=360, description="degrees")
+    x: Num = Field(0.0, description="metres")
+    y: Num = Field(0.0, description="metres")
 
 
 EXTRINSICS_EXPECTED = "auto, {T_world_from_camera: 4x4} or {height, pitch_deg, roll_deg}"
@@ -292,7 +292,8 @@ class GroundSection(Node):
     distance_threshold: Num = Field(_d(GroundOptions, "distance_threshold"), gt=0,
                                     description="RANSAC inlier distance, metres")
     depth_max: Num = Field(_d(GroundOptions, "depth_max"), gt=0, description="readings beyond are not used, metres")
-    min_inliers: Int = Field(_d(GroundOptions, "min_inliers"), ge=3)
+    min_inliers: Int = Field(_d(GroundOptions, "min_inliers"), ge=3,
+                             description="a floor candidate needs this many downsampled points")
     stride: Int = Field(_d(GroundOptions, "stride"), ge=1, description="every stride-th pixel")
     max_planes: Int = Field(_d(GroundOptions, "max_planes"), ge=1, description="planes peeled off, largest first")
     voxel: Num = Field(_d(GroundOptions, "voxel"), gt=0, description="downsampling voxel, metres")
@@ -354,8 +355,8 @@ class GridSection(Node):
 class ObjectSection(Node):
     """The object's box, metres."""
 
-    width: Num = Field(0.5, gt=0)
-    height: Num = Field(1.8, gt=0)
+    width: Num = Field(0.5, gt=0, description="metres, across the line of sight")
+    height: Num = Field(1.8, gt=0, description="metres")
     depth: Num | None = Field(None, gt=0, description="default: = width")
 
 
@@ -407,7 +408,7 @@ class ModelSection(Node):
                           description="the band starts at top_band x the object height")
     top_hidden: Num = Field(_d(ModelParams, "top_hidden"), ge=0, le=1,
                             description="a hidden band pixel counts as this much of a supporting one")
-    top_slope: Num = Field(_d(ModelParams, "top_slope"), gt=0)
+    top_slope: Num = Field(_d(ModelParams, "top_slope"), gt=0, description="steepness of the top-band sigmoid")
     top_min_pixels: Int = Field(_d(ModelParams, "top_min_pixels"), ge=1,
                                 description="fewer readings in the band: not judged")
 
@@ -469,23 +470,24 @@ class SyntheticSection(Node):
     """Render a synthetic sequence before the run (once; later runs reuse it)."""
 
     cache: FilePath = Field(description="folder of the rendered frames, background and ground truth")
-    seed: Int = Field(_sd("seed"), ge=0)
-    frames: Int = Field(_sd("frames"), ge=1)
+    seed: Int = Field(_sd("seed"), ge=0, description="seed of the whole sequence")
+    frames: Int = Field(_sd("frames"), ge=1, description="frames with people")
     background_frames: Int = Field(_sd("background_frames"), ge=0, description="frames of the empty room")
     people: Int = Field(_sd("people"), ge=0, description="people walking, or drones flying")
-    kind: Literal["people", "drones"] = _sd("kind")
+    kind: Literal["people", "drones"] = Field(_sd("kind"), description="what is rendered")
     area: Annotated[tuple[float, float, float, float], _numbers(4)] = Field(
         _sd("area"), description="x_min, x_max, y_min, y_max where they move, metres")
     altitude: Pair = Field(_sd("altitude"), description="drones' heights, metres")
     obstacles: Int = Field(_sd("obstacles"), ge=0, description="free-standing cabinets")
     room: Annotated[tuple[float, float, float, float, float], _numbers(5)] = Field(
         _sd("room"), description="x_min, x_max, y_min, y_max, height of the walls, metres")
-    furniture: Int = Field(_sd("furniture"), ge=0)
+    furniture: Int = Field(_sd("furniture"), ge=0, description="furniture pieces placed in the room")
     step_m: Num = Field(_sd("step_m"), ge=0, description="walk per frame, metres")
     pair_gap: Num = Field(_sd("pair_gap"), ge=0, description="> 0: people walk in pairs this far apart")
     noise: Pair = Field(_sd("noise"), description="depth noise a + b z^2, metres")
     dropout: Num = Field(_sd("dropout"), ge=0, le=1, description="share of pixels with no reading")
-    edge_holes: Num = Field(_sd("edge_holes"), ge=0, le=1)
+    edge_holes: Num = Field(_sd("edge_holes"), ge=0, le=1,
+                            description="probability of no reading at a depth edge")
     range_m: Pair = Field(_sd("range_m"), description="near, far sensor range, metres")
 
 

@@ -38,8 +38,7 @@ def demo_run(tmp_path_factory):
     """The people demo through `dpom-warp run` (its scene rendered into .cache/demo_people,
     shared with the quick start)."""
     out = tmp_path_factory.mktemp("demo") / "run"
-    os.chdir(ROOT)
-    assert main(["run", "configs/demo_people.yaml", "--no-progress", "--output", str(out),
+    assert main(["run", str(ROOT / "configs" / "demo_people.yaml"), "--no-progress", "--output", str(out),
                  "--set", "output.images=false"]) == 0
     return out
 
