@@ -237,3 +237,22 @@ def test_eval_compare_leaves_the_runs_untouched(tmp_path, capsys):
     assert len(results) == 2
     assert (target / "plots" / "moda_ground.png").exists()
     assert f"curves in {target / 'eval.json'}" in capsys.readouterr().out
+
+
+def test_readme_api_examples_run(monkeypatch, demo_run):
+    """The README's two API snippets, run as written on demo frames."""
+    import re
+
+    monkeypatch.chdir(ROOT)
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    assert len(blocks) >= 2
+    frames = sorted((ROOT / ".cache" / "demo_people" / "frames").glob("*.png"))[:2]
+    background = sorted((ROOT / ".cache" / "demo_people" / "background").glob("*.png"))[:3]
+    depths = np.stack([np.asarray(Image.open(f)) for f in frames])
+    first = {"depth": depths[0], "depths": depths, "print": lambda *a: None}
+    exec(blocks[0], first)
+    assert first["result"].detections and len(first["results"]) == 2
+    second = {"depth_m": read_depth(frames[0], 0.001),
+              "background_m": np.stack([read_depth(f, 0.001) for f in background])}
+    exec(blocks[1], second)
+    assert second["res"].rho_star.shape == (second["geometry"].locations.shape[0],)
