@@ -59,10 +59,16 @@ def run_variant(args):
     summary = run(cfg, str(Path(out) / slug / ({"frames": "bg"}.get(background, background) + tag)), "cpu",
                   progress=False, log=lambda *_: None, overwrite=True)
     s = summary["scores"]
-    return name, {k: s[k] for k in ("moda", "precision", "recall", "mean_error_m", "n_gt")} | {
+    result = {k: s[k] for k in ("moda", "precision", "recall", "mean_error_m", "n_gt")} | {
         "median_frame_s": summary["timings"]["median_infer_s"],
         "median_iterations": summary["timings"]["median_iterations"],
         "stride": summary["inference"]["stride"]}
+    if background == "frames" and not extra:  # the same frames through the clustering baseline
+        from bench.baseline import score_config
+
+        b = score_config(cfg)
+        result["baseline"] = {k: b[k] for k in ("moda", "precision", "recall", "mean_error_m")}
+    return name, result
 
 
 def main():
@@ -82,11 +88,12 @@ def main():
     with ProcessPoolExecutor(a.jobs) as pool:
         results = dict(pool.map(run_variant, jobs))
     lines = ["| scene | people | MODA | precision | recall | mean error (m) | stride | median s/frame "
-             "| iterations |", "|---|---|---|---|---|---|---|---|---|"]
+             "| iterations | clustering baseline MODA |", "|---|---|---|---|---|---|---|---|---|---|"]
     for n, r in results.items():
+        base = f"{r['baseline']['moda']:.3f}" if "baseline" in r else "-"
         lines.append(f"| {n} | {r['n_gt']} | {r['moda']:.3f} | {r['precision']:.3f} | {r['recall']:.3f} "
                      f"| {r['mean_error_m']:.3f} | {r['stride']} | {r['median_frame_s']:.3f} "
-                     f"| {r['median_iterations']:.0f} |")
+                     f"| {r['median_iterations']:.0f} | {base} |")
     modas = [r["moda"] for r in results.values()]
     lines.append(f"\nMODA over {len(modas)} variants: median {statistics.median(modas):.3f}, "
                  f"min {min(modas):.3f}, max {max(modas):.3f} "
