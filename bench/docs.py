@@ -96,17 +96,11 @@ def config_block() -> str:
         for name, info in model.model_fields.items():
             key = f"{prefix}{name}"
             subs = [a for a in _members(info.annotation) if isinstance(a, type) and issubclass(a, Node)]
-            text = (info.description or (subs[0].__doc__ or "").strip().splitlines()[0] if subs else
-                    info.description or "")
-            text = text.replace("|", "\\|")
-            if subs and all(s.__name__.startswith("Pose") for s in subs):
-                pass  # extrinsics: its forms are described in its own row
-            elif subs:
-                rows.append(f"| `{key}` | {default(info)} | {text} |")
-                for s in subs:
-                    walk(s, key + ".")
-                continue
-            rows.append(f"| `{key}` | {default(info)} | {text} |")
+            nested = subs and not all(s.__name__.startswith("Pose") for s in subs)  # extrinsics: one row
+            text = info.description or (subs[0].__doc__.strip().splitlines()[0] if nested else "")
+            rows.append(f"| `{key}` | {default(info)} | {text.replace('|', chr(92) + '|')} |")
+            for s in subs if nested else []:
+                walk(s, key + ".")
 
     walk(ConfigFile, "")
     return "\n".join(rows)

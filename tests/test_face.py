@@ -3,7 +3,6 @@ errors users hit first, --version, help, unconverged frames, pictures and eval -
 
 import csv
 import json
-import os
 from pathlib import Path
 
 import jsonschema
