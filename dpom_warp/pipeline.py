@@ -130,15 +130,10 @@ def check_frames(frames: list[Path], scale: float, shape, strict: bool) -> tuple
 
 
 @dataclasses.dataclass
-class RunPlan:
-    """A run checked and set up, before any output is written: what every way of inferring
-    its frames (this process, --workers processes, Ray actors) starts from."""
+class Setup:
+    """What a run infers with, built from its config: the device, the posed camera, the
+    full-resolution geometry (boxes, pictures, scores) and the engine with its background."""
 
-    cfg: RunConfig
-    out: Path
-    frames: list[Path]
-    skipped: list[dict]
-    truth: dict | None
     device: str
     spec: WorkerSpec  # how a worker builds the run's engine
     geometry: object  # full resolution: boxes, pictures, scores
@@ -147,8 +142,21 @@ class RunPlan:
     auto_report: dict | None
     inference: dict
     engine: Engine | None  # this process's engine (None when workers infer the frames)
+    setup_s: float
+
+
+@dataclasses.dataclass
+class RunPlan(Setup):
+    """A run checked and set up, before any output is written: what every way of inferring
+    its frames (this process, --workers processes, Ray actors) starts from (its Setup, with
+    the frames, the skipped ones, the ground truth and the output folder)."""
+
+    cfg: RunConfig
+    out: Path
+    frames: list[Path]
+    skipped: list[dict]
+    truth: dict | None
     t_start: float
-    t_setup: float
     records: dict = dataclasses.field(default_factory=dict)
     todo: list = dataclasses.field(default_factory=list)
     grown: list = dataclasses.field(default_factory=list)
@@ -214,8 +222,8 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         if missing:
             raise InputError(f"{cfg.evaluation.ground_truth}: no ground truth for frame {missing[0]}")
     s = set_up(cfg, frames, device, log, parallel)
-    return RunPlan(cfg, out, frames, skipped, truth, s.device, s.spec, s.geometry, s.ground,
-                   s.background, s.auto_report, s.inference, s.engine, t_start, s.setup_s)
+    return RunPlan(**{f.name: getattr(s, f.name) for f in dataclasses.fields(Setup)}, cfg=cfg,
+                   out=out, frames=frames, skipped=skipped, truth=truth, t_start=t_start)
 
 
 def render_synthetic(cfg: RunConfig, log=print) -> None:
@@ -229,22 +237,6 @@ def render_synthetic(cfg: RunConfig, log=print) -> None:
     generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
     log(f"synthetic scene: {cfg.synthetic.frames} frames in {cfg.synthetic_cache} "
         f"({'checked' if cached else 'generated'} in {time.perf_counter() - t:.1f} s)")
-
-
-@dataclasses.dataclass
-class Setup:
-    """What a run infers with, built from its config: the device, the posed camera, the
-    full-resolution geometry (boxes, pictures, scores) and the engine with its background."""
-
-    device: str
-    spec: WorkerSpec
-    geometry: object
-    ground: dict | None
-    background: str
-    auto_report: dict | None
-    inference: dict
-    engine: Engine | None
-    setup_s: float
 
 
 def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=print,
@@ -380,7 +372,7 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     summary["inference"] = plan.inference
     summary["runner"] = {**runner, "frames_resumed": len(done) - sum(plan.by_worker.values()),
                          "frames_per_worker": dict(sorted(plan.by_worker.items()))}
-    summary["timings"]["setup_s"] = plan.t_setup
+    summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))
     if truth is not None and done:  # the curves of `dpom-warp eval`, from the maps just written
