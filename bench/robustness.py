@@ -1,7 +1,8 @@
 """Do the demo's defaults hold on scenes they were not tuned on?
 
 Runs the people demo config over synthetic variants (other seeds, camera heights and tilts,
-crowd sizes), each a fresh rendered sequence, and reports MODA / precision / recall at 0.5 m.
+crowd sizes, crowds 0.45 m apart, ceiling cameras at pitch 45 to 90 over tables), each a fresh
+rendered sequence, and reports MODA / precision / recall at 0.5 m.
 
     python -m bench.robustness [--frames 10] [--jobs 2] [--output runs/robustness]
                                [--background frames|auto|floor] [--set key.path=value ...] [--name NAME]
@@ -21,6 +22,8 @@ import statistics
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+CEILING_90 = ["camera.extrinsics.pitch_deg=90", "camera.extrinsics.y=4.0", "grid.x=[-1.8, 1.8, 0.1]",
+              "grid.y=[2.4, 5.6, 0.1]", "synthetic.in_view=head"]
 VARIANTS = {
     "seed 1": [],
     "seed 2": [],
@@ -31,6 +34,26 @@ VARIANTS = {
     "3 people": ["synthetic.people=3"],
     "8 people": ["synthetic.people=8"],
     "side by side 0.45 m": ["synthetic.people=6", "synthetic.pair_gap=0.45"],
+    # crowds: people as close as 0.45 m, hiding each other
+    "crowd of 10, 0.45 m apart": ["synthetic.people=10", "synthetic.min_gap=0.45",
+                                  "synthetic.area=[-1.6, 1.6, 2.5, 5.5]"],
+    "crowd of 12, camera 2.6 m": ["synthetic.people=12", "synthetic.min_gap=0.45",
+                                  "synthetic.area=[-2.0, 2.0, 2.0, 6.0]", "camera.extrinsics.height=2.6",
+                                  "camera.extrinsics.pitch_deg=25"],
+    # ceiling cameras: the head must be in view (the feet often are not), tables in the room
+    "ceiling 3.0 m, pitch 90": [*CEILING_90, "camera.extrinsics.height=3.0", "synthetic.people=3",
+                                "synthetic.area=[-1.2, 1.2, 3.0, 5.0]"],
+    "ceiling 3.5 m, pitch 90, yaw 30": [*CEILING_90, "camera.extrinsics.height=3.5", "camera.extrinsics.yaw_deg=30",
+                                        "synthetic.people=5", "synthetic.tables=1",
+                                        "synthetic.area=[-1.5, 1.5, 2.7, 5.3]"],
+    "ceiling 2.6 m, pitch 45": ["synthetic.in_view=head", "camera.extrinsics.height=2.6",
+                                "camera.extrinsics.pitch_deg=45", "camera.extrinsics.y=0.5",
+                                "grid.x=[-2.4, 2.4, 0.1]", "grid.y=[0.6, 4.0, 0.1]", "synthetic.people=4",
+                                "synthetic.tables=1", "synthetic.area=[-1.8, 1.8, 1.0, 3.4]"],
+    "ceiling 3.2 m, pitch 45, yaw -40, 8 people": [
+        "synthetic.in_view=head", "camera.extrinsics.height=3.2", "camera.extrinsics.pitch_deg=45",
+        "camera.extrinsics.yaw_deg=-40", "camera.extrinsics.x=-3.0", "synthetic.people=8",
+        "synthetic.tables=2", "synthetic.area=[-2.5, 2.5, 1.5, 6.5]"],
 }
 
 BACKGROUNDS = {"frames": "background frames", "auto": "background estimated from the frames (auto)",

@@ -353,11 +353,22 @@ class GridSection(Node):
 
 
 class ObjectSection(Node):
-    """The object's box, metres."""
+    """The object's size and shape model, metres."""
 
     width: Num = Field(0.5, gt=0, description="metres, across the line of sight")
     height: Num = Field(1.8, gt=0, description="metres")
     depth: Num | None = Field(None, gt=0, description="default: = width")
+    shape: Literal["plane", "solid"] = Field(
+        _d(ObjectBox, "shape"), description="plane: a pixel expects the depth of the plane facing the "
+        "camera (the paper); solid: the depth where its ray enters an upright body and head "
+        "(README, How it works)")
+    radius: Num | None = Field(None, gt=0, description="solid: body radius, metres (default width / 2)")
+    head_radius: Num = Field(_d(ObjectBox, "head_radius"), ge=0,
+                             description="solid: head radius, metres (0: no head; ground grids)")
+    shoulder: Num = Field(_d(ObjectBox, "shoulder"), gt=0, le=1,
+                          description="solid: where the head begins, share of the height")
+    height_spread: Num = Field(_d(ObjectBox, "height_spread"), ge=0,
+                               description="solid: spread of the heights of its tops, metres")
 
 
 class ModelSection(Node):
@@ -484,6 +495,10 @@ class SyntheticSection(Node):
     furniture: Int = Field(_sd("furniture"), ge=0, description="furniture pieces placed in the room")
     step_m: Num = Field(_sd("step_m"), ge=0, description="walk per frame, metres")
     pair_gap: Num = Field(_sd("pair_gap"), ge=0, description="> 0: people walk in pairs this far apart")
+    min_gap: Num = Field(_sd("min_gap"), gt=0, description="people keep this far apart, metres")
+    tables: Int = Field(_sd("tables"), ge=0, description="free-standing tables inside the area")
+    in_view: Literal["body", "head"] = Field(_sd("in_view"), description="what of a person must be in "
+                                             "the image: body (eye level) or head (ceiling cameras)")
     noise: Pair = Field(_sd("noise"), description="depth noise a + b z^2, metres")
     dropout: Num = Field(_sd("dropout"), ge=0, le=1, description="share of pixels with no reading")
     edge_holes: Num = Field(_sd("edge_holes"), ge=0, le=1,
@@ -693,7 +708,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     camera = Camera(cam.width, cam.height, i.fx, i.fy, i.cx, i.cy, pose, cam.distortion)
     ground = _fill(GroundOptions, cam.ground)
     grid = Grid(x=c.grid.x, y=c.grid.y, mode=c.grid.mode, z=c.grid.z)
-    obj = ObjectBox(width=c.object.width, height=c.object.height, depth=c.object.depth)
+    obj = _fill(ObjectBox, c.object)
     m = c.model
     damping_max = m.damping_max if m.damping_max is not None else max(_d(ModelParams, "damping_max"), m.damping)
     model = _fill(ModelParams, m, damping_max=damping_max)
@@ -719,7 +734,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
                    "distortion": list(cam.distortion) if cam.distortion else None,
                    "ground": {"frames": cam.ground.frames, **{k: plain(v) for k, v in vars_of(ground).items()}}},
         "grid": {"mode": grid.mode, "x": list(grid.x), "y": list(grid.y), **({"z": list(grid.z)} if grid.z else {})},
-        "object": {"width": obj.width, "height": obj.height, "depth": obj.depth},
+        "object": vars_of(obj),
         "model": {k: plain(v) for k, v in vars_of(model).items()},
         "detection": vars_of(detection), "evaluation": vars_of(evaluation),
         "output": vars_of(output), "engine": vars_of(engine),

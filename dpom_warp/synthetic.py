@@ -39,6 +39,12 @@ class SceneSpec:
         step_m: distance a person walks between frames.
         pair_gap: > 0: people walk in pairs, side by side, this far apart (centre to centre,
             across their heading): person 2i + 1 at the left of person 2i.
+        min_gap: people keep at least this far apart, centre to centre (crowds: 0.45).
+        tables: free-standing tables (0.72-0.76 m high) inside `area`, which people walk around
+            (a ceiling camera sees them from above).
+        in_view: 'body': a person's feet and head are both in the image (a camera at eye
+            level); 'head': the top of the head is (a ceiling camera, which sees the floor at a
+            person's feet only far from below it).
         noise: (a, b) of the depth noise sigma(z) = a + b z^2, metres.
         dropout: share of pixels with no reading, at random.
         edge_holes: probability that a pixel at a depth edge has no reading.
@@ -57,6 +63,9 @@ class SceneSpec:
     furniture: int = 4
     step_m: float = 0.3
     pair_gap: float = 0.0
+    min_gap: float = 0.6
+    tables: int = 0
+    in_view: str = "body"
     noise: tuple[float, float] = (0.002, 0.0015)
     dropout: float = 0.01
     edge_holes: float = 0.5
@@ -166,6 +175,33 @@ def obstacle_meshes(spec: SceneSpec, rng: np.random.Generator, footprints):
         boxes.append(box)
         meshes.append(_box((w, d, h), (cx, cy, h / 2)))
     return meshes, boxes
+
+
+def table_meshes(spec: SceneSpec, rng: np.random.Generator, footprints):
+    """Free-standing tables (top and four legs) inside the walking area, 0.9 m clear of the
+    furniture and of each other (a table that finds no such place is left out); returns
+    meshes and their footprints (x0, x1, y0, y1)."""
+    ax0, ax1, ay0, ay1 = spec.area
+    meshes, placed = [], []
+    for _ in range(spec.tables):
+        for _ in range(200):
+            w, d, h = rng.uniform(0.8, 1.4), rng.uniform(0.6, 0.9), rng.uniform(0.72, 0.76)
+            if rng.random() < 0.5:
+                w, d = d, w
+            cx, cy = rng.uniform(ax0 + w / 2, ax1 - w / 2), rng.uniform(ay0 + d / 2, ay1 - d / 2)
+            fp = (cx - w / 2, cx + w / 2, cy - d / 2, cy + d / 2)
+            if all(fp[1] < f[0] - 0.9 or fp[0] > f[1] + 0.9 or fp[3] < f[2] - 0.9 or fp[2] > f[3] + 0.9
+                   for f in footprints + placed):
+                break
+        else:
+            continue
+        placed.append(fp)
+        meshes.append(_box((w, d, 0.04), (cx, cy, h - 0.02)))
+        for sx in (-1, 1):
+            for sy in (-1, 1):
+                meshes.append(_box((0.05, 0.05, h - 0.04),
+                                   (cx + sx * (w / 2 - 0.05), cy + sy * (d / 2 - 0.05), (h - 0.04) / 2)))
+    return meshes, placed
 
 
 def fly(spec: SceneSpec, camera: Camera, boxes, rng: np.random.Generator):
@@ -291,8 +327,9 @@ def sensor_noise(depth, spec: SceneSpec, rng: np.random.Generator):
     return np.where(lost, 0.0, noisy)
 
 
-def _in_view(camera: Camera, x, y, top):
-    u, v, z = camera.project(np.array([[x, y, 0.0], [x, y, top]]))
+def _in_view(camera: Camera, x, y, top, from_above=False):
+    """Feet and head in the image, or (`from_above`) the head."""
+    u, v, z = camera.project(np.array([[x, y, top]] if from_above else [[x, y, 0.0], [x, y, top]]))
     return bool(np.all(z > 0.3) and np.all((u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)))
 
 
@@ -302,16 +339,16 @@ def _free(x, y, footprints, margin=0.45):
 
 
 def walk(spec: SceneSpec, camera: Camera, footprints, rng: np.random.Generator):
-    """People's (x, y, heading, phase) per frame: a random walk that keeps them in view,
-    off the furniture and 0.6 m apart. Returns list over frames of lists of dicts."""
+    """People's (x, y, heading, phase) per frame: a random walk that keeps them in view
+    (spec.in_view), off the furniture and spec.min_gap apart. Returns list over frames of lists of dicts."""
     ax0, ax1, ay0, ay1 = spec.area
     heights = rng.uniform(1.55, 1.95, spec.people)
     builds = rng.uniform(0.9, 1.15, spec.people)
 
     def ok(x, y, others, i):
         return (ax0 <= x <= ax1 and ay0 <= y <= ay1 and _free(x, y, footprints)
-                and _in_view(camera, x, y, heights[i])
-                and all(math.hypot(x - o[0], y - o[1]) > 0.6 for o in others))
+                and _in_view(camera, x, y, heights[i], spec.in_view == "head")
+                and all(math.hypot(x - o[0], y - o[1]) > spec.min_gap for o in others))
 
     if spec.pair_gap > 0:
         return _walk_pairs(spec, ok, heights, builds, rng)
@@ -342,7 +379,7 @@ def walk(spec: SceneSpec, camera: Camera, footprints, rng: np.random.Generator):
 
 def _walk_pairs(spec: SceneSpec, ok, heights, builds, rng: np.random.Generator):
     """walk() for people in pairs (spec.pair_gap): each pair moves as one, the second person
-    pair_gap to the left of the first, both in view, off the furniture, 0.6 m from others."""
+    pair_gap to the left of the first, both in view, off the furniture, min_gap from others."""
     n, gap = spec.people, spec.pair_gap
     units = [list(range(i, min(i + 2, n))) for i in range(0, n, 2)]
 
@@ -404,12 +441,17 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
             pass
     if spec.kind not in ("people", "drones"):
         raise ValueError(f"synthetic.kind: expected people or drones, found {spec.kind!r}")
+    if spec.in_view not in ("body", "head"):
+        raise ValueError(f"synthetic.in_view: expected body or head, found {spec.in_view!r}")
     rng = np.random.default_rng(spec.seed)
     room, footprints = room_meshes(spec, rng)
     boxes = [(*f, 3.0) for f in footprints]
     if spec.obstacles:
         extra, inside = obstacle_meshes(spec, rng, footprints)
         room, boxes = room + extra, boxes + inside
+    if spec.tables:
+        extra, placed = table_meshes(spec, rng, footprints)
+        room, footprints, boxes = room + extra, footprints + placed, boxes + [(*f, 0.8) for f in placed]
     (out / "frames").mkdir(parents=True, exist_ok=True)
     (out / "background").mkdir(parents=True, exist_ok=True)
     static, _ = _scene(room)
