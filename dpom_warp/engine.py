@@ -51,8 +51,8 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 8 * 6 + 4 + 12  # rect, normal, plane, area, five accumulators,
-# live, top band
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 6 + 4 + 12  # rect, normal, plane, centre, area, five
+# accumulators, live, top band
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
@@ -178,6 +178,11 @@ class Engine:
             g.rect = wp.array(geometry.rect, dtype=wp.vec4i)
             g.normal = wp.array(geometry.normal, dtype=wp.vec3d)
             g.plane = wp.array(geometry.plane, dtype=wp.float64)
+            g.location = wp.array(geometry.locations, dtype=wp.vec3d)
+            g.centre = wp.vec3d(*(float(c) for c in geometry.centre))
+            solid = [float(x) for x in geometry.solid]
+            g.solid = int(solid[0] > 0)
+            g.body_radius, g.head_radius, g.bottom, g.shoulder, g.top, g.height_spread = solid[1:]
             self.geo = g
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)

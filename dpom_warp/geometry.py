@@ -165,19 +165,114 @@ class Grid:
 
 @dataclass(frozen=True)
 class ObjectBox:
-    """Object size in metres; `depth` defaults to `width`."""
+    """Object size in metres (`depth` defaults to `width`) and its shape model.
+
+    Attributes:
+        shape: 'plane': each pixel of the silhouette rectangle expects the object's depth on
+            the plane through the location that faces the camera (the paper's model);
+            'solid': each pixel expects the depth where its ray enters the object's upright
+            solid, and pixels whose rays miss the solid are not the object's (MODEL.md,
+            "The object's solid"). The solid is a vertical cylinder of `radius` (the body)
+            from the floor to `shoulder` x height, with a coaxial cylinder of `head_radius`
+            (the head) up to the full height; centred on its voxel in voxel mode, without a
+            head (a drone: a disc).
+        radius: body radius, metres (None: width / 2).
+        head_radius: head radius, metres (0: no head; ground mode only).
+        shoulder: where the body ends and the head begins, share of the height.
+        height_spread: standard deviation of the height of the solid's flat tops (people are
+            not all of one height), metres; a pixel whose ray enters through a top expects a
+            depth that spread / |ray's vertical share| wide (at most 1 / 0.3 of it).
+    """
 
     width: float
     height: float
     depth: float | None = None
+    shape: str = "plane"
+    radius: float | None = None
+    head_radius: float = 0.11
+    shoulder: float = 0.8
+    height_spread: float = 0.12
+
+    @property
+    def body_radius(self) -> float:
+        return 0.5 * self.width if self.radius is None else float(self.radius)
 
     def corners(self, centre: np.ndarray, mode: str) -> np.ndarray:
-        """(K, 8, 3) corners of the boxes at `centre` (K, 3): standing on it or centred on it."""
-        d = self.width if self.depth is None else self.depth
-        hx, hy = 0.5 * self.width, 0.5 * d
+        """(K, 8, 3) corners of the boxes at `centre` (K, 3): standing on it or centred on it.
+        A solid's box is its bounding box (2 x radius across)."""
+        if self.shape == "solid":
+            hx = hy = self.body_radius
+        else:
+            hx, hy = 0.5 * self.width, 0.5 * (self.width if self.depth is None else self.depth)
         z0, z1 = (0.0, self.height) if mode == "ground" else (-0.5 * self.height, 0.5 * self.height)
         offs = np.array([[sx, sy, sz] for sx in (-hx, hx) for sy in (-hy, hy) for sz in (z0, z1)])
         return centre[:, None, :] + offs[None, :, :]
+
+    def solid(self, mode: str) -> np.ndarray:
+        """The solid as (solid, body radius, head radius, bottom, shoulder, top, height
+        spread): heights relative to the location centre; solid = 0 for the plane model."""
+        r, h = self.body_radius, self.height
+        if mode == "ground":
+            head = self.head_radius > 0 and self.shoulder < 1
+            z0, z1, z2 = 0.0, (self.shoulder * h if head else h), h
+            rh = self.head_radius if head else 0.0
+        else:
+            z0, z1, z2, rh = -0.5 * h, 0.5 * h, 0.5 * h, 0.0
+        return np.array([float(self.shape == "solid"), r, rh, z0, z1, z2, self.height_spread])
+
+
+MIN_TOP_SLOPE = 0.3  # a top's depth spread is at most height_spread / MIN_TOP_SLOPE
+
+
+def cylinder_entry(centre, rays, axis, radius, z0, z1, spread):
+    """Where each ray enters the vertical cylinder of `radius` about `axis` (x, y) between
+    heights z0 and z1 (the camera outside it), and the variance of that depth.
+
+    Args:
+        centre: camera centre (3,); rays: (..., 3) directions, ray parameter = z-depth.
+
+    Returns:
+        (t, var): (...,) entry z-depth (-1 where the ray misses) and the depth variance of
+        the hit: (spread / max(|d_z|, MIN_TOP_SLOPE |d|))^2 through a flat top or bottom, 0
+        through the side.
+    """
+    d = np.asarray(rays, np.float64)
+    dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
+    ox, oy, cz = centre[0] - axis[0], centre[1] - axis[1], centre[2]
+    a = dx * dx + dy * dy
+    b = ox * dx + oy * dy
+    c = ox * ox + oy * oy - radius * radius
+    disc = b * b - a * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ts = (-b - np.sqrt(np.maximum(disc, 0.0))) / a
+        hs = cz + ts * dz
+        side = (c > 0) & (a > 1e-18) & (disc >= 0) & (ts > 0) & (hs >= z0) & (hs <= z1)
+        t = np.where(side, ts, np.inf)
+        var = np.zeros_like(t)
+        slope = np.maximum(np.abs(dz), MIN_TOP_SLOPE * np.sqrt(a + dz * dz))
+        for zc, facing in ((z1, cz > z1), (z0, cz < z0)):  # the top seen from above, the bottom from below
+            if not facing:
+                continue
+            tc = (zc - cz) / dz
+            px, py = ox + tc * dx, oy + tc * dy
+            cap = (np.abs(dz) > 1e-18) & (tc > 0) & (px * px + py * py <= radius * radius) & (tc < t)
+            t = np.where(cap, tc, t)
+            var = np.where(cap, (spread / slope) ** 2, var)
+    hit = np.isfinite(t)
+    return np.where(hit, t, -1.0), np.where(hit, var, 0.0)
+
+
+def solid_depth(centre, rays, location, solid):
+    """Entry depth (-1: miss) and its variance of each ray into the solid (ObjectBox.solid)
+    standing on, or centred at, `location` (3,): the nearer of body and head."""
+    _, rb, rh, z0, z1, z2, spread = solid
+    lz = location[2]
+    t, var = cylinder_entry(centre, rays, location, rb, lz + z0, lz + z1, spread)
+    if rh > 0 and z2 > z1:
+        th, vh = cylinder_entry(centre, rays, location, rh, lz + z1, lz + z2, spread)
+        head = (th > 0) & ((t < 0) | (th < t))
+        t, var = np.where(head, th, t), np.where(head, vh, var)
+    return t, var
 
 
 @dataclass
@@ -197,6 +292,9 @@ class Geometry:
             outside can belong to no object.
         height: the height of the boxes standing on the floor (ground mode); 0 for boxes
             centred on voxels, where the top-band test of the soft threshold does not apply.
+        solid: (7,) the object's solid (ObjectBox.solid); solid[0] = 0: the facing-plane
+            model, whose area is the rectangle's; with a solid, area counts the pixels whose
+            rays enter it.
     """
 
     rays: np.ndarray
@@ -208,6 +306,17 @@ class Geometry:
     plane: np.ndarray
     bounds: np.ndarray
     height: float = 0.0
+    solid: np.ndarray = field(default_factory=lambda: np.zeros(7))
+
+    def object_depth(self, k: int, rays: np.ndarray):
+        """(mu, var): the depth each of `rays` (..., 3) expects of location k (-1: not the
+        object's) and the variance the shape adds to it (0 on a facing plane)."""
+        if self.solid[0] > 0:
+            return solid_depth(self.centre, rays, self.locations[k], self.solid)
+        denom = rays @ self.normal[k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mu = np.where(denom < -1e-12, self.plane[k] / denom, -1.0)
+        return mu, np.zeros_like(mu)
 
 
 def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
@@ -243,9 +352,15 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
     fallback /= max(np.linalg.norm(fallback), 1e-12)
     normal = np.where(norm[:, None] > 1e-9, to_cam / np.maximum(norm, 1e-12)[:, None], fallback)
     plane = np.einsum("kj,kj->k", normal, locs - c[None, :])
-    return Geometry(
+    geom = Geometry(
         rays=camera.rays(), centre=c, locations=locs, rect=rect.astype(np.int32),
         area=area.astype(np.int64), normal=normal, plane=plane,
         bounds=np.stack([corners.min(axis=(0, 1)), corners.max(axis=(0, 1))], 1).ravel(),
-        height=float(obj.height) if grid.mode == "ground" else 0.0,
+        height=float(obj.height) if grid.mode == "ground" else 0.0, solid=obj.solid(grid.mode),
     )
+    if obj.shape == "solid":  # the silhouette is the solid's projection: count its pixels
+        for k in np.flatnonzero(area > 0):
+            u0, v0, u1, v1 = rect[k]
+            mu, _ = geom.object_depth(k, geom.rays[v0:v1 + 1, u0:u1 + 1])
+            geom.area[k] = int(np.count_nonzero(mu > 0))
+    return geom

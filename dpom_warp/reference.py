@@ -32,8 +32,10 @@ def valid_reading(depth_m, params: ModelParams):
     return (depth_m > 0) & (depth_m <= params.z_max)
 
 
-def object_sigma(mu, params: ModelParams):
-    return np.sqrt(params.sigma_object ** 2 + params.sensor_sigma(mu) ** 2)
+def object_sigma(mu, params: ModelParams, shape_var=0.0):
+    """sqrt(sigma_obj^2 + var + sigma_sensor(mu)^2): `shape_var` is what the object's shape
+    adds (geometry.Geometry.object_depth; 0 on a facing plane)."""
+    return np.sqrt(params.sigma_object ** 2 + shape_var + params.sensor_sigma(mu) ** 2)
 
 
 def outside_objects(points, bounds):
@@ -175,18 +177,17 @@ def log_outlier(params: ModelParams):
 
 
 def silhouette(z_img, geom: Geometry, k: int, params: ModelParams):
-    """Location k's silhouette rectangle: ((v0, u0), rays, readings z, facing-plane depth mu
-    (-1 where the ray misses the plane), log inlier term of the object at mu), or None when
-    it has no silhouette."""
+    """Location k's silhouette rectangle: ((v0, u0), rays, readings z, object depth mu
+    (-1 where the ray misses the facing plane or the solid), log inlier term of the object at
+    mu), or None when it has no silhouette."""
     u0, v0, u1, v1 = (int(x) for x in geom.rect[k])
     if u1 < u0 or v1 < v0:
         return None
     rays = geom.rays[v0:v1 + 1, u0:u1 + 1]
     z = z_img[v0:v1 + 1, u0:u1 + 1]
-    denom = rays @ geom.normal[k]
+    mu, var = geom.object_depth(k, rays)
     with np.errstate(divide="ignore", invalid="ignore"):
-        mu = np.where(denom < -1e-12, geom.plane[k] / denom, -1.0)
-        inlier = np.log1p(-params.outlier_prob) + gaussian_logpdf(z, mu, object_sigma(mu, params))
+        inlier = np.log1p(-params.outlier_prob) + gaussian_logpdf(z, mu, object_sigma(mu, params, var))
     return (v0, u0), rays, z, mu, inlier
 
 

@@ -7,9 +7,9 @@ its reading, through a static index built once per camera and grid:
 - the image is cut into square tiles; for every (location k, tile t) whose silhouette
   rectangle overlaps t, `pair_depth_bounds` scans the overlap once and records the depth
   interval [lo, hi] outside which no reading z can pass k's mask test there:
-  lo = min mu - W, hi = max mu + W, where W is the largest half-width of the test
-  ((z - mu)^2 < 2 s^2 (c - log s), c = log(1 - pi_out) - log(sqrt(2 pi)) - log(pi_out / z_max))
-  over the object sigmas s of the overlap, plus a small slack for rounding;
+  lo = min (mu - W), hi = max (mu + W) over the overlap's pixels, where W is the half-width of
+  the test at the pixel's object sigma s ((z - mu)^2 < 2 s^2 (c - log s),
+  c = log(1 - pi_out) - log(sqrt(2 pi)) - log(pi_out / z_max)), plus a small slack for rounding;
 - pairs are sorted by tile, then lo; each tile keeps the longest interval it holds (span).
 
 Per frame, `pixel_entries` finds in its tile the pairs with lo in [z - span, z] by binary
@@ -24,8 +24,8 @@ does not claim a pixel whose known background is clearly in front of it.
 
 import warp as wp
 
-from .pixel_model import LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, facing_plane_depth
-from .pixel_model import is_reading, logaddexp, object_log_inlier, object_sigma
+from .pixel_model import LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, is_reading, logaddexp
+from .pixel_model import object_depth, object_log_inlier, object_sigma
 
 EMPTY = wp.constant(wp.float64(1.0e300))
 
@@ -78,25 +78,23 @@ def pair_depth_bounds(
     u1 = wp.min(r[2], (t % tiles_x) * size + size - 1)
     v0 = wp.max(r[1], (t / tiles_x) * size)
     v1 = wp.min(r[3], (t / tiles_x) * size + size - 1)
-    mu_min = EMPTY
-    mu_max = f64(0.0)
+    lo_min = EMPTY
+    hi_max = -EMPTY
     for v in range(v0, v1 + 1):
         for u in range(u0, u1 + 1):
-            mu = facing_plane_depth(geo.rays[v, u], geo.normal[k], geo.plane[k])
+            o = object_depth(geo, k, geo.rays[v, u])
+            mu = o[0]
             if mu > f64(0.0):
-                mu_min = wp.min(mu_min, mu)
-                mu_max = wp.max(mu_max, mu)
+                w = test_half_width(pm, object_sigma(pm, mu, o[1]))
+                if w > f64(0.0):
+                    lo_min = wp.min(lo_min, mu - w)
+                    hi_max = wp.max(hi_max, mu + w)
     lo[i] = EMPTY
     hi[i] = -EMPTY
-    if mu_min < EMPTY:
-        # W(s) rises up to s* = exp(c - 1/2) and falls after: its largest value over the
-        # sigmas of [mu_min, mu_max] (sigma grows with mu) is at s* clamped to their range.
-        s_star = wp.exp(pm.log_inlier_weight - LOG_SQRT_2PI - pm.log_outlier - f64(0.5))
-        w = test_half_width(pm, wp.clamp(s_star, object_sigma(pm, mu_min), object_sigma(pm, mu_max)))
-        if w > f64(0.0):
-            slack = f64(1.0e-6) * (f64(1.0) + mu_max + w)
-            lo[i] = mu_min - w - slack
-            hi[i] = mu_max + w + slack
+    if lo_min < EMPTY:
+        slack = f64(1.0e-6) * (f64(1.0) + wp.abs(hi_max))
+        lo[i] = lo_min - slack
+        hi[i] = hi_max + slack
 
 
 @wp.func
@@ -146,9 +144,10 @@ def pixel_entries(
                 k = tiles.loc[j]
                 r = geo.rect[k]
                 if u >= r[0] and u <= r[2] and v >= r[1] and v <= r[3]:
-                    mu = facing_plane_depth(d, geo.normal[k], geo.plane[k])
+                    o = object_depth(geo, k, d)
+                    mu = o[0]
                     if mu > f64(0.0):
-                        inlier = object_log_inlier(pm, z, mu)
+                        inlier = object_log_inlier(pm, z, mu, o[1])
                         if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
                             if fill == 1 and e0 + n < capacity:
                                 mu32 = wp.float32(mu)

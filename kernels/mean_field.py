@@ -12,7 +12,7 @@ captured once as a graph, with no host sync) gives every frame what it would get
 
 import warp as wp
 
-from .pixel_model import GeometryArrays, PixelModel, f64, facing_plane_depth, is_reading, object_log_inlier
+from .pixel_model import GeometryArrays, PixelModel, f64, is_reading, object_depth, object_log_inlier
 
 
 @wp.func
@@ -190,16 +190,16 @@ def top_band(
     f = int(0)
     if rho[i] >= min_rho:
         r = geo.rect[k]
-        n = geo.normal[k]
         for v in range(r[1], r[3] + 1):
             for u in range(r[0], r[2] + 1):
                 d = geo.rays[v, u]
-                mu = facing_plane_depth(d, n, geo.plane[k])
+                o = object_depth(geo, k, d)
+                mu = o[0]
                 if mu > f64(0.0):
                     h = centre_z + mu * d[2]
                     z = f64(depth[b, v, u])
                     if h >= lo and h <= hi and is_reading(pm, z):
-                        if object_log_inlier(pm, z, mu) > pm.log_outlier:
+                        if object_log_inlier(pm, z, mu, o[1]) > pm.log_outlier:
                             s += 1
                         elif z > mu:
                             a += 1

@@ -8,12 +8,22 @@ LOG_SQRT_2PI = wp.constant(wp.float64(0.91893853320467274178))
 
 @wp.struct
 class GeometryArrays:
-    """Per-pixel rays and per-location silhouettes and facing planes (see geometry.Geometry)."""
+    """Per-pixel rays and per-location silhouettes, facing planes and solids (see
+    geometry.Geometry and geometry.ObjectBox.solid)."""
 
     rays: wp.array2d(dtype=wp.vec3d)
     rect: wp.array(dtype=wp.vec4i)
     normal: wp.array(dtype=wp.vec3d)
     plane: wp.array(dtype=wp.float64)
+    location: wp.array(dtype=wp.vec3d)
+    centre: wp.vec3d  # camera centre
+    solid: int  # 0: facing planes; 1: the solid below
+    body_radius: wp.float64
+    head_radius: wp.float64  # 0: no head
+    bottom: wp.float64  # heights relative to the location centre
+    shoulder: wp.float64
+    top: wp.float64
+    height_spread: wp.float64
 
 
 @wp.struct
@@ -52,16 +62,16 @@ def sensor_sigma(pm: PixelModel, z: wp.float64) -> wp.float64:
 
 
 @wp.func
-def object_sigma(pm: PixelModel, mu: wp.float64) -> wp.float64:
+def object_sigma(pm: PixelModel, mu: wp.float64, shape_var: wp.float64) -> wp.float64:
     s = sensor_sigma(pm, mu)
-    return wp.sqrt(pm.sigma_object2 + s * s)
+    return wp.sqrt(pm.sigma_object2 + shape_var + s * s)
 
 
 @wp.func
-def object_log_inlier(pm: PixelModel, z: wp.float64, mu: wp.float64) -> wp.float64:
-    """log((1 - pi_out) N(z | mu, s^2)) of an object at depth mu; the mask test (eq. 12) is
-    that it beats pm.log_outlier."""
-    return pm.log_inlier_weight + gaussian_logpdf(z, mu, object_sigma(pm, mu))
+def object_log_inlier(pm: PixelModel, z: wp.float64, mu: wp.float64, shape_var: wp.float64) -> wp.float64:
+    """log((1 - pi_out) N(z | mu, s^2)) of an object at depth mu whose shape adds shape_var
+    to the variance; the mask test (eq. 12) is that it beats pm.log_outlier."""
+    return pm.log_inlier_weight + gaussian_logpdf(z, mu, object_sigma(pm, mu, shape_var))
 
 
 @wp.func
@@ -76,3 +86,62 @@ def facing_plane_depth(d: wp.vec3d, n: wp.vec3d, plane: wp.float64) -> wp.float6
     if denom < f64(-1.0e-12):
         return plane / denom
     return f64(-1.0)
+
+
+MIN_TOP_SLOPE = wp.constant(wp.float64(0.3))  # geometry.MIN_TOP_SLOPE
+
+
+@wp.func
+def cylinder_entry(c: wp.vec3d, d: wp.vec3d, axis: wp.vec3d, radius: wp.float64, z0: wp.float64,
+                   z1: wp.float64, spread: wp.float64) -> wp.vec2d:
+    """(z-depth where ray d from c enters the vertical cylinder of `radius` about axis
+    (x, y) between heights z0 and z1, -1 on a miss; the variance of that depth: through a
+    flat top or bottom (spread / max(|d_z|, MIN_TOP_SLOPE |d|))^2, through the side 0).
+    geometry.cylinder_entry."""
+    ox = c[0] - axis[0]
+    oy = c[1] - axis[1]
+    a = d[0] * d[0] + d[1] * d[1]
+    b = ox * d[0] + oy * d[1]
+    q = ox * ox + oy * oy - radius * radius
+    disc = b * b - a * q
+    t = f64(-1.0)
+    var = f64(0.0)
+    if q > f64(0.0) and a > f64(1.0e-18) and disc >= f64(0.0):
+        ts = (-b - wp.sqrt(disc)) / a
+        hs = c[2] + ts * d[2]
+        if ts > f64(0.0) and hs >= z0 and hs <= z1:
+            t = ts
+    if wp.abs(d[2]) > f64(1.0e-18):
+        slope = wp.max(wp.abs(d[2]), MIN_TOP_SLOPE * wp.sqrt(a + d[2] * d[2]))
+        zc = z1
+        facing = c[2] > z1
+        for side in range(2):
+            if side == 1:
+                zc = z0
+                facing = c[2] < z0
+            if facing:
+                tc = (zc - c[2]) / d[2]
+                px = ox + tc * d[0]
+                py = oy + tc * d[1]
+                if tc > f64(0.0) and px * px + py * py <= radius * radius and (t < f64(0.0) or tc < t):
+                    t = tc
+                    var = (spread / slope) * (spread / slope)
+    return wp.vec2d(t, var)
+
+
+@wp.func
+def object_depth(geo: GeometryArrays, k: int, d: wp.vec3d) -> wp.vec2d:
+    """(depth pixel ray d expects of location k, -1: not the object's; variance the shape
+    adds): the facing plane's (variance 0), or the entry into the solid, the nearer of body
+    and head (geometry.Geometry.object_depth)."""
+    if geo.solid == 0:
+        return wp.vec2d(facing_plane_depth(d, geo.normal[k], geo.plane[k]), f64(0.0))
+    p = geo.location[k]
+    body = cylinder_entry(geo.centre, d, p, geo.body_radius, p[2] + geo.bottom, p[2] + geo.shoulder,
+                          geo.height_spread)
+    if geo.head_radius > f64(0.0) and geo.top > geo.shoulder:
+        head = cylinder_entry(geo.centre, d, p, geo.head_radius, p[2] + geo.shoulder, p[2] + geo.top,
+                              geo.height_spread)
+        if head[0] > f64(0.0) and (body[0] < f64(0.0) or head[0] < body[0]):
+            return head
+    return body

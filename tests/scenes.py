@@ -8,14 +8,14 @@ from dpom_warp.model import ModelParams
 
 
 def draw_slab(depth, geom, k, below=None):
-    """Draw location k's facing plane into `depth` (in place) where it is nearer than what is
-    there; with `below`, only where the plane's points are lower than that (metres)."""
+    """Draw location k's object depth (its facing plane, or its solid) into `depth` (in place)
+    where it is nearer than what is there; with `below`, only where the object's points are
+    lower than that (metres)."""
     u0, v0, u1, v1 = geom.rect[k]
     if u1 < u0:
         return
     rays = geom.rays[v0:v1 + 1, u0:u1 + 1]
-    d = rays @ geom.normal[k]
-    mu = np.where(d < 0, geom.plane[k] / np.where(d < 0, d, -1), 0)
+    mu, _ = geom.object_depth(k, rays)
     patch = depth[v0:v1 + 1, u0:u1 + 1]
     front = (mu > 0) & ((patch == 0) | (mu < patch))
     if below is not None:
@@ -23,14 +23,26 @@ def draw_slab(depth, geom, k, below=None):
     patch[front] = mu[front]
 
 
-def random_scene(seed: int, width=48, height=40):
+def random_scene(seed: int, width=48, height=40, shape="plane"):
     """A tilted camera over a small grid; depth = floor background with a few fronto-parallel
-    slabs standing on it (some hiding others), noise and dropouts; background frames too."""
+    slabs standing on it (some hiding others), noise and dropouts; background frames too.
+    With shape 'solid', people-like solids (random body and head radii) seen by a camera
+    2.4 to 3.4 m high at any pitch from 10 to 90 degrees (tops and sides)."""
     rng = np.random.default_rng(seed)
-    cam = Camera(width, height, 0.8 * width, 0.8 * width, (width - 1) / 2, (height - 1) / 2,
-                 pose_from_angles(rng.uniform(1.5, 2.8), rng.uniform(10, 30), rng.uniform(-4, 4)))
+    pose = pose_from_angles(rng.uniform(1.5, 2.8), rng.uniform(10, 30), rng.uniform(-4, 4))
+    height_m = rng.uniform(1.6, 1.9)
+    obj = ObjectBox(0.5, height_m)
+    if shape == "solid":
+        extra = np.random.default_rng(1000 + seed)
+        pitch = extra.uniform(10, 90)
+        pose = pose_from_angles(extra.uniform(2.4, 3.4), pitch, extra.uniform(-4, 4), extra.uniform(-30, 30),
+                                0.0, 3.2 if pitch > 60 else 0.0)
+        obj = ObjectBox(0.5, height_m, shape="solid", radius=extra.uniform(0.15, 0.3),
+                        head_radius=extra.choice([0.0, extra.uniform(0.08, 0.14)]),
+                        shoulder=extra.uniform(0.75, 0.85), height_spread=extra.uniform(0.0, 0.2))
+    cam = Camera(width, height, 0.8 * width, 0.8 * width, (width - 1) / 2, (height - 1) / 2, pose)
     grid = Grid(x=(-1.5, 1.5, 0.3), y=(1.5, 5.0, 0.3))
-    geom = build_geometry(cam, grid, ObjectBox(0.5, rng.uniform(1.6, 1.9)))
+    geom = build_geometry(cam, grid, obj)
     params = ModelParams(prior=rng.uniform(0.005, 0.05), sigma_object=rng.uniform(0.05, 0.2),
                          damping=rng.uniform(0.1, 0.4), max_iterations=int(rng.integers(20, 60)),
                          check_every=int(rng.integers(1, 6)), outlier_prob=rng.uniform(0.02, 0.2))

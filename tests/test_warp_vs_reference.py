@@ -13,10 +13,11 @@ from dpom_warp.model import ModelParams
 from scenes import random_scene
 
 
+@pytest.mark.parametrize("shape", ["plane", "solid"])
 @pytest.mark.parametrize("path", ["exact", "sparse"])
 @pytest.mark.parametrize("seed", range(6))
-def test_rho_matches_reference(device, seed, path):
-    geom, params, depth, bg_frames = random_scene(seed)
+def test_rho_matches_reference(device, seed, path, shape):
+    geom, params, depth, bg_frames = random_scene(seed, shape=shape)
     params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4)
     engine = Engine(geom, params, device)
     use_frames = seed % 2 == 0
@@ -46,14 +47,15 @@ def lists_as_entries(engine):
             engine.entry_delta.numpy()[order])
 
 
-def distorted_voxel_scene(seed):
+def distorted_voxel_scene(seed, shape="plane"):
     """A rolled camera with lens distortion over a voxel grid whose first rows reach under and
-    behind the camera, random readings, and a background that occludes some voxels."""
+    behind the camera, random readings, and a background that occludes some voxels; with
+    shape 'solid', discs seen from below, beside and above."""
     rng = np.random.default_rng(seed)
     cam = Camera(56, 44, 40.0, 41.0, 27.0, 22.5, pose_from_angles(1.6, 25.0, 5.0, 10.0),
                  distortion=(-0.25, 0.08, 0.001, -0.002, -0.01))
     grid = Grid(x=(-1.5, 1.5, 0.25), y=(-0.5, 4.0, 0.25), mode="voxel", z=(0.2, 2.0, 0.3))
-    geom = build_geometry(cam, grid, ObjectBox(0.3, 0.2))
+    geom = build_geometry(cam, grid, ObjectBox(0.3, 0.2, shape=shape, height_spread=0.03))
     params = ModelParams(sigma_object=0.05, background_occludes=True)
     depth = (rng.uniform(0.5, 5.0, (44, 56)) * (rng.random((44, 56)) > 0.05)).astype(np.float32)
     return geom, params, depth
@@ -62,7 +64,9 @@ def distorted_voxel_scene(seed):
 @pytest.mark.parametrize("tile", [1, 5, 8, 64])
 def test_sorted_lists_match_reference(device, tile):
     """The tile index finds exactly the reference's masks, in its order, whatever the tile."""
-    for geom, params, depth, bg in [random_scene(11)[:3] + (None,), distorted_voxel_scene(tile) + (None,)]:
+    for geom, params, depth, bg in [random_scene(11)[:3] + (None,), distorted_voxel_scene(tile) + (None,),
+                                    random_scene(11 + tile, shape="solid")[:3] + (None,),
+                                    distorted_voxel_scene(tile, "solid") + (None,)]:
         engine = Engine(geom, params, device, tile=tile)
         if params.background_occludes:
             frames = np.stack([np.roll(depth, 3 * i, axis=1) for i in range(3)])
