@@ -187,7 +187,7 @@ class ObjectBox:
     width: float
     height: float
     depth: float | None = None
-    shape: str = "plane"
+    shape: str = "solid"
     radius: float | None = None
     head_radius: float = 0.11
     shoulder: float = 0.8

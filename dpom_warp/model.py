@@ -81,7 +81,7 @@ class ModelParams:
     occlusion_margin: float = 0.1
     sparse_epsilon: float = 1e-4
     warm_start: bool = False
-    top_support: float = 0.05
+    top_support: float = 0.12
     top_band: float = 0.75
     top_hidden: float = 0.15
     top_slope: float = 100.0

@@ -31,7 +31,7 @@ def random_scene(seed: int, width=48, height=40, shape="plane"):
     rng = np.random.default_rng(seed)
     pose = pose_from_angles(rng.uniform(1.5, 2.8), rng.uniform(10, 30), rng.uniform(-4, 4))
     height_m = rng.uniform(1.6, 1.9)
-    obj = ObjectBox(0.5, height_m)
+    obj = ObjectBox(0.5, height_m, shape="plane")
     if shape == "solid":
         extra = np.random.default_rng(1000 + seed)
         pitch = extra.uniform(10, 90)

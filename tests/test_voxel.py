@@ -61,7 +61,7 @@ def test_one_layer_voxel_grid_equals_ground_grid(device):
     """With the camera at half the object height the facing planes of both modes coincide."""
     h = 1.8
     cam = Camera(64, 48, 50.0, 50.0, 31.5, 23.5, pose_from_angles(h / 2, 3.0))
-    box = ObjectBox(0.5, h)
+    box = ObjectBox(0.5, h, shape="plane")
     ground = build_geometry(cam, Grid(x=(-1.5, 1.5, 0.25), y=(1.0, 5.0, 0.25)), box)
     voxel = build_geometry(cam, Grid(x=(-1.5, 1.5, 0.25), y=(1.0, 5.0, 0.25), mode="voxel",
                                      z=(h / 2 - 0.05, h / 2 + 0.05, 0.1)), box)
