@@ -386,6 +386,9 @@ class ModelSection(Node):
     z_max: Num = Field(_d(ModelParams, "z_max"), gt=0, description="sensor range, metres")
     alpha: Num = Field(_d(ModelParams, "alpha"), description="soft threshold rho* = sigmoid(alpha e + beta) rho")
     beta: Num = Field(_d(ModelParams, "beta"), description="see alpha")
+    share_of: Literal["silhouette", "unhidden"] = Field(
+        _d(ModelParams, "share_of"), description="eq. 13's e: share of the silhouette, or of its "
+        "pixels not hidden by something nearer (README, How it works)")
     damping: Num = Field(_d(ModelParams, "damping"), gt=0, le=1,
                          description="lambda of the damped update at the first iteration")
     damping_growth: Num = Field(_d(ModelParams, "damping_growth"), ge=1, description="growth of lambda per iteration")

@@ -13,6 +13,7 @@ import warp as wp
 from . import kernels as K
 from .geometry import Geometry
 from .model import TOP_MIN_RHO, AutoBackground, Background, ModelParams
+from .reference import BAND_ALL
 from .resolution import Resolution
 from .warp_setup import init_warp
 
@@ -51,8 +52,8 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 6 + 4 + 12  # rect, normal, plane, centre, area, five
-# accumulators, live, top band
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 6 + 4 + 24  # rect, normal, plane, centre, area, five
+# accumulators, live, top-band and whole-silhouette counts
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
@@ -200,6 +201,9 @@ class Engine:
             self.top_support = wp.zeros(L, dtype=wp.int32)
             self.top_against = wp.zeros(L, dtype=wp.int32)
             self.top_hidden = wp.zeros(L, dtype=wp.int32)
+            self.all_support = wp.zeros(L, dtype=wp.int32)  # the same counts, whole silhouette
+            self.all_against = wp.zeros(L, dtype=wp.int32)
+            self.all_hidden = wp.zeros(L, dtype=wp.int32)
             self.rho_star = wp.zeros(L, dtype=wp.float64)
             self.max_change = wp.zeros((batch, max(1, params.max_iterations)), dtype=wp.float64)
             self.done = wp.zeros(batch, dtype=wp.int32)
@@ -445,10 +449,17 @@ class Engine:
                       inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]),
                               p.top_band * h, h, TOP_MIN_RHO, self.rho, self.top_support,
                               self.top_against, self.top_hidden])
+        unhidden = int(p.share_of == "unhidden")
+        if unhidden:
+            wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
+                      inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]),
+                              -BAND_ALL, BAND_ALL, TOP_MIN_RHO, self.rho, self.all_support,
+                              self.all_against, self.all_hidden])
         wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
                   inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support,
                           self.top_against, self.top_hidden, p.top_hidden, top, p.top_slope,
-                          p.top_min_pixels, self.share, self.rho_star])
+                          p.top_min_pixels, unhidden, self.all_support, self.all_against,
+                          self.share, self.rho_star])
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))
         iterations, max_change, done = self.iterations.numpy(), self.max_change.numpy(), self.done.numpy()

@@ -22,6 +22,12 @@ class ModelParams:
         missing_prob: pi_inf of objects (and of the floor-only background).
         z_max: sensor range, metres; readings beyond it are treated as no reading.
         alpha, beta: soft threshold rho* = sigmoid(alpha e + beta) rho (eq. 13, corrected sign).
+        share_of: what e of eq. 13 is a share of: 'silhouette' (MODEL.md: sum of T over the
+            mask / |S_k|) or 'unhidden' (/ the silhouette's pixels that read at or behind the
+            object: those whose reading is nearer, hidden by something in front, and those
+            with no reading are left out). A person hidden but for the head keeps the share
+            of its head; an estimate its pixels do not support, or explained away by what is
+            in front (small T), is still cut.
         damping: lambda of the damped parallel update rho <- (1 - lambda) rho + lambda rho_new,
             at the first iteration.
         damping_growth: lambda is multiplied by this after every iteration (annealing: small
@@ -55,9 +61,10 @@ class ModelParams:
             sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f); a
             band with fewer than top_min_pixels readings, a location with rho < TOP_MIN_RHO
             and voxel grids are not judged. A table or cabinet lower than the box shows the
-            wall through the band (u = 0); a person's head and shoulders support it (measured on
-            fully visible people: 0.07 for a 1.55 m person to 0.87, median 0.3), also when
-            their legs are hidden. 0: off.
+            wall through the band (u = 0); a person's head and shoulders support it (with the
+            solid, on the tuning draw of bench.robustness: found people 0.14 to 1, median
+            0.6; an arm beside a person seen from above 0.08 to 0.1), also when their legs
+            are hidden. 0.05 suits the facing plane. 0: off.
         top_band, top_hidden, top_slope, top_min_pixels: see top_support.
     """
 
@@ -69,6 +76,7 @@ class ModelParams:
     z_max: float = 10.0
     alpha: float = 100.0
     beta: float = -8.0
+    share_of: str = "silhouette"
     damping: float = 0.1
     damping_growth: float = 1.03
     damping_max: float | None = 0.4

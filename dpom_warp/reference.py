@@ -15,6 +15,7 @@ from .geometry import Geometry
 from .model import TOP_MIN_RHO, AutoBackground, Background, ModelParams
 
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
+BAND_ALL = 1e30  # a height band that holds every pixel
 
 
 def gaussian_logpdf(z, mu, sigma):
@@ -303,8 +304,12 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     r = np.where(valid, rho[L], 0.0)
     T = front_transparency(r)
     tsum = np.bincount(L[valid], weights=T[valid], minlength=K)
+    denominator = geom.area.astype(np.float64)
+    if params.share_of == "unhidden":
+        s_all, a_all, _ = top_band(depth_m, geom, params, rho, whole=True)
+        denominator = np.where(s_all + a_all > 0, s_all + a_all, denominator)
     with np.errstate(divide="ignore", invalid="ignore"):
-        share = np.where(geom.area > 0, tsum / geom.area, 0.0)
+        share = np.where(geom.area > 0, tsum / denominator, 0.0)
     rho_star = np.where(geom.area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
     support, against, hidden = top_band(depth_m, geom, params, rho)
     if params.top_support > 0 and geom.height > 0:
@@ -318,18 +323,19 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
                 top_hidden=hidden)
 
 
-def top_band(depth_m, geom: Geometry, params: ModelParams, rho):
+def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
     """The top-band test of the soft threshold (ModelParams.top_support): for each location
     with rho >= TOP_MIN_RHO of a standing box, the silhouette pixels with a reading whose
-    facing-plane point lies between top_band x height and the height that pass the mask
-    test (support), and of the others those that read beyond the plane (against) and in
-    front of it (hidden). Returns three (K,) arrays."""
+    object point lies between top_band x height and the height that pass the mask test
+    (support), and of the others those that read beyond the object (against) and in front
+    of it (hidden). `whole`: the same counts over the whole silhouette, any grid (the
+    unhidden share of ModelParams.share_of). Returns three (K,) arrays."""
     K = len(geom.rect)
     support, against, hidden = (np.zeros(K, np.int64) for _ in range(3))
-    if geom.height <= 0:
+    if geom.height <= 0 and not whole:
         return support, against, hidden
     z_img = np.asarray(depth_m, dtype=np.float64)
-    lo, hi = params.top_band * geom.height, geom.height
+    lo, hi = (-BAND_ALL, BAND_ALL) if whole else (params.top_band * geom.height, geom.height)
     for k in np.flatnonzero(np.asarray(rho) >= TOP_MIN_RHO):
         sil = silhouette(z_img, geom, k, params)
         if sil is None:

@@ -235,16 +235,24 @@ def soft_threshold(
     top_share: wp.float64,
     top_slope: wp.float64,
     top_min_pixels: int,
+    unhidden: int,
+    all_support: wp.array(dtype=wp.int32),
+    all_against: wp.array(dtype=wp.int32),
     share: wp.array(dtype=wp.float64),
     rho_star: wp.array(dtype=wp.float64),
 ):
     """Eq. 13 with the corrected sign: rho* = sigmoid(alpha e + beta) rho, e = visible / |S_k|
-    (area holds the L locations of one frame; the arrays hold the frames of a batch), times
+    (area holds the L locations of one frame; the arrays hold the frames of a batch), or with
+    `unhidden` e = visible / (pixels of S_k reading at or behind the object: all_support +
+    all_against, the top_band counts over the whole silhouette) where there are any; times
     the top-band factor (top_band; top_share = 0: none)."""
     k = wp.tid()
     a = area[k % area.shape[0]]
     if a > f64(0.0):
-        e = visible[k] / a
+        d = a
+        if unhidden != 0 and all_support[k] + all_against[k] > 0:
+            d = f64(all_support[k] + all_against[k])
+        e = visible[k] / d
         share[k] = e
         rho_star[k] = sigmoid(alpha * e + beta) * rho[k]
         if top_share > f64(0.0):

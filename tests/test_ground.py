@@ -191,3 +191,20 @@ def test_fit_is_repeatable_bit_for_bit():
     poses = [fit_ground_frames([depth], cam).T_world_from_camera for _ in range(4)]
     for p in poses[1:]:
         assert np.array_equal(p, poses[0])
+
+
+@pytest.mark.parametrize("pitch, yaw", [(90, 30), (70, -60), (55, 0)])
+def test_ceiling_camera_floor_with_the_up_hint(pitch, yaw):
+    """A ceiling camera (3 m, pitch 55 to 90, any yaw) over a room with a table: with
+    camera.ground.up pointing back along the optical axis ([0, 0.0, -1], the camera looks
+    down) the floor is found, not a wall or the table top."""
+    from dpom_warp.ground import GroundOptions
+
+    rng = np.random.default_rng(pitch)
+    room, _ = room_meshes(SceneSpec(furniture=3), rng)
+    table = _box((1.2, 0.8, 0.04), (0.5, 3.6, 0.74))
+    true = pose_from_angles(3.0, pitch, 0.0, yaw, 0.0, 3.0)
+    _, frames = rendered(camera(true), room + [table], rng, frames=3)
+    fit = fit_ground_frames(frames, camera(np.eye(4)), GroundOptions(up=(0.0, 0.0, -1.0)))
+    assert fit.camera_height == pytest.approx(3.0, abs=0.02)
+    assert fit.pitch_deg == pytest.approx(pitch, abs=0.5)

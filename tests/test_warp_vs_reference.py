@@ -191,3 +191,19 @@ def test_evidence_scratch_on_stack_or_global_agree(device):
         got = engine.infer(depth)
         assert got.iterations == want["iterations"]
         np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape", ["plane", "solid"])
+@pytest.mark.parametrize("seed", range(3))
+def test_unhidden_share_matches_reference(device, seed, shape):
+    """model.share_of: unhidden (eq. 13's e over the pixels not hidden by something nearer)
+    on the Warp path equals the reference, and differs from the silhouette share somewhere."""
+    geom, params, depth, _ = random_scene(seed, shape=shape)
+    params = dataclasses.replace(params, share_of="unhidden")
+    bg = ref.floor_background(geom, params, depth)
+    want = ref.mean_field(depth, geom, bg, params)
+    got = Engine(geom, params, device).infer(depth)
+    np.testing.assert_allclose(got.evidence_share, want["evidence_share"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, share_of="silhouette"))
+    assert np.any(want["evidence_share"] > plain["evidence_share"] + 1e-3)
