@@ -12,8 +12,7 @@ import warp as wp
 
 from . import kernels as K
 from .geometry import Geometry
-from .model import TOP_MIN_RHO, AutoBackground, Background, ModelParams
-from .reference import BAND_ALL
+from .model import BAND_ALL, TOP_MIN_RHO, AutoBackground, Background, ModelParams
 from .resolution import Resolution
 from .warp_setup import init_warp
 

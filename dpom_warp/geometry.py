@@ -171,8 +171,8 @@ class ObjectBox:
         shape: 'plane': each pixel of the silhouette rectangle expects the object's depth on
             the plane through the location that faces the camera (the paper's model);
             'solid': each pixel expects the depth where its ray enters the object's upright
-            solid, and pixels whose rays miss the solid are not the object's (MODEL.md,
-            "The object's solid"). The solid is a vertical cylinder of `radius` (the body)
+            solid, and pixels whose rays miss the solid are not the object's (README, "How
+            it works"). The solid is a vertical cylinder of `radius` (the body)
             from the floor to `shoulder` x height, with a coaxial cylinder of `head_radius`
             (the head) up to the full height; centred on its voxel in voxel mode, without a
             head (a drone: a disc).

@@ -8,6 +8,7 @@ import numpy as np
 
 
 TOP_MIN_RHO = 1e-3  # locations below it skip the top-band test (their rho* is below it anyway)
+BAND_ALL = 1e30  # a height band that holds every pixel (the unhidden share of eq. 13)
 
 
 @dataclass(frozen=True)

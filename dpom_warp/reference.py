@@ -12,10 +12,9 @@ import warnings
 import numpy as np
 
 from .geometry import Geometry
-from .model import TOP_MIN_RHO, AutoBackground, Background, ModelParams
+from .model import BAND_ALL, TOP_MIN_RHO, AutoBackground, Background, ModelParams
 
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
-BAND_ALL = 1e30  # a height band that holds every pixel
 
 
 def gaussian_logpdf(z, mu, sigma):
