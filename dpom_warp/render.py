@@ -69,11 +69,15 @@ def colour_bar(draw: ImageDraw.ImageDraw, x: int, y: int, h: int, cmap: str, vmi
     draw.text((x + BAR_W + 3, y - 4), label, fill=INK, font=f, anchor="ld")
 
 
+OUT_OF_VIEW = (58, 64, 76)  # map cells the camera does not see (a blue-grey no text or map colour has)
+
+
 class MapPanel:
     """A top or side view of a map in world coordinates, drawn at a fixed scale."""
 
-    def __init__(self, image: np.ndarray, extent, view, scale: float):
+    def __init__(self, image: np.ndarray, extent, view, scale: float, outside=None):
         self.image, self.extent, self.view, self.scale = image, extent, view, scale
+        self.outside = outside  # cells out of the camera's view: drawn as the panel's grey
         x0, x1, y0, y1 = view
         self.w = int(round((x1 - x0) * scale))
         self.h = int(round((y1 - y0) * scale))
@@ -90,6 +94,8 @@ class MapPanel:
         b = self.to_px(x1, y0, ox, oy)
         size = (max(1, int(round(b[0] - a[0]))), max(1, int(round(b[1] - a[1]))))
         rgb = colourise(self.image[::-1], 0.0, 1.0, "magma")  # row 0 = lowest y: flip for the picture
+        if self.outside is not None:
+            rgb[self.outside[::-1]] = OUT_OF_VIEW
         canvas.paste(Image.fromarray(rgb).resize(size, Image.NEAREST), (int(round(a[0])), int(round(a[1]))))
         draw.rectangle((ox, oy, ox + self.w - 1, oy + self.h - 1), outline=INK)
         f = font(11)
@@ -138,11 +144,13 @@ def place_label(draw: ImageDraw.ImageDraw, label: str, at, taken: list, bounds) 
 
 
 def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, title="",
-                  z_max=None) -> bytes:
+                  z_max=None, in_view=None) -> bytes:
     """A PNG file's bytes: left the depth frame with detection boxes (solid, with rho*) and
     ground-truth boxes (dashed); right the occupancy map rho* seen from above, with
     detections (circles), ground truth (crosses) and the camera position; for a voxel grid
-    also a side view (maximum over y)."""
+    also a side view (maximum over y). `in_view` (map-shaped bool): the locations the camera
+    sees; the others are drawn grey, so the map shows the camera's footprint (a wedge at eye
+    level, the floor below it from the ceiling)."""
     voxel = rho_map.ndim == 3
     has_truth, truth = truth is not None, truth or []
     depth = np.asarray(depth_m, dtype=np.float32)
@@ -158,11 +166,16 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     y0, y1 = grid.y[0], grid.y[0] + grid.shape[-2] * grid.y[2]
     view = (min(x0, camera_xy[0] - 0.3), max(x1, camera_xy[0] + 0.3), min(y0, camera_xy[1] - 0.3), y1)
     scale = PANEL_H / (view[3] - view[2])
-    top = MapPanel(rho_map.max(axis=0) if voxel else rho_map, (x0, x1, y0, y1), view, scale)
+    seen_top = seen_side = None
+    if in_view is not None:
+        in_view = np.asarray(in_view, bool).reshape(rho_map.shape)
+        seen_top, seen_side = (~in_view.any(axis=0), ~in_view.any(axis=1)) if voxel else (~in_view, None)
+    top = MapPanel(rho_map.max(axis=0) if voxel else rho_map, (x0, x1, y0, y1), view, scale, seen_top)
     panels = [top]
     if voxel:
         z0, z1 = grid.z[0], grid.z[0] + grid.shape[0] * grid.z[2]
-        panels.append(MapPanel(rho_map.max(axis=1), (x0, x1, z0, z1), (view[0], view[1], z0, z1), scale))
+        panels.append(MapPanel(rho_map.max(axis=1), (x0, x1, z0, z1), (view[0], view[1], z0, z1), scale,
+                               seen_side))
 
     bar_space = BAR_W + 44
     width = PAD + depth_img.width + bar_space + sum(PAD + 10 + p.w for p in panels) + bar_space

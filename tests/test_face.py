@@ -258,3 +258,26 @@ def test_readme_api_examples_run(monkeypatch, demo_run):
               "background_m": np.stack([read_depth(f, 0.001) for f in background])}
     exec(blocks[1], second)
     assert second["res"].rho_star.shape == (second["geometry"].locations.shape[0],)
+
+
+def test_top_view_shows_the_camera_footprint():
+    """A ceiling camera's map: the cells it sees are the map's colours, the others grey
+    (render.OUT_OF_VIEW), the footprint the geometry gives, not a wedge."""
+    from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
+    from dpom_warp.render import OUT_OF_VIEW, frame_picture
+
+    cam = Camera(128, 106, 91.0, 91.0, 63.5, 52.5, pose_from_angles(3.0, 90.0, 0.0, 0.0, 0.0, 4.0))
+    grid = Grid(x=(-4, 4, 0.2), y=(0, 8, 0.2))
+    geom = build_geometry(cam, grid, ObjectBox(0.4, 1.8))
+    seen = (geom.area > 0).reshape(grid.shape)
+    assert 0.05 < seen.mean() < 0.6  # below the camera only
+    rho, depth = np.zeros(grid.shape), np.full((106, 128), 3.0, np.float32)
+
+    def grey(png):
+        im = np.asarray(Image.open(__import__("io").BytesIO(png)).convert("RGB"))
+        return int(np.all(im == OUT_OF_VIEW, axis=-1).sum())
+
+    assert grey(frame_picture(depth, rho, grid, [], cam.centre[:2])) == 0
+    out = grey(frame_picture(depth, rho, grid, [], cam.centre[:2], in_view=seen))
+    everything = grey(frame_picture(depth, rho, grid, [], cam.centre[:2], in_view=np.zeros(grid.shape, bool)))
+    assert 0 < out < everything and out / everything == pytest.approx(1 - seen.mean(), abs=0.05)
