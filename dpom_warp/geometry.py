@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -285,7 +286,8 @@ class Geometry:
         locations: (K, 3) location centres.
         rect: (K, 4) int32 silhouette rectangle u0, v0, u1, v1 (inclusive pixel indices,
             clipped to the image); u1 < u0 for a location with no silhouette.
-        area: (K,) silhouette area in pixels inside the image, 0 when there is none.
+        rect_area: (K,) pixels of the silhouette rectangle inside the image, 0 when there is
+            none (its footprint: the locations the camera sees).
         normal: (K, 3) unit normal of the facing plane (pointing at the camera).
         plane: (K,) n . (P_k - C); the object depth along pixel ray d is plane / (n . d).
         bounds: (6,) x_min, x_max, y_min, y_max, z_min, z_max of all object boxes: a point
@@ -293,20 +295,33 @@ class Geometry:
         height: the height of the boxes standing on the floor (ground mode); 0 for boxes
             centred on voxels, where the top-band test of the soft threshold does not apply.
         solid: (7,) the object's solid (ObjectBox.solid); solid[0] = 0: the facing-plane
-            model, whose area is the rectangle's; with a solid, area counts the pixels whose
-            rays enter it.
+            model.
+        area: |S_k| (property): the rectangle's area for the facing plane; with a solid, the
+            pixels of the rectangle whose rays enter it, counted on first use (seconds at
+            full resolution: only the engine and the reference need it, not the pictures).
     """
 
     rays: np.ndarray
     centre: np.ndarray
     locations: np.ndarray
     rect: np.ndarray
-    area: np.ndarray
+    rect_area: np.ndarray
     normal: np.ndarray
     plane: np.ndarray
     bounds: np.ndarray
     height: float = 0.0
     solid: np.ndarray = field(default_factory=lambda: np.zeros(7))
+
+    @cached_property
+    def area(self) -> np.ndarray:
+        if self.solid[0] <= 0:
+            return self.rect_area
+        area = np.zeros_like(self.rect_area)
+        for k in np.flatnonzero(self.rect_area > 0):  # the silhouette is the solid's projection
+            u0, v0, u1, v1 = self.rect[k]
+            mu, _ = self.object_depth(k, self.rays[v0:v1 + 1, u0:u1 + 1])
+            area[k] = np.count_nonzero(mu > 0)
+        return area
 
     def object_depth(self, k: int, rays: np.ndarray):
         """(mu, var): the depth each of `rays` (..., 3) expects of location k (-1: not the
@@ -352,15 +367,9 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
     fallback /= max(np.linalg.norm(fallback), 1e-12)
     normal = np.where(norm[:, None] > 1e-9, to_cam / np.maximum(norm, 1e-12)[:, None], fallback)
     plane = np.einsum("kj,kj->k", normal, locs - c[None, :])
-    geom = Geometry(
+    return Geometry(
         rays=camera.rays(), centre=c, locations=locs, rect=rect.astype(np.int32),
-        area=area.astype(np.int64), normal=normal, plane=plane,
+        rect_area=area.astype(np.int64), normal=normal, plane=plane,
         bounds=np.stack([corners.min(axis=(0, 1)), corners.max(axis=(0, 1))], 1).ravel(),
         height=float(obj.height) if grid.mode == "ground" else 0.0, solid=obj.solid(grid.mode),
     )
-    if obj.shape == "solid":  # the silhouette is the solid's projection: count its pixels
-        for k in np.flatnonzero(area > 0):
-            u0, v0, u1, v1 = rect[k]
-            mu, _ = geom.object_depth(k, geom.rays[v0:v1 + 1, u0:u1 + 1])
-            geom.area[k] = int(np.count_nonzero(mu > 0))
-    return geom

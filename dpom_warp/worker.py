@@ -167,7 +167,7 @@ class FrameWorker:
 
             files[f"images/{f.stem}.png"] = frame_picture(depth, rho_map, cfg.grid, dets,
                                                           geometry.centre[:2], item.truth, f.name,
-                                                          in_view=geometry.area > 0)
+                                                          in_view=geometry.rect_area > 0)
         if cfg.output.ply:
             files.update(ply_files(f.stem, depth, geometry, dets, cfg))
         t3 = time.perf_counter()

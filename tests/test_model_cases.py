@@ -24,7 +24,7 @@ def toy_geometry(depths, rects):
     area = (rect[:, 2] - rect[:, 0] + 1) * (rect[:, 3] - rect[:, 1] + 1)
     normal = np.tile([0.0, 0.0, -1.0], (n, 1))
     locs = np.array([[0.0, 0.0, d] for d in depths])
-    return Geometry(rays=rays, centre=np.zeros(3), locations=locs, rect=rect, area=area,
+    return Geometry(rays=rays, centre=np.zeros(3), locations=locs, rect=rect, rect_area=area,
                     normal=normal, plane=-np.array(depths, dtype=float),
                     bounds=np.array([-1.0, 1.0, -1.0, 1.0, 0.0, 10.0]))
 
