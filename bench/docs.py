@@ -178,13 +178,10 @@ def demo_block(out: Path) -> str:
     return "\n".join(lines)
 
 
-PLANE = ["object.shape=plane", "object.width=0.5", "model.top_support=0.05"]  # the paper's model, its own defaults
-
-
 def robustness_block(out: Path, jobs: int) -> str:
     from concurrent.futures import ProcessPoolExecutor
 
-    from bench.robustness import VARIANTS, run_variant
+    from bench.robustness import PLANE, VARIANTS, run_variant
 
     columns = [("frames", [], "background frames"), ("auto", [], "`auto`"), ("floor", [], "floor-only"),
                ("frames", ["engine.exact=true"], "background frames, **exact path**"),

@@ -25,6 +25,7 @@ import statistics
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+PLANE = ["object.shape=plane", "object.width=0.5", "model.top_support=0.05"]  # the paper's model, its own defaults
 CEILING_90 = ["camera.extrinsics.pitch_deg=90", "camera.extrinsics.y=4.0", "grid.x=[-1.8, 1.8, 0.1]",
               "grid.y=[2.4, 5.6, 0.1]", "synthetic.in_view=head"]
 VARIANTS = {

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from bench.baseline import score_config
+from bench.robustness import PLANE
 from dpom_warp.config import load_config
 from dpom_warp.pipeline import run
 from dpom_warp.synthetic import generate
@@ -59,8 +60,7 @@ def test_solid_model_end_to_end(tmp_path, which):
     cfg_sets = CROWD if which == "crowd" else CEILING
     scores = {}
     for shape in ("solid", "plane"):
-        own = [] if shape == "solid" else ["object.shape=plane", "object.width=0.5", "model.top_support=0.05"]
-        cfg = scene(tmp_path, cfg_sets + own, 4)
+        cfg = scene(tmp_path, cfg_sets + ([] if shape == "solid" else PLANE), 4)
         summary = run(cfg, str(tmp_path / shape), "cpu", progress=False, log=lambda *_: None, overwrite=True)
         scores[shape] = summary["scores"]
     base = score_config(cfg)
