@@ -5,6 +5,7 @@ commands:
                 [--workers N] [--ray [ADDRESS]] [--resume | --overwrite]
   dpom-warp fit-ground DEPTH... --camera CAMERA.yaml [--output POSE.yaml]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
+  dpom-warp track RUN_DIR [--set tracking.KEY=VALUE ...]
   dpom-warp schema [--output FILE]
 
 `dpom-warp COMMAND --help` explains each; the README has the config reference.
@@ -95,6 +96,10 @@ def _report(summary: dict, out: str) -> None:
     print(f"{summary['frames']} frames, {summary['detections']} detections; median "
           f"{1000 * t['median_infer_s']:.0f} ms per frame ({t['median_iterations']:.0f} iterations) "
           f"on {summary['device']}; outputs in {out}")
+    tr = summary.get("tracking") or {}
+    if tr.get("method", "off") != "off":
+        print(f"{tr['tracks']} tracks ({tr['method']}, {tr['ms_per_frame']:.1f} ms per frame): "
+              f"{out}/tracks.csv")
     s = summary.get("scores")
     if s:
         print(f"MODA {s['moda']:.3f}  precision {s['precision']:.3f}  recall {s['recall']:.3f}  "
@@ -142,7 +147,7 @@ def eval_output(run: str, compare: list[str], output: str | None):
 
 
 def _eval(args) -> int:
-    from .evaluate import evaluate_runs, markdown_table
+    from .evaluate import evaluate_runs, markdown_table, tracking_table
     from .io import write_json_atomic
     from .pipeline import _jsonable
 
@@ -151,12 +156,24 @@ def _eval(args) -> int:
     out = eval_output(args.run, args.compare, args.output)
     write_json_atomic(out / "eval.json", _jsonable(results))
     print(markdown_table(results))
+    tracks = tracking_table(results)
+    if tracks:
+        print("\n" + tracks)
     print(f"\ncurves in {out / 'eval.json'}")
     if args.plots:
         from .plots import write_figures
 
         made = write_figures(results, out / "plots")
         print(f"figures: {', '.join(str(out / 'plots' / m) for m in made)}")
+    return 0
+
+
+def _track(args) -> int:
+    from .pipeline import retrack
+
+    report = retrack(args.run, args.set)
+    print(f"{report.get('tracks', 0)} tracks ({report['method']}); tracks.csv and track_table.csv in "
+          f"{args.run}" if report["method"] != "off" else f"tracking off: no tracks in {args.run}")
     return 0
 
 
@@ -249,6 +266,13 @@ def main(argv: list[str] | None = None) -> int:
                    help="people less visible than this are not penalised in the second protocol")
     e.add_argument("--min-rho", type=float, default=0.05,
                    help="lowest rho* re-detected from the maps for the threshold sweep")
+    t = command("track", "track a finished run again with other tracking settings",
+                "Compute a finished run's tracks again from its maps (no inference): tracks.csv,\n"
+                "track_table.csv, the pictures, summary.json's tracking block and eval.json.")
+    t.add_argument("run", metavar="RUN_DIR", help="a dpom-warp run folder")
+    t.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override tracking.*, input.fps or output.images, e.g. --set "
+                        "tracking.method=online; repeatable")
     m = command("schema", "write the JSON Schema of run configs (for editors)",
                 "Write the JSON Schema of run configs: point an editor's YAML support at it to\n"
                 "complete and check configs (configs/dpom-warp.schema.json is this output).")
@@ -264,6 +288,8 @@ def main(argv: list[str] | None = None) -> int:
             return _eval(args)
         if args.command == "schema":
             return _schema(args)
+        if args.command == "track":
+            return _track(args)
     except (ConfigError, InputError) as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 2

@@ -29,6 +29,7 @@ from .ground import GroundOptions
 from .model import AutoBackground, ModelParams
 from .resolution import REDUCERS
 from .synthetic import SceneSpec
+from .tracking import TrackingOptions
 
 
 class ConfigError(ValueError):
@@ -206,6 +207,7 @@ class InputSection(Node):
     reduce: Literal[REDUCERS] = Field("median", description="how a block becomes one reading: median "
                                                             "(lower median of its readings), nearest "
                                                             "(one pixel), min")
+    fps: Num = Field(15.0, gt=0, description="frames per second of the frames (tracking's speeds)")
     background_auto: BackgroundAutoSection = BackgroundAutoSection()
 
 
@@ -454,6 +456,35 @@ class EvaluationSection(Node):
     plots: Bool = Field(False, description="also write the evaluation figures into plots/")
 
 
+def _td(name):
+    return _d(TrackingOptions, name)
+
+
+class TrackingSection(Node):
+    """Tracks with identities over the run's maps (K-shortest paths as a min-cost flow)."""
+
+    method: Literal["auto", "ksp", "online", "off"] = Field(
+        _td("method"), description="auto: ksp for runs of two frames or more; ksp: offline, globally "
+                                   "optimal; online: causal, committed `delay` frames behind; off: no tracks")
+    max_speed: Num = Field(_td("max_speed"), gt=0, description="fastest move between frames, m/s")
+    prune: Num = Field(_td("prune"), gt=0, lt=1, description="cells below this rho* are left out of the graph")
+    peak: Num = Field(_td("peak"), gt=0, lt=1, description="map peaks at least this high may be bridged "
+                                                           "across hidden frames")
+    min_rho: Num = Field(_td("min_rho"), gt=0, lt=0.5, description="rho* floor of a node's cost: a "
+                                                                   "bridged frame costs -log(min_rho / (1 - min_rho))")
+    max_rho: Num = Field(_td("max_rho"), gt=0.5, lt=1, description="rho* ceiling of a node's cost")
+    entry_cost: Num = Field(_td("entry_cost"), ge=0, description="starting or ending a track at an entry "
+                                                                 "cell (grid border, edge of the view, regions)")
+    appear_cost: Num = Field(_td("appear_cost"), ge=0, description="starting or ending one anywhere else")
+    max_gap: Int = Field(_td("max_gap"), ge=0, description="most frames a track is bridged across")
+    window: Int = Field(_td("window"), ge=2, description="ksp: frames per solved window")
+    overlap: Int = Field(_td("overlap"), ge=0, description="ksp: frames two windows share (stitched there)")
+    delay: Int = Field(_td("delay"), ge=0, description="online: frames between the newest and the committed one")
+    regions: list[Annotated[tuple[float, float, float, float], _numbers(4)]] = Field(
+        [], description="more entry areas [x_min, x_max, y_min, y_max], metres (doors)")
+    trail: Int = Field(_td("trail"), ge=0, description="frames of trail drawn behind a track in the pictures")
+
+
 class OutputSection(Node):
     """What the run writes."""
 
@@ -502,6 +533,10 @@ class SyntheticSection(Node):
     tables: Int = Field(_sd("tables"), ge=0, description="free-standing tables inside the area")
     in_view: Literal["body", "head"] = Field(_sd("in_view"), description="what of a person must be in "
                                              "the image: body (eye level) or head (ceiling cameras)")
+    motion: Literal["random", "paths"] = Field(_sd("motion"), description="random: a random walk in view; "
+                                               "paths: straight walks to waypoints with stops (tracking scenes)")
+    leave: Num = Field(_sd("leave"), ge=0, description="paths: waypoints up to this far outside the area "
+                                                       "(people leave the view and come back), metres")
     noise: Pair = Field(_sd("noise"), description="depth noise a + b z^2, metres")
     dropout: Num = Field(_sd("dropout"), ge=0, le=1, description="share of pixels with no reading")
     edge_holes: Num = Field(_sd("edge_holes"), ge=0, le=1,
@@ -522,6 +557,7 @@ class ConfigFile(Node):
     model: ModelSection = ModelSection()
     detection: DetectionSection = DetectionSection()
     evaluation: EvaluationSection = EvaluationSection()
+    tracking: TrackingSection = TrackingSection()
     output: OutputSection = OutputSection()
     engine: EngineSection = EngineSection()
     synthetic: SyntheticSection | None = None
@@ -630,6 +666,7 @@ class Inputs:
     frames: str | None = None
     background: str | None = None
     depth_scale: float = 0.001
+    fps: float = 15.0
     stride: int | str = "auto"  # "auto" or an integer >= 1 (dpom_warp.resolution)
     reduce: str = "median"
     background_auto: AutoBackground = AutoBackground()  # for background: auto
@@ -680,6 +717,7 @@ class RunConfig:
     pose_auto: bool = False
     ground: GroundOptions = GroundOptions()
     ground_frames: int = 5
+    tracking: TrackingOptions = TrackingOptions()
 
 
 def _fill(cls, section: BaseModel, **changes):
@@ -695,8 +733,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     except ValidationError as e:
         raise ConfigError(_first_error(e)) from None
     s = c.input
-    inputs = Inputs(frames=s.frames, background=s.background, depth_scale=s.depth_scale, stride=s.stride,
-                    reduce=s.reduce, background_auto=_fill(AutoBackground, s.background_auto))
+    inputs = Inputs(frames=s.frames, background=s.background, depth_scale=s.depth_scale, fps=s.fps,
+                    stride=s.stride, reduce=s.reduce, background_auto=_fill(AutoBackground, s.background_auto))
     cam, ext = c.camera, c.camera.extrinsics
     pose_auto = ext == "auto"
     if pose_auto:
@@ -719,6 +757,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     evaluation = _fill(Evaluation, c.evaluation)
     output = _fill(Output, c.output)
     engine = _fill(EngineOptions, c.engine)
+    tracking = _fill(TrackingOptions, c.tracking, regions=tuple(tuple(r) for r in c.tracking.regions))
     if engine.exact:  # the exact path: full resolution, every pass full, no warm start
         inputs = dataclasses.replace(inputs, stride=1)
         model = dataclasses.replace(model, sparse_epsilon=0.0, warm_start=False)
@@ -740,12 +779,13 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         "object": vars_of(obj),
         "model": {k: plain(v) for k, v in vars_of(model).items()},
         "detection": vars_of(detection), "evaluation": vars_of(evaluation),
+        "tracking": {**vars_of(tracking), "regions": [list(r) for r in tracking.regions]},
         "output": vars_of(output), "engine": vars_of(engine),
     }
     if synthetic is not None:
         resolved["synthetic"] = {"cache": cache, **{k: plain(v) for k, v in vars_of(synthetic).items()}}
     return RunConfig(c.device, inputs, camera, grid, obj, model, detection, evaluation, output,
-                     engine, synthetic, cache, resolved, pose_auto, ground, cam.ground.frames)
+                     engine, synthetic, cache, resolved, pose_auto, ground, cam.ground.frames, tracking)
 
 
 def vars_of(dc) -> dict:

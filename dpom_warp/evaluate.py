@@ -420,4 +420,42 @@ def evaluate_runs(sources: list[str | Path], ground_truth: str | Path | None = N
             missing = next(k for k in frames if k not in truth)
             raise InputError(f"{ground_truth}: no ground truth for frame {missing} of {src}")
         results.append(evaluate(dets, sub, hidden_visibility, cube_size=cube))
+        if src.is_dir() and (src / "tracks.csv").exists():
+            results[-1]["tracking"] = run_track_scores(src, summary, sub, hidden_visibility)
     return results
+
+
+def run_track_scores(run_dir: Path, summary: dict, truth: dict, hidden_visibility: float) -> dict:
+    """Tracking scores of a run's tracks.csv, and of the naive linking of its detections.csv
+    (the baseline), when the ground truth has identities."""
+    from .track_eval import naive_tracks, track_scores
+    from .tracking import read_tracks_csv
+
+    frames = [p["frame"] for p in summary["per_frame"]]
+    if not all("id" in o for f in frames for o in truth.get(f, [])):
+        return {"skipped": "the ground truth has no identities (objects[].id)"}
+    dims = 3 if summary["config"]["grid"]["mode"] == "voxel" else 2
+    tracks = read_tracks_csv(run_dir / "tracks.csv")
+    dets = read_detections_csv(run_dir / "detections.csv")
+    gate = summary["config"]["evaluation"]["match_distance"]
+    naive = naive_tracks({f: d[:, :dims] for f, d in dets.frames.items()}, frames, gate)
+    return {"method": summary.get("tracking", {}).get("method"),
+            "tracks": track_scores(tracks, truth, frames, dims, hidden_visibility),
+            "naive": track_scores(naive, truth, frames, dims, hidden_visibility)}
+
+
+def tracking_table(results: list[dict]) -> str:
+    """One row per run, tracker (its tracks, the naive linking) and gate: MOTA, MOTP, IDF1,
+    HOTA, identity switches (hidden people ignored below the visibility threshold)."""
+    lines = ["| run | tracks | gate | MOTA | MOTP (m) | IDF1 | HOTA | ID switches | per 500 person-frames |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        t = r.get("tracking")
+        if not t or "skipped" in t:
+            continue
+        for who, label in (("tracks", t["method"]), ("naive", "naive linking")):
+            for gate, s in t[who]["ignore_hidden"].items():
+                lines.append(f"| {r['name']} | {label} | {gate} m | {s['mota']:.3f} | {s['motp']:.3f} | "
+                             f"{s['idf1']:.3f} | {s['hota']:.3f} | {s['num_switches']} | "
+                             f"{s['switches_per_500']:.2f} |")
+    return "\n".join(lines) if len(lines) > 2 else ""

@@ -21,7 +21,8 @@ from .engine import Engine, MemoryBudgetError, resolve_device
 from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
 from .ground import fit_ground_files
-from .io import TEMP_MARK, InputError, read_depth, write_json_atomic, write_text_atomic
+from .io import (TEMP_MARK, InputError, read_depth, write_bytes_atomic, write_json_atomic,
+                 write_text_atomic)
 from .resolution import Resolution
 from .synthetic import generate
 from .worker import (FrameItem, FrameOutput, FrameWorker, WorkerSpec, kernel_cache, make_engine,
@@ -61,8 +62,9 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
 
 
 RUN_STATE = "run.json"
+TRACK_FILES = ("tracks.csv", "track_table.csv")
 OUTPUTS = ("maps", "images", "frames", "plots", "ply", "detections.csv", "summary.json", "eval.json",
-           RUN_STATE)
+           *TRACK_FILES, RUN_STATE)
 
 
 def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> None:
@@ -222,6 +224,7 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         if missing:
             raise InputError(f"{cfg.evaluation.ground_truth}: no ground truth for frame {missing[0]}")
     s = set_up(cfg, frames, device, log, parallel)
+    s.spec.pictures = cfg.output.images and not pictures_deferred(cfg, len(frames))
     return RunPlan(**{f.name: getattr(s, f.name) for f in dataclasses.fields(Setup)}, cfg=cfg,
                    out=out, frames=frames, skipped=skipped, truth=truth, t_start=t_start)
 
@@ -372,6 +375,7 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     summary["inference"] = plan.inference
     summary["runner"] = {**runner, "frames_resumed": len(done) - sum(plan.by_worker.values()),
                          "frames_per_worker": dict(sorted(plan.by_worker.items()))}
+    summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth)
     summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))
@@ -385,6 +389,114 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
 
             write_figures(results, out / "plots")
     return summary
+
+
+def pictures_deferred(cfg: RunConfig, frames: int) -> bool:
+    """Whether a run's pictures are drawn after tracking (they show the tracks) rather than
+    by whoever infers each frame."""
+    return cfg.output.images and cfg.tracking.resolved_method(frames) != "off"
+
+
+def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None, log=print) -> dict:
+    """Tracks of a run whose maps are written (maps/<stem>.npy of the `done` frames, in
+    order): tracks.csv and track_table.csv, then, when the run has pictures, every frame's
+    picture with the tracks (deferred until now: pictures_deferred). Returns the `tracking`
+    block of summary.json. tracking.method off (or a single frame): no track files."""
+    from .render import frame_picture
+    from .tracking import Cells, per_frame, run_tracker, track_table, tracks_csv
+
+    method = cfg.tracking.resolved_method(len(done))
+    if method == "off":
+        for name in TRACK_FILES:
+            (out / name).unlink(missing_ok=True)
+        return {"method": "off"}
+    maps = np.stack([np.load(out / "maps" / f"{f.stem}.npy").ravel() for f in done])
+    cells = Cells.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
+                     cfg.detection.nms_radius)
+    tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, cfg.inputs.fps,
+                                 cfg.detection.threshold, method)
+    names = [f.name for f in done]
+    write_text_atomic(out / "tracks.csv", tracks_csv(tracks, names))
+    write_text_atomic(out / "track_table.csv", track_table(tracks, names, cfg.inputs.fps))
+    log(f"{len(tracks)} tracks ({method}) in {report['time_s']:.2f} s "
+        f"({report['ms_per_frame']:.1f} ms per frame)")
+    if cfg.output.images:
+        t = time.perf_counter()
+        from .detect import detect
+
+        now = per_frame(tracks, len(done))
+        trail = cfg.tracking.trail
+        history: dict[int, list] = {}
+        for i, f in enumerate(done):
+            rho_map = maps[i].reshape(cfg.grid.shape)
+            dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
+                          cfg.detection.nms_radius)
+            shown = []
+            for tid, xyz, bridged in now[i]:
+                history.setdefault(tid, []).append((i, xyz))
+                past = [p for j, p in history[tid] if j > i - max(1, trail)]
+                k = int(np.argmin(np.linalg.norm(geometry.locations - xyz, axis=1)))
+                shown.append({"id": tid, "box": geometry.rect[k], "bridged": bridged, "trail": past})
+            png = frame_picture(read_frame(cfg, f), rho_map, cfg.grid, dets, geometry.centre[:2],
+                                truth.get(f.name) if truth else None, f.name,
+                                in_view=geometry.rect_area > 0, tracks=shown, trail=trail)
+            write_bytes_atomic(out / "images" / f"{f.stem}.png", png)
+        report["pictures_s"] = time.perf_counter() - t
+    return report
+
+
+RETRACK_KEYS = ("tracking.", "input.fps", "output.images")
+
+
+def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
+    """`dpom-warp track RUN_DIR`: the tracks of a finished run again from its maps, with
+    `overrides` (tracking.*, input.fps, output.images) applied to its config; tracks.csv,
+    track_table.csv, the pictures, summary.json's `tracking` and eval.json are rewritten.
+    Returns the new tracking block."""
+    from .config import apply_overrides, parse_config
+
+    run_dir = Path(run_dir)
+    try:
+        summary = json.loads((run_dir / "summary.json").read_text())
+        raw = summary["config"]
+    except (OSError, json.JSONDecodeError, KeyError):
+        raise InputError(f"{run_dir}: not a finished dpom-warp run (no readable summary.json)") from None
+    for o in overrides:
+        key = o.split("=", 1)[0].strip()
+        if not any(key.startswith(k) for k in RETRACK_KEYS):
+            raise ConfigError(f"--set {key}: expected a tracking.* key, input.fps or output.images "
+                              f"(the rest of a run changes only by inferring again)")
+    cfg = parse_config(apply_overrides(raw, overrides))
+    camera = cfg.camera
+    if cfg.pose_auto:
+        camera = dataclasses.replace(camera, T_world_from_camera=np.array(
+            summary["ground_fit"]["T_world_from_camera"], float))
+    names = [p["frame"] for p in summary["per_frame"]]
+    if cfg.output.images:
+        by_name = {f.name: f for f in expand(cfg.inputs.frames, "input.frames")}
+        missing = [n for n in names if n not in by_name]
+        if missing:
+            raise InputError(f"input.frames: {cfg.inputs.frames} has no frame {missing[0]} of the run "
+                             f"(its frames redraw the pictures; run from the folder the run started "
+                             f"in, or --set output.images=false)")
+        done = [by_name[n] for n in names]
+    else:
+        done = [Path(n) for n in names]
+    for n in names:
+        if not (run_dir / "maps" / f"{Path(n).stem}.npy").is_file():
+            raise InputError(f"{run_dir / 'maps' / (Path(n).stem + '.npy')}: missing occupancy map")
+    truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
+    geometry = build_geometry(camera, cfg.grid, cfg.obj)
+    report = track_run(cfg, run_dir, done, geometry, truth, log)
+    summary["config"], summary["tracking"] = cfg.resolved, report
+    write_json_atomic(run_dir / "summary.json", _jsonable(summary))
+    write_json_atomic(run_dir / RUN_STATE, {"config": _jsonable(cfg.resolved)})
+    if truth is not None:
+        from .evaluate import evaluate_runs
+
+        results = evaluate_runs([run_dir], cfg.evaluation.ground_truth, cfg.evaluation.hidden_visibility)
+        write_json_atomic(run_dir / "eval.json", _jsonable(results))
+    return report
 
 
 def estimate_background(cfg: RunConfig, files: list[Path], height: int, width: int, device: str,

@@ -143,14 +143,44 @@ def place_label(draw: ImageDraw.ImageDraw, label: str, at, taken: list, bounds) 
     return rect
 
 
+@lru_cache(maxsize=None)
+def track_colour(track_id: int) -> tuple:
+    """A track's colour: matplotlib's tab20, by identity."""
+    table = colour_table("tab20")
+    c = table[(track_id * 7) % 20 * 255 // 19]
+    return tuple(int(v) for v in c)
+
+
+def fade(colour, age: float, towards=(32, 32, 32)) -> tuple:
+    """`colour` mixed towards the map's background by `age` (0: as is, 1: gone)."""
+    return tuple(int(round(c + (b - c) * age)) for c, b in zip(colour, towards))
+
+
+def draw_tracks(draw, panel: MapPanel, ox, oy, tracks, trail: int, side: bool = False):
+    """Each track's trail (the last `trail` frames, fading with age) and its identity on a
+    map panel; `side`: the panel shows (x, z)."""
+    for tr in tracks:
+        colour = track_colour(tr["id"])
+        pts = [panel.to_px(p[0], p[2] if side else p[1], ox, oy) for p in tr["trail"]]
+        n = len(pts)
+        for i in range(1, n):  # the newest segment in the track's colour, older ones fading
+            draw.line((*pts[i - 1], *pts[i]), fill=fade(colour, 0.85 * (n - 1 - i) / max(1, trail)), width=2)
+        if pts:
+            px, py = pts[-1]
+            draw.text((px + 8, py - 8), str(tr["id"]), fill=colour, font=font(11), anchor="lb")
+
+
 def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, title="",
-                  z_max=None, in_view=None) -> bytes:
+                  z_max=None, in_view=None, tracks=None, trail: int = 30) -> bytes:
     """A PNG file's bytes: left the depth frame with detection boxes (solid, with rho*) and
     ground-truth boxes (dashed); right the occupancy map rho* seen from above, with
     detections (circles), ground truth (crosses) and the camera position; for a voxel grid
     also a side view (maximum over y). `in_view` (map-shaped bool): the locations the camera
     sees; the others are drawn grey, so the map shows the camera's footprint (a wedge at eye
-    level, the floor below it from the ceiling)."""
+    level, the floor below it from the ceiling). `tracks`: the tracks of this frame, dicts of
+    id, box (image rectangle), bridged (no detection: the box is drawn dashed) and trail (its
+    positions over the last `trail` frames, this one last): identities on the boxes, fading
+    trails on the maps."""
     voxel = rho_map.ndim == 3
     has_truth, truth = truth is not None, truth or []
     depth = np.asarray(depth_m, dtype=np.float32)
@@ -192,9 +222,22 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     boxes = [(np.asarray(d.box, float) + [-0.5, -0.5, 0.5, 0.5]) * zoom for d in detections]
     for u0, v0, u1, v1 in boxes:
         draw.rectangle((ox + u0, oy + v0, ox + u1, oy + v1), outline=(255, 255, 255), width=2)
+    ident = {}
+    for tr in tracks or []:
+        k = min(range(len(detections)), default=None,
+                key=lambda i: np.hypot(detections[i].x - tr["trail"][-1][0], detections[i].y - tr["trail"][-1][1]))
+        near = k is not None and np.hypot(detections[k].x - tr["trail"][-1][0],
+                                          detections[k].y - tr["trail"][-1][1]) < 0.25
+        if near and not tr["bridged"]:
+            ident[k] = tr["id"]
+        else:  # bridged: where the tracker holds the person, hidden or missed
+            u0, v0, u1, v1 = (np.asarray(tr["box"], float) + [-0.5, -0.5, 0.5, 0.5]) * zoom
+            dashed_rectangle(draw, (ox + u0, oy + v0, ox + u1, oy + v1), track_colour(tr["id"]), width=2)
+            draw.text((ox + u0 + 2, oy + v0 + 2), f"#{tr['id']}", fill=track_colour(tr["id"]),
+                      font=font(11), anchor="lt")
     taken = []
-    for d, (u0, v0, u1, v1) in zip(detections, boxes):
-        label = f"{d.rho:.2f}"
+    for i, (d, (u0, v0, u1, v1)) in enumerate(zip(detections, boxes)):
+        label = f"#{ident[i]} {d.rho:.2f}" if i in ident else f"{d.rho:.2f}"
         tb = place_label(draw, label, (ox + u0, oy + v0 - 2), taken, (ox, oy, ox + depth_img.width, oy + PANEL_H))
         draw.rectangle(tb, fill=(0, 0, 0))
         draw.text((tb[0] + 1, tb[3] - 1), label, fill=(255, 255, 255), font=font(11), anchor="lb")
@@ -206,6 +249,8 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     ox += depth_img.width + bar_space + PAD + 10
     top.draw(canvas, draw, ox, oy, "occupancy map (top view" + (", max over z)" if voxel else ")"), "y (m)")
     top.marks(draw, ox, oy, [(o["x"], o["y"]) for o in truth], [(d.x, d.y) for d in detections])
+    if tracks:
+        draw_tracks(draw, top, ox, oy, tracks, trail)
     cx, cy = top.to_px(camera_xy[0], camera_xy[1], ox, oy)
     draw.polygon([(cx, cy - 8), (cx - 7, cy + 5), (cx + 7, cy + 5)], fill=(255, 255, 255), outline=INK)
     if voxel:
@@ -213,12 +258,15 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
         ox += top.w + PAD + 10
         side.draw(canvas, draw, ox, oy, "side view (max over y)", "z (m)")
         side.marks(draw, ox, oy, [(o["x"], o.get("z", 0.0)) for o in truth], [(d.x, d.z) for d in detections])
+        if tracks:
+            draw_tracks(draw, side, ox, oy, tracks, trail, side=True)
         ox += side.w
     else:
         ox += top.w
     colour_bar(draw, ox + 10, oy + 16, PANEL_H - 32, "magma", 0.0, 1.0, "rho*")
     legend = ([((0, 255, 0), "x ground truth")] if has_truth else []) + [
-        ((0, 255, 255), "o detections"), ((255, 255, 255), "^ camera")]
+        ((0, 255, 255), "o detections"), ((255, 255, 255), "^ camera")] + (
+        [((180, 120, 40), "#n track (dashed: bridged)")] if tracks is not None else [])
     for i, (c, text) in enumerate(legend):
         draw.text((PAD + 4 + 120 * i, height - 12), text, fill=tuple(int(v * 0.7) for v in c) if c != (255, 255, 255) else INK,
                   font=font(11), anchor="lm")

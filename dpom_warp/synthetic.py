@@ -18,7 +18,7 @@ from ._open3d import o3d
 from .geometry import Camera
 from .io import write_depth_png, write_json_atomic
 
-GENERATOR_VERSION = 2  # 2: objects with no visible pixel are left out of the ground truth
+GENERATOR_VERSION = 3  # 2: objects with no visible pixel are left out of the ground truth; 3: objects carry ids
 
 
 @dataclass(frozen=True)
@@ -45,6 +45,12 @@ class SceneSpec:
         in_view: 'body': a person's feet and head are both in the image (a camera at eye
             level); 'head': the top of the head is (a ceiling camera, which sees the floor at a
             person's feet only far from below it).
+        motion: 'random': a random walk of step_m a frame that keeps everyone in view;
+            'paths': people walk straight to waypoints at about step_m a frame, stop at some
+            for 8 to 20 frames, wait or step aside for each other, and walk behind obstacles
+            (tracking scenes: crossings, people standing still, hidden ones).
+        leave: 'paths': waypoints may lie this far (metres) outside `area`, where a person
+            may leave the camera's view and come back later.
         noise: (a, b) of the depth noise sigma(z) = a + b z^2, metres.
         dropout: share of pixels with no reading, at random.
         edge_holes: probability that a pixel at a depth edge has no reading.
@@ -66,6 +72,8 @@ class SceneSpec:
     min_gap: float = 0.6
     tables: int = 0
     in_view: str = "body"
+    motion: str = "random"
+    leave: float = 0.0
     noise: tuple[float, float] = (0.002, 0.0015)
     dropout: float = 0.01
     edge_holes: float = 0.5
@@ -377,6 +385,69 @@ def walk(spec: SceneSpec, camera: Camera, footprints, rng: np.random.Generator):
     return frames
 
 
+def stroll(spec: SceneSpec, camera: Camera, footprints, rng: np.random.Generator):
+    """motion 'paths': people's (x, y, heading, phase) per frame, each walking straight to a
+    waypoint at ~step_m a frame (+-15 %), pausing at some, waiting or stepping aside when
+    another person is within min_gap; start in view, waypoints in `area` widened by
+    spec.leave and inside the room, off the furniture."""
+    ax0, ax1, ay0, ay1 = spec.area
+    rx0, rx1, ry0, ry1, _ = spec.room
+    heights = rng.uniform(1.55, 1.95, spec.people)
+    builds = rng.uniform(0.9, 1.15, spec.people)
+    lo = (max(ax0 - spec.leave, rx0 + 0.4), max(ay0 - spec.leave, ry0 + 0.4))
+    hi = (min(ax1 + spec.leave, rx1 - 0.4), min(ay1 + spec.leave, ry1 - 0.4))
+
+    def clear(x, y, others):
+        return (_free(x, y, footprints) and rx0 + 0.3 < x < rx1 - 0.3 and ry0 + 0.3 < y < ry1 - 0.3
+                and all(math.hypot(x - o[0], y - o[1]) > spec.min_gap for o in others))
+
+    def waypoint(x, y):
+        for _ in range(1000):
+            wx, wy = rng.uniform(lo[0], hi[0]), rng.uniform(lo[1], hi[1])
+            if _free(wx, wy, footprints) and math.hypot(wx - x, wy - y) > 1.0:
+                return [wx, wy]
+        return [x, y]
+
+    people = []
+    for i in range(spec.people):
+        for _ in range(10000):
+            x, y = rng.uniform(ax0, ax1), rng.uniform(ay0, ay1)
+            if clear(x, y, people) and _in_view(camera, x, y, heights[i], spec.in_view == "head"):
+                break
+        else:
+            raise RuntimeError("synthetic: could not place everyone in view; enlarge 'area'")
+        people.append({"x": x, "y": y, "heading": rng.uniform(0, 2 * math.pi),
+                       "phase": rng.uniform(0, 2 * math.pi), "speed": spec.step_m * rng.uniform(0.85, 1.15),
+                       "goal": waypoint(x, y), "pause": 0, "waited": 0})
+    frames = []
+    for _ in range(spec.frames):
+        frames.append([dict(x=p["x"], y=p["y"], heading=p["heading"], phase=p["phase"],
+                            height=float(heights[i]), build=float(builds[i])) for i, p in enumerate(people)])
+        for i, p in enumerate(people):
+            if p["pause"] > 0:
+                p["pause"] -= 1
+                continue
+            gx, gy = p["goal"]
+            dist = math.hypot(gx - p["x"], gy - p["y"])
+            if dist <= p["speed"]:
+                p["goal"] = waypoint(gx, gy)
+                p["pause"] = int(rng.integers(8, 21)) if rng.random() < 0.3 else 0
+                continue
+            others = [(q["x"], q["y"]) for j, q in enumerate(people) if j != i]
+            toward = math.atan2(gy - p["y"], gx - p["x"])
+            for turn in (0.0, 0.6, -0.6, 1.2, -1.2):
+                hd = toward + turn
+                x, y = p["x"] + p["speed"] * math.cos(hd), p["y"] + p["speed"] * math.sin(hd)
+                if clear(x, y, others):
+                    p.update(x=x, y=y, heading=hd, phase=p["phase"] + 1.3 * p["speed"] / 0.3, waited=0)
+                    break
+            else:
+                p["waited"] += 1
+                if p["waited"] > 4:
+                    p["goal"], p["waited"] = waypoint(p["x"], p["y"]), 0
+    return frames
+
+
 def _walk_pairs(spec: SceneSpec, ok, heights, builds, rng: np.random.Generator):
     """walk() for people in pairs (spec.pair_gap): each pair moves as one, the second person
     pair_gap to the left of the first, both in view, off the furniture, min_gap from others."""
@@ -443,12 +514,16 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
         raise ValueError(f"synthetic.kind: expected people or drones, found {spec.kind!r}")
     if spec.in_view not in ("body", "head"):
         raise ValueError(f"synthetic.in_view: expected body or head, found {spec.in_view!r}")
+    if spec.motion not in ("random", "paths"):
+        raise ValueError(f"synthetic.motion: expected random or paths, found {spec.motion!r}")
     rng = np.random.default_rng(spec.seed)
     room, footprints = room_meshes(spec, rng)
     boxes = [(*f, 3.0) for f in footprints]
     if spec.obstacles:
         extra, inside = obstacle_meshes(spec, rng, footprints)
         room, boxes = room + extra, boxes + inside
+        if spec.kind == "people":  # people walk around them (and behind them, hidden)
+            footprints = footprints + [b[:4] for b in inside]
     if spec.tables:
         extra, placed = table_meshes(spec, rng, footprints)
         room, footprints, boxes = room + extra, footprints + placed, boxes + [(*f, 0.8) for f in placed]
@@ -460,7 +535,7 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
         write_depth_png(out / "background" / f"{f:04d}.png", sensor_noise(t_static, spec, rng))
     truth = []
     if spec.kind == "people":
-        sequence = walk(spec, camera, footprints, rng)
+        sequence = (stroll if spec.motion == "paths" else walk)(spec, camera, footprints, rng)
     else:
         sequence = fly(spec, camera, boxes, rng)
     for f, people in enumerate(sequence):
@@ -475,7 +550,7 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
         name = f"{f:04d}.png"
         write_depth_png(out / "frames" / name, sensor_noise(t, spec, rng))
         objects = []
-        for m, p, pid in zip(meshes, people, ids[len(room):]):
+        for n, (m, p, pid) in enumerate(zip(meshes, people, ids[len(room):])):
             alone, _ = _scene([m])
             ta, _ = render(alone, camera)
             full = np.isfinite(ta)
@@ -483,7 +558,7 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
             if visible == 0:  # out of view or wholly hidden: nothing in the image to find
                 continue
             vv, uu = np.nonzero(full)
-            obj = {"x": round(p["x"], 4), "y": round(p["y"], 4), "z": round(p.get("z", 0.0), 4)}
+            obj = {"id": n, "x": round(p["x"], 4), "y": round(p["y"], 4), "z": round(p.get("z", 0.0), 4)}
             if "height" in p:
                 obj["height"] = round(p["height"], 3)
             objects.append({**obj,

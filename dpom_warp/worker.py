@@ -40,6 +40,7 @@ class WorkerSpec:
     camera: Camera
     device: str
     background: tuple | None = None
+    pictures: bool = True  # False: the run draws them after tracking
 
 
 @dataclasses.dataclass
@@ -102,6 +103,7 @@ class FrameWorker:
 
     def __init__(self, spec: WorkerSpec, name: str = "main", engine: Engine | None = None):
         self.cfg, self.name = spec.cfg, name
+        self.pictures = spec.cfg.output.images and spec.pictures
         self.geometry = build_geometry(spec.camera, spec.cfg.grid, spec.cfg.obj)  # full resolution
         if engine is None:
             engine = make_engine(spec.cfg, spec.camera, spec.device, spec.cfg.engine.batch)
@@ -162,7 +164,7 @@ class FrameWorker:
         rho_map, dets = self.detections(res)
         t2 = time.perf_counter()
         files = {}
-        if cfg.output.images:
+        if self.pictures:
             from .render import frame_picture
 
             files[f"images/{f.stem}.png"] = frame_picture(depth, rho_map, cfg.grid, dets,

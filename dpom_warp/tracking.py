@@ -1,0 +1,451 @@
+"""Tracks with identities from a run's occupancy maps.
+
+K-shortest paths (Berclaz, Fleuret, Turetken, Fua, PAMI 2011) as one min-cost flow: a node per
+(frame, cell) that matters, holding at most one object, costs -log(rho* / (1 - rho*)); arcs
+join a cell to the cells of the next frame within reach of `max_speed`; a unit of flow from
+the source to the sink is one track. Tracks enter and leave at entry cells (the grid's border,
+the edge of the camera's view, configured regions) for `entry_cost`, anywhere else for
+`appear_cost`; a track hidden for up to `max_gap` frames is bridged by an arc between two
+peaks of the maps, which pays `gap cost` = -log(min_rho / (1 - min_rho)) for every frame it
+skips. The flow that sends as many tracks as lowers the total cost is the global optimum over
+the maps (OR-Tools' min-cost flow; a bypass arc lets it send fewer than its supply).
+
+The graph holds only the maps' peaks (local maxima of rho* >= `prune`, one per detection
+radius, as the detections but below their threshold too); long runs are solved in windows of `window`
+frames overlapping by `overlap`, stitched by the positions they agree on. `online` solves,
+at every frame, the frames since the last committed one and commits the frame `delay` behind
+the newest: causal, its identities fixed once written.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+SCALE = 1000.0  # costs are integers for the solver: thousandths
+TRACKS_HEADER = "frame,track,x,y,z,rho,bridged"
+TABLE_HEADER = "track,first_frame,last_frame,frames,bridged,path_m,mean_speed_mps"
+
+
+@dataclass(frozen=True)
+class TrackingOptions:
+    """tracking.* (config.TrackingSection documents each)."""
+
+    method: str = "auto"
+    max_speed: float = 2.0
+    prune: float = 0.02
+    peak: float = 0.3
+    min_rho: float = 0.01
+    max_rho: float = 0.999
+    entry_cost: float = 4.0
+    appear_cost: float = 20.0
+    max_gap: int = 15
+    window: int = 300
+    overlap: int = 60
+    delay: int = 10
+    regions: tuple = ()
+    trail: int = 30
+
+    def resolved_method(self, frames: int) -> str:
+        """auto: ksp for two frames or more, else off."""
+        if self.method == "auto":
+            return "ksp" if frames >= 2 else "off"
+        return self.method
+
+
+@dataclass
+class Cells:
+    """What the tracker knows of the grid: cell centres (K, 3), the step between
+    neighbouring cells (metres), and which cells tracks may enter and leave by cheaply."""
+
+    positions: np.ndarray
+    step: float
+    entry: np.ndarray  # (K,) bool
+    nms_radius: float = 0.4  # a map's peaks closer than this are one object (detection.nms_radius)
+
+    @classmethod
+    def of(cls, geometry, grid, image_size, regions=(), nms_radius: float = 0.4) -> "Cells":
+        """From a run's full-resolution geometry: entry cells are the cells the camera sees on
+        the grid's border, beside a cell it does not see, whose silhouette leaves the image
+        (`image_size` = (width, height)), or inside a configured region [x0, x1, y0, y1]."""
+        shape = grid.shape
+        seen = (geometry.rect_area > 0).reshape(shape)
+        border = np.zeros(shape, bool)
+        for axis in range(len(shape)):
+            idx = [slice(None)] * len(shape)
+            idx[axis] = 0
+            border[tuple(idx)] = True
+            idx[axis] = -1
+            border[tuple(idx)] = True
+        beside = np.zeros(shape, bool)
+        padded = np.pad(~seen, 1, constant_values=False)
+        for off in np.ndindex(*(3,) * len(shape)):
+            beside |= padded[tuple(slice(o, o + n) for o, n in zip(off, shape))]
+        w, h = image_size
+        r = geometry.rect
+        leaves = ((r[:, 0] <= 0) | (r[:, 1] <= 0) | (r[:, 2] >= w - 1) | (r[:, 3] >= h - 1)).reshape(shape)
+        p = geometry.locations
+        inside = np.zeros(len(p), bool)
+        for x0, x1, y0, y1 in regions:
+            inside |= (p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)
+        entry = (seen & (border | beside | leaves)).ravel() | inside
+        steps = [grid.x[2], grid.y[2]] + ([grid.z[2]] if grid.mode == "voxel" else [])
+        return cls(np.asarray(p, float), float(max(steps)), entry, nms_radius)
+
+
+@dataclass
+class Track:
+    """One identity: per frame index t, the position (x, y, z), rho* there and whether the
+    tracker bridged the frame (no map peak: hidden or missed)."""
+
+    id: int
+    frames: list[int]
+    xyz: np.ndarray
+    rho: np.ndarray
+    bridged: np.ndarray
+
+
+# -- the flow over a window of frames --------------------------------------------------------
+def _costs(rho, opt: TrackingOptions):
+    r = np.clip(rho, opt.min_rho, opt.max_rho)
+    return -np.log(r / (1.0 - r))
+
+
+def peaks(rho_map: np.ndarray, cells: Cells, threshold: float) -> np.ndarray:
+    """The cells that matter in a map: its local maxima of at least `threshold`, one per
+    cells.nms_radius as the detections (the solid model often explains one person by two
+    neighbouring cells; each would carry a track of its own). Sorted cell indices."""
+    from .detect import local_maxima
+
+    flat = rho_map.ravel()
+    cand = np.flatnonzero(local_maxima(rho_map).ravel() & (flat >= threshold))
+    cand = cand[np.lexsort((cand, -flat[cand]))]
+    kept: list[int] = []
+    for k in cand:
+        if all(np.linalg.norm(cells.positions[k] - cells.positions[j]) >= cells.nms_radius for j in kept):
+            kept.append(int(k))
+    return np.array(sorted(kept), dtype=np.int64)
+
+
+def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
+                 anchors: dict | None = None) -> tuple[list[list[tuple[int, int]]], dict]:
+    """The optimal tracks over `maps` (T, K) rho*: a list of paths, each a list of (t, k)
+    in frame order (frames a path skips are bridged). `anchors` (online): cell k -> the
+    only cells where a path may start at t = 0 (the tracks committed there); without it a
+    path may start anywhere at t = 0 and end anywhere at the last frame."""
+    from ortools.graph.python import min_cost_flow
+    from scipy.spatial import cKDTree
+
+    T = maps.shape[0]
+    node_t, node_k = [], []
+    peak_of = []
+    for t in range(T):
+        if t == 0 and anchors is not None:
+            ks = np.array(sorted(anchors), dtype=np.int64)
+        else:
+            ks = peaks(maps[t].reshape(shape), cells, opt.prune)
+        node_t.append(np.full(len(ks), t))
+        node_k.append(ks)
+        peak_of.append(maps[t, ks] >= opt.peak)
+    offsets = np.cumsum([0] + [len(k) for k in node_k])
+    n = int(offsets[-1])
+    stats = {"nodes": n, "arcs": 0}
+    if n == 0:
+        return [], stats
+    all_t, all_k = np.concatenate(node_t), np.concatenate(node_k)
+    rho = maps[all_t, all_k]
+    cost = _costs(rho, opt)
+    first, last = all_t == 0, all_t == T - 1
+    if anchors is not None:  # committed already: their cost is paid, and they may be bridged from
+        cost[first] = 0.0
+        peak_of[0][:] = True
+    gap = float(_costs(np.array([opt.min_rho]), opt)[0])
+    src, snk = 2 * n, 2 * n + 1
+    tails, heads, costs = [np.arange(n) * 2], [np.arange(n) * 2 + 1], [cost]  # in -> out
+    reach = [opt.max_speed * s * dt + cells.step for s in range(opt.max_gap + 2)]
+    trees = [cKDTree(cells.positions[k]) if len(k) else None for k in node_k]
+    for t in range(T - 1):
+        a = trees[t]
+        if a is None:
+            continue
+        for s in range(1, opt.max_gap + 2):
+            if t + s >= T or trees[t + s] is None:
+                continue
+            if s == 1:
+                pairs = a.sparse_distance_matrix(trees[t + 1], reach[1], output_type="ndarray")
+                i, j = pairs["i"], pairs["j"]
+            else:  # a bridge: from a peak to a peak, paying the gap cost per skipped frame
+                pa, pb = np.flatnonzero(peak_of[t]), np.flatnonzero(peak_of[t + s])
+                if not len(pa) or not len(pb):
+                    continue
+                d = np.linalg.norm(cells.positions[node_k[t][pa]][:, None]
+                                   - cells.positions[node_k[t + s][pb]][None], axis=2)
+                ia, ib = np.nonzero(d <= reach[s])
+                i, j = pa[ia], pb[ib]
+            tails.append((offsets[t] + i) * 2 + 1)
+            heads.append((offsets[t + s] + j) * 2)
+            costs.append(np.full(len(i), (s - 1) * gap))
+    entry = cells.entry[all_k]
+    enter = np.where(first, 0.0, np.where(entry, opt.entry_cost, opt.appear_cost))
+    leave = np.where(last, 0.0, np.where(entry, opt.entry_cost, opt.appear_cost))
+    tails += [np.full(n, src), np.arange(n) * 2 + 1, [src]]
+    heads += [np.arange(n) * 2, np.full(n, snk), [snk]]
+    supply = max(1, int(np.sum(cost < 0)))
+    costs += [enter, leave, [0.0]]
+    tails, heads = np.concatenate(tails).astype(np.int64), np.concatenate(heads).astype(np.int64)
+    costs = np.round(np.concatenate(costs) * SCALE).astype(np.int64)
+    caps = np.ones(len(tails), np.int64)
+    caps[-1] = supply
+    flow = min_cost_flow.SimpleMinCostFlow()
+    arcs = flow.add_arcs_with_capacity_and_unit_cost(tails, heads, caps, costs)
+    flow.set_nodes_supplies(np.array([src, snk]), np.array([supply, -supply]))
+    status = flow.solve()
+    if status != flow.OPTIMAL:
+        raise RuntimeError(f"tracking: the min-cost flow solver returned status {status}")
+    used = flow.flows(arcs) > 0
+    stats["arcs"] = int(len(tails))
+    stats["cost"] = flow.optimal_cost() / SCALE
+    moves = used & (tails < 2 * n) & (heads < 2 * n) & (tails % 2 == 1)
+    succ = dict(zip((tails[moves] // 2).tolist(), (heads[moves] // 2).tolist()))
+    starts = heads[used & (tails == src) & (heads < 2 * n)] // 2
+    paths = []
+    for i in sorted(starts.tolist()):
+        path = []
+        while i is not None:
+            path.append((int(all_t[i]), int(all_k[i])))
+            i = succ.get(i)
+        paths.append(path)
+    return paths, stats
+
+
+def _expand(path, t0, maps, cells, threshold):
+    """(t, xyz, rho, bridged) of every frame of a path, t counted from t0 (`maps` starts
+    there); skipped frames are interpolated between the peaks they join, with the rho* of
+    the cell nearest to where they put the track."""
+    out = []
+    for (ta, ka), nxt in zip(path, path[1:] + [None]):
+        pa = cells.positions[ka]
+        out.append((t0 + ta, pa, float(maps[ta, ka]), float(maps[ta, ka]) < threshold))
+        if nxt is not None and nxt[0] > ta + 1:
+            pb = cells.positions[nxt[1]]
+            for t in range(ta + 1, nxt[0]):
+                p = pa + (t - ta) / (nxt[0] - ta) * (pb - pa)
+                k = int(np.argmin(np.linalg.norm(cells.positions - p, axis=1)))
+                out.append((t0 + t, p, float(maps[t, k]), True))
+    return out
+
+
+def _tracks_from(rows_by_id: dict) -> list[Track]:
+    """Tracks numbered 1, 2, ... by first frame then position (deterministic)."""
+    items = []
+    for rows in rows_by_id.values():
+        rows = sorted(rows, key=lambda r: r[0])
+        if rows:
+            items.append(rows)
+    items.sort(key=lambda rs: (rs[0][0], round(float(rs[0][1][0]), 4), round(float(rs[0][1][1]), 4)))
+    tracks = []
+    for i, rows in enumerate(items, 1):
+        frames = [r[0] for r in rows]
+        xyz = np.array([r[1] for r in rows], float)
+        rho = np.array([r[2] for r in rows])
+        tracks.append(Track(i, frames, xyz, rho, np.array([r[3] for r in rows], bool)))
+    return tracks
+
+
+def track_offline(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
+                  threshold: float = 0.5) -> tuple[list[Track], dict]:
+    """KSP over the whole run in windows of opt.window frames overlapping by opt.overlap; a
+    path of a later window takes the identity of the earlier window's path it agrees with
+    most in the overlap (the same cell within one step, at least a quarter of the frames),
+    and the windows meet in the overlap's middle."""
+    T = maps.shape[0]
+    win = max(2, opt.window)
+    lap = min(max(0, opt.overlap), win - 1)
+    starts = [0]
+    while starts[-1] + win < T:
+        starts.append(starts[-1] + win - lap)
+    ids: dict[int, list] = {}
+    prev: dict[int, dict] = {}  # id -> {t: xyz} of the previous window
+    next_id, stats = 0, {"windows": len(starts), "nodes": 0, "arcs": 0, "max_nodes": 0, "max_arcs": 0}
+    for w, s in enumerate(starts):
+        e = min(T, s + win)
+        paths, st = solve_window(maps[s:e], cells, shape, opt, dt)
+        for key in ("nodes", "arcs"):
+            stats[key] += st[key]
+            stats[f"max_{key}"] = max(stats[f"max_{key}"], st[key])
+        cut = s + lap // 2 if w > 0 else s  # frames before `cut` come from the earlier window
+        rows_now = [_expand(p, s, maps[s:e], cells, threshold) for p in paths]
+        assign = _stitch(prev, rows_now, s, min(e, s + lap), cells.step) if w > 0 else {}
+        current: dict[int, dict] = {}
+        for j, rows in enumerate(rows_now):
+            if j in assign:
+                tid = assign[j]
+                ids[tid] = [r for r in ids[tid] if r[0] < cut]
+            else:
+                next_id += 1
+                tid = next_id
+                ids[tid] = []
+            ids[tid] += [r for r in rows if r[0] >= cut]
+            current[tid] = {r[0]: r[1] for r in rows}
+        for tid in set(prev) - set(assign.values()):
+            ids[tid] = [r for r in ids[tid] if r[0] < cut]  # the later window decides after the cut
+        prev = current
+    return _tracks_from({k: v for k, v in ids.items() if v}), stats
+
+
+def _stitch(prev: dict, rows_now: list, a: int, b: int, step: float) -> dict:
+    """Path index of the new window -> identity of the earlier window, by the frames in
+    [a, b) where both are at the same place (within 1.5 steps): Hungarian on the counts."""
+    from scipy.optimize import linear_sum_assignment
+
+    if not prev or not rows_now or b <= a:
+        return {}
+    old = list(prev)
+    agree = np.zeros((len(rows_now), len(old)))
+    for j, rows in enumerate(rows_now):
+        here = {r[0]: r[1] for r in rows if a <= r[0] < b}
+        for i, tid in enumerate(old):
+            there = prev[tid]
+            agree[j, i] = sum(1 for t, p in here.items()
+                              if t in there and np.linalg.norm(there[t] - p) <= 1.5 * step)
+    rj, ri = linear_sum_assignment(-agree)
+    need = max(1, (b - a) // 4)
+    return {int(j): old[i] for j, i in zip(rj, ri) if agree[j, i] >= need}
+
+
+def track_online(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
+                 threshold: float = 0.5) -> tuple[list[Track], dict]:
+    """The causal tracker: frames arrive one by one; when frame t arrives the flow is solved
+    over the frames from the last committed one (whose tracks are the only starts there) to
+    t, and frame t - delay is committed. Identities, once committed, never change."""
+    T, delay = maps.shape[0], max(0, opt.delay)
+    ids: dict[int, list] = {}
+    at: dict[int, tuple] = {}  # cell k of the last committed frame -> (id, xyz)
+    next_id, committed = 0, -1
+    stats = {"solves": 0, "max_nodes": 0, "max_arcs": 0, "delay_frames": delay}
+    for t in range(T):
+        c = t - delay if t < T - 1 else T - 1  # at the end the rest is committed at once
+        if c < 0 or c <= committed:
+            continue
+        a = committed if committed >= 0 else 0
+        anchors = {k: v for k, v in at.items()} if committed >= 0 else None
+        paths, st = solve_window(maps[a:t + 1], cells, shape, opt, dt, anchors)
+        stats["solves"] += 1
+        stats["max_nodes"] = max(stats["max_nodes"], st["nodes"])
+        stats["max_arcs"] = max(stats["max_arcs"], st["arcs"])
+        new_at = {}
+        for p in paths:
+            rows = _expand(p, a, maps[a:t + 1], cells, threshold)
+            if committed >= 0:
+                if p[0][0] == 0:
+                    tid = at[p[0][1]][0]
+                    rows = [r for r in rows if r[0] > committed]
+                else:
+                    tid = None
+            else:
+                tid = None
+            rows = [r for r in rows if r[0] <= c]
+            if not rows:
+                continue
+            if tid is None:
+                next_id += 1
+                tid = next_id
+                ids[tid] = []
+            ids[tid] += rows
+            last = rows[-1]
+            if last[0] == c:
+                k = int(np.argmin(np.linalg.norm(cells.positions - last[1], axis=1)))
+                new_at.setdefault(k, (tid, last[1]))
+        at, committed = new_at, c
+    return _tracks_from({k: v for k, v in ids.items() if v}), stats
+
+
+def link_naive(positions: list[np.ndarray], gate: float) -> list[list[int]]:
+    """The naive baseline: each frame's detections matched to the previous frame's by the
+    Hungarian method within `gate` metres; an unmatched detection starts a new identity.
+    Returns the identity of every detection, frame by frame."""
+    from .evaluate import match
+
+    out, prev, prev_ids, next_id = [], None, [], 0
+    for pos in positions:
+        pos = np.asarray(pos, float).reshape(len(pos), -1)
+        ids = [-1] * len(pos)
+        if prev is not None and len(prev) and len(pos):
+            for i, j in match(pos, prev, gate):
+                ids[i] = prev_ids[j]
+        for i in range(len(pos)):
+            if ids[i] < 0:
+                next_id += 1
+                ids[i] = next_id
+        out.append(ids)
+        prev, prev_ids = pos, ids
+    return out
+
+
+def run_tracker(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, fps: float,
+                threshold: float = 0.5, method: str | None = None) -> tuple[list[Track], dict]:
+    """Tracks of `maps` (T, K) by `method` (default opt's, resolved for T frames) and a report
+    for summary.json (method, tracks, time, graph size)."""
+    method = method or opt.resolved_method(len(maps))
+    t = time.perf_counter()
+    if method == "off":
+        return [], {"method": "off"}
+    dt = 1.0 / fps
+    fn = track_offline if method == "ksp" else track_online
+    tracks, stats = fn(maps, cells, shape, opt, dt, threshold)
+    spent = time.perf_counter() - t
+    return tracks, {"method": method, "tracks": len(tracks), "time_s": spent,
+                    "ms_per_frame": 1000 * spent / max(1, len(maps)), "fps": fps, **stats}
+
+
+# -- outputs ---------------------------------------------------------------------------------
+def tracks_csv(tracks: list[Track], names: list[str]) -> str:
+    """tracks.csv: one row per track per frame, frame order then identity."""
+    rows = []
+    for tr in tracks:
+        for t, p, r, b in zip(tr.frames, tr.xyz, tr.rho, tr.bridged):
+            rows.append((t, tr.id, f"{names[t]},{tr.id},{p[0]:.4f},{p[1]:.4f},{p[2]:.4f},{r:.6f},{int(b)}"))
+    rows.sort(key=lambda r: (r[0], r[1]))
+    return "\n".join([TRACKS_HEADER] + [r[2] for r in rows]) + "\n"
+
+
+def track_table(tracks: list[Track], names: list[str], fps: float) -> str:
+    """track_table.csv: per track its first and last frame, frames, bridged frames, path
+    length (metres, on the ground plane; in 3D for voxel grids) and mean speed (m/s)."""
+    lines = [TABLE_HEADER]
+    for tr in tracks:
+        path = float(np.sum(np.linalg.norm(np.diff(tr.xyz, axis=0), axis=1))) if len(tr.xyz) > 1 else 0.0
+        span = (tr.frames[-1] - tr.frames[0]) / fps
+        speed = path / span if span > 0 else 0.0
+        lines.append(f"{tr.id},{names[tr.frames[0]]},{names[tr.frames[-1]]},{len(tr.frames)},"
+                     f"{int(tr.bridged.sum())},{path:.3f},{speed:.3f}")
+    return "\n".join(lines) + "\n"
+
+
+def read_tracks_csv(path) -> dict[str, list[tuple]]:
+    """frame name -> [(track, x, y, z, rho, bridged)] from a tracks.csv."""
+    from pathlib import Path
+
+    out: dict[str, list[tuple]] = {}
+    lines = Path(path).read_text().splitlines()
+    if not lines or not lines[0].startswith("frame,track,x,y,z,rho"):
+        from .io import InputError
+
+        raise InputError(f"{path}: expected a header beginning frame,track,x,y,z,rho, found "
+                         f"{lines[0] if lines else 'an empty file'!r}")
+    for line in lines[1:]:
+        f = line.split(",")
+        out.setdefault(f[0], []).append((int(f[1]), float(f[2]), float(f[3]), float(f[4]),
+                                         float(f[5]), len(f) > 6 and f[6] == "1"))
+    return out
+
+
+def per_frame(tracks: list[Track], frames: int) -> list[list[tuple]]:
+    """For each frame index, the (id, xyz, bridged) of the tracks present."""
+    out = [[] for _ in range(frames)]
+    for tr in tracks:
+        for t, p, b in zip(tr.frames, tr.xyz, tr.bridged):
+            out[t].append((tr.id, p, bool(b)))
+    return out
