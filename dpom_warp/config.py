@@ -460,10 +460,18 @@ def _td(name):
     return _d(TrackingOptions, name)
 
 
+def _switch(v):
+    """YAML 1.1 reads a bare on / off as true / false: the words they were."""
+    return {True: "on", False: "off"}.get(v, v) if isinstance(v, bool) else v
+
+
+Switch = BeforeValidator(_switch)
+
+
 class TrackingSection(Node):
     """Tracks with identities over the run's maps (K-shortest paths as a min-cost flow)."""
 
-    method: Literal["auto", "ksp", "online", "off"] = Field(
+    method: Annotated[Literal["auto", "ksp", "online", "off"], Switch] = Field(
         _td("method"), description="auto: ksp for runs of two frames or more; ksp: offline, globally "
                                    "optimal; online: causal, committed `delay` frames behind; off: no tracks")
     max_speed: Num = Field(_td("max_speed"), gt=0, description="fastest move between frames, m/s")
@@ -501,7 +509,7 @@ class EngineSection(Node):
                                                             "above it is refused, never truncated")
     memory_gb: Num | None = Field(8.0, gt=0, description="memory budget of the engine's buffers, GiB")
     batch: Int = Field(1, ge=1, description="frames per engine call (for GPUs)")
-    graph: Literal["auto", "on", "off"] = Field("auto", description="replay the iteration loop as a "
+    graph: Annotated[Literal["auto", "on", "off"], Switch] = Field("auto", description="replay the iteration loop as a "
                                                                     "captured graph; auto: on CUDA only")
     exact: Bool = Field(False, description="the exact path: full resolution, every pass full, no warm "
                                            "start (the NumPy reference's results to 1e-6)")

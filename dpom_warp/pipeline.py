@@ -375,7 +375,7 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     summary["inference"] = plan.inference
     summary["runner"] = {**runner, "frames_resumed": len(done) - sum(plan.by_worker.values()),
                          "frames_per_worker": dict(sorted(plan.by_worker.items()))}
-    summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth)
+    summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth, log=lambda *_: None)
     summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))

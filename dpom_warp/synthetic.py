@@ -412,7 +412,8 @@ def stroll(spec: SceneSpec, camera: Camera, footprints, rng: np.random.Generator
     for i in range(spec.people):
         for _ in range(10000):
             x, y = rng.uniform(ax0, ax1), rng.uniform(ay0, ay1)
-            if clear(x, y, people) and _in_view(camera, x, y, heights[i], spec.in_view == "head"):
+            if (clear(x, y, [(q["x"], q["y"]) for q in people])
+                    and _in_view(camera, x, y, heights[i], spec.in_view == "head")):
                 break
         else:
             raise RuntimeError("synthetic: could not place everyone in view; enlarge 'area'")

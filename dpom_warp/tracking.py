@@ -370,7 +370,8 @@ def link_naive(positions: list[np.ndarray], gate: float) -> list[list[int]]:
 
     out, prev, prev_ids, next_id = [], None, [], 0
     for pos in positions:
-        pos = np.asarray(pos, float).reshape(len(pos), -1)
+        pos = np.asarray(pos, float)
+        pos = pos.reshape(0, 2) if pos.size == 0 else pos
         ids = [-1] * len(pos)
         if prev is not None and len(prev) and len(pos):
             for i, j in match(pos, prev, gate):

@@ -239,9 +239,11 @@ def test_interrupted_run_resumes_to_the_same_files(tmp_path, scene, monkeypatch,
     assert main(["run", str(path), "--no-progress", "--resume"]) == 0
     assert "resuming: 3 frames already done, 3 to go" in capsys.readouterr().out
     whole = tmp_path / "whole"
-    assert (out / "detections.csv").read_bytes() == (whole / "detections.csv").read_bytes()
-    for m in (whole / "maps").iterdir():
-        assert (out / "maps" / m.name).read_bytes() == m.read_bytes()
+    for name in ("detections.csv", "tracks.csv", "track_table.csv"):  # tracks from the saved maps
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+    for folder in ("maps", "images"):
+        for m in (whole / folder).iterdir():
+            assert (out / folder / m.name).read_bytes() == m.read_bytes()
     a, b = (json.load(open(d / "summary.json")) for d in (out, whole))
     assert a["scores"] == b["scores"] and a["frames"] == b["frames"] == 6
 
@@ -271,9 +273,11 @@ def test_workers_give_the_same_files(tmp_path, scene):
     assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "one")]) == 0
     assert main(["run", str(path), "--no-progress", "--workers", "2", "--output", str(tmp_path / "two")]) == 0
     one, two = tmp_path / "one", tmp_path / "two"
-    assert (one / "detections.csv").read_bytes() == (two / "detections.csv").read_bytes()
-    for m in (one / "maps").iterdir():
-        assert (two / "maps" / m.name).read_bytes() == m.read_bytes()
+    for name in ("detections.csv", "tracks.csv", "track_table.csv"):
+        assert (one / name).read_bytes() == (two / name).read_bytes(), name
+    for folder in ("maps", "images"):
+        for m in (one / folder).iterdir():
+            assert (two / folder / m.name).read_bytes() == m.read_bytes()
     assert json.load(open(two / "summary.json"))["scores"] == json.load(open(one / "summary.json"))["scores"]
 
 

@@ -56,7 +56,8 @@ def config(tmp_path, scene_path, name="config", **changes):
 
 
 def assert_same_files(a: Path, b: Path, frames: int):
-    assert (a / "detections.csv").read_bytes() == (b / "detections.csv").read_bytes()
+    for name in ("detections.csv", "tracks.csv", "track_table.csv"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
     for folder, n in (("maps", frames), ("images", frames)):
         names = sorted(p.name for p in (a / folder).iterdir())
         assert len(names) == n and names == sorted(p.name for p in (b / folder).iterdir())

@@ -1,0 +1,364 @@
+"""Tracks: the flow's optimum on hand-made maps whose answer is known (bridged gaps,
+crossings, entries and exits), windows stitched to the one-window identities, the online
+tracker's causality, the scores against py-motmetrics' and TrackEval's, and the run's track
+files (resume, --workers, dpom-warp track)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dpom_warp.tracking import (TABLE_HEADER, TRACKS_HEADER, Cells, TrackingOptions, link_naive,
+                                read_tracks_csv, run_tracker, track_offline, track_online,
+                                tracks_csv)
+
+NX, NY, STEP = 40, 30, 0.1
+
+
+def grid_cells(entry_border=True):
+    """A 4 m x 3 m ground grid of 0.1 m cells; entries on its border."""
+    ys, xs = np.mgrid[0:NY, 0:NX]
+    pos = np.stack([xs.ravel() * STEP, ys.ravel() * STEP, np.zeros(NX * NY)], axis=1)
+    border = (xs == 0) | (xs == NX - 1) | (ys == 0) | (ys == NY - 1)
+    return Cells(pos, STEP, border.ravel() if entry_border else np.zeros(NX * NY, bool), 0.4)
+
+
+def cell(x, y):
+    return int(round(y / STEP)) * NX + int(round(x / STEP))
+
+
+def maps_of(paths, frames, rho=0.98):
+    """(T, K) maps with one peak per person per frame: paths = [{t: (x, y)}]."""
+    maps = np.zeros((frames, NX * NY), np.float32)
+    for p in paths:
+        for t, (x, y) in p.items():
+            maps[t, cell(x, y)] = rho
+    return maps
+
+
+OPT = TrackingOptions(max_speed=1.5)  # 0.1 s a frame: 0.15 m + one cell per frame
+
+
+def solve(maps, opt=OPT, method="ksp"):
+    tracks, _ = run_tracker(maps, grid_cells(), (NY, NX), opt, 10.0, 0.5, method)
+    return tracks
+
+
+def as_paths(tracks):
+    return sorted([[(t, round(float(p[0]), 3), round(float(p[1]), 3)) for t, p in zip(tr.frames, tr.xyz)]
+                   for tr in tracks])
+
+
+def walk(x0, y0, dx, dy, frames, t0=0):
+    return {t0 + i: (round(x0 + dx * i, 1), round(y0 + dy * i, 1)) for i in range(frames)}
+
+
+def test_two_people_walking_are_two_whole_tracks():
+    a, b = walk(0.5, 0.5, 0.1, 0.0, 20), walk(3.5, 2.5, -0.1, 0.0, 20)
+    tracks = solve(maps_of([a, b], 20))
+    assert len(tracks) == 2
+    assert as_paths(tracks) == sorted([[(t, *a[t]) for t in range(20)], [(t, *b[t]) for t in range(20)]])
+    assert all(not tr.bridged.any() for tr in tracks)
+    assert [tr.id for tr in tracks] == [1, 2]  # numbered by first frame, then x
+
+
+def test_a_hidden_stretch_is_bridged_not_cut():
+    """Six frames without a peak in the middle of the room: one track, the frames bridged
+    on the straight line between the peaks either side."""
+    a = walk(0.5, 1.5, 0.1, 0.0, 30)
+    seen = {t: p for t, p in a.items() if not 12 <= t < 18}
+    tracks = solve(maps_of([seen], 30))
+    assert len(tracks) == 1
+    tr = tracks[0]
+    assert tr.frames == list(range(30))
+    assert tr.bridged.tolist() == [12 <= t < 18 for t in range(30)]
+    np.testing.assert_allclose(tr.xyz[12:18, 0], [a[t][0] for t in range(12, 18)], atol=1e-9)
+
+
+def test_a_gap_longer_than_max_gap_ends_the_track():
+    a = walk(0.5, 1.5, 0.1, 0.0, 30)
+    seen = {t: p for t, p in a.items() if not 8 <= t < 18}
+    tracks = solve(maps_of([seen], 30), TrackingOptions(max_speed=1.5, max_gap=5, appear_cost=4.0))
+    assert [(tr.frames[0], tr.frames[-1]) for tr in tracks] == [(0, 7), (18, 29)]
+
+
+def test_people_crossing_keep_their_identities():
+    """Two people pass each other 0.6 m apart; swapping would need a jump no one can make."""
+    a, b = walk(0.5, 1.2, 0.1, 0.0, 30), walk(3.4, 1.8, -0.1, 0.0, 30)
+    tracks = solve(maps_of([a, b], 30))
+    assert as_paths(tracks) == sorted([[(t, *a[t]) for t in range(30)], [(t, *b[t]) for t in range(30)]])
+
+
+def test_entries_at_the_border_and_appearing_inside():
+    """A person walking in from the border mid-sequence gets a track from there; a two-frame
+    blip in the middle of the room (cheaper to explain away than appear_cost) gets none; a
+    person standing inside for 20 frames from frame 10 does (appear_cost paid once)."""
+    inner = walk(2.0, 1.5, 0.0, 0.0, 2, t0=5)
+    enter = walk(0.0, 0.5, 0.1, 0.0, 15, t0=10)
+    stand = walk(3.0, 2.0, 0.0, 0.0, 20, t0=10)
+    tracks = solve(maps_of([inner, enter, stand], 30))
+    spans = sorted((tr.frames[0], tr.frames[-1], round(float(tr.xyz[0][0]), 1)) for tr in tracks)
+    assert spans == [(10, 24, 0.0), (10, 29, 3.0)]
+
+
+def test_flow_is_the_optimum_of_a_small_case_by_enumeration():
+    """Three frames, two candidate cells a frame: the flow's total cost equals the best of
+    every set of node-disjoint tracks (entries and exits paid inside the window), found by
+    brute force over which track, if any, holds each (frame, cell)."""
+    from itertools import product
+
+    from dpom_warp.tracking import _costs, solve_window
+
+    opt = TrackingOptions(max_speed=20.0, max_gap=0, entry_cost=1.5, appear_cost=1.5, prune=0.01)
+    cells = Cells(np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]]), 1.0, np.zeros(3, bool), 0.1)
+    rng = np.random.default_rng(5)
+    nodes = [(t, k) for t in range(3) for k in (0, 2)]
+    for _ in range(20):
+        maps = rng.uniform(0.05, 0.99, (3, 3)).astype(np.float32)
+        maps[:, 1] = 0.0  # cells 0 and 2 are both peaks in every frame
+        paths, stats = solve_window(maps, cells, (1, 3), opt, 0.1)
+        c = _costs(maps, opt)
+        best = 0.0
+        for labels in product(range(4), repeat=len(nodes)):
+            total, ok = 0.0, True
+            for tid in range(1, 4):
+                ts = [t for (t, k), lab in zip(nodes, labels) if lab == tid]
+                if not ts:
+                    continue
+                if len(set(ts)) != len(ts) or ts != list(range(ts[0], ts[0] + len(ts))):
+                    ok = False
+                    break
+                total += sum(c[t, k] for (t, k), lab in zip(nodes, labels) if lab == tid)
+                total += (0.0 if ts[0] == 0 else 1.5) + (0.0 if ts[-1] == 2 else 1.5)
+            if ok:
+                best = min(best, total)
+        assert stats["cost"] == pytest.approx(best, abs=0.01)
+
+
+def random_people(frames, n, seed):
+    """n people on random walks, each in a band of its own (never within reach of another:
+    their identities are not ambiguous), now and then missed."""
+    rng = np.random.default_rng(seed)
+    paths = []
+    for i in range(n):
+        lo, hi = 0.2 + i * 0.9, 0.7 + i * 0.9
+        x, y = rng.uniform(0.5, 3.5), rng.uniform(lo, hi)
+        p = {}
+        for t in range(frames):
+            x = float(np.clip(x + rng.choice([-0.1, 0.0, 0.1]), 0.2, 3.7))
+            y = float(np.clip(y + rng.choice([-0.1, 0.0, 0.1]), lo, hi))
+            if rng.random() > 0.05:  # now and then missed
+                p[t] = (round(x, 1), round(y, 1))
+        paths.append(p)
+    return paths
+
+
+def test_windows_stitch_to_the_one_window_identities():
+    maps = maps_of(random_people(160, 3, seed=2), 160)
+    one = solve(maps, TrackingOptions(max_speed=1.5, window=1000))
+    many = track_offline(maps, grid_cells(), (NY, NX), TrackingOptions(max_speed=1.5, window=50, overlap=16),
+                         0.1)[0]
+    assert len(one) >= 3
+    assert [(tr.id, tr.frames) for tr in many] == [(tr.id, tr.frames) for tr in one]
+    for a, b in zip(one, many):
+        np.testing.assert_allclose(a.xyz, b.xyz)
+
+
+def test_online_is_causal_and_close_to_offline():
+    maps = maps_of(random_people(80, 3, seed=4), 80)
+    cells, opt = grid_cells(), TrackingOptions(max_speed=1.5, delay=8)
+    online, stats = track_online(maps, cells, (NY, NX), opt, 0.1)
+    offline = solve(maps)
+    assert stats["delay_frames"] == 8
+    assert as_paths(online) == as_paths(offline)
+    # what was committed before frame 50 does not depend on frames 58 and later
+    changed = maps.copy()
+    changed[58:] = maps_of(random_people(80, 2, seed=9), 80)[58:]
+    again, _ = track_online(changed, cells, (NY, NX), opt, 0.1)
+
+    def before(tracks, t):
+        return sorted((tr.id, f, tuple(np.round(p, 4))) for tr in tracks for f, p in zip(tr.frames, tr.xyz)
+                      if f < t)
+
+    assert before(again, 50) == before(online, 50)
+
+
+def test_naive_linking_breaks_at_a_missed_frame():
+    pos = [np.array([[0.0, 0.0]]), np.array([[0.1, 0.0]]), np.zeros((0, 2)), np.array([[0.3, 0.0]])]
+    assert link_naive(pos, 0.5) == [[1], [1], [], [2]]
+
+
+def test_track_files(tmp_path):
+    a = walk(0.5, 0.5, 0.1, 0.0, 4)
+    tracks = solve(maps_of([a], 4))
+    names = [f"{i:04d}.png" for i in range(4)]
+    text = tracks_csv(tracks, names)
+    assert text.splitlines()[0] == TRACKS_HEADER and text.startswith("frame,track,x,y,z,rho")
+    assert text.splitlines()[1] == "0000.png,1,0.5000,0.5000,0.0000,0.980000,0"
+    (tmp_path / "tracks.csv").write_text(text)
+    rows = read_tracks_csv(tmp_path / "tracks.csv")
+    assert list(rows) == names and rows["0003.png"][0][:3] == (1, 0.8, 0.5)
+    from dpom_warp.tracking import track_table
+
+    table = track_table(tracks, names, 10.0).splitlines()
+    assert table[0] == TABLE_HEADER
+    assert table[1] == "1,0000.png,0003.png,4,0,0.300,1.000"  # 0.3 m in 0.3 s
+
+
+# -- scores -----------------------------------------------------------------------------------
+def hand_case():
+    """Two people over four frames; the tracker swaps their identities at frame 2 and has a
+    false track at frame 3."""
+    truth = {f"{t}": [{"id": 0, "x": 0.0 + 0.1 * t, "y": 0.0}, {"id": 1, "x": 0.0 + 0.1 * t, "y": 2.0}]
+             for t in range(4)}
+    tracks = {}
+    for t in range(4):
+        a, b = (1, 2) if t < 2 else (2, 1)
+        tracks[f"{t}"] = [(a, 0.1 * t + 0.05, 0.0, 0.0), (b, 0.1 * t, 2.1, 0.0)]
+    tracks["3"].append((3, 5.0, 5.0, 0.0))
+    return tracks, truth
+
+
+def test_clear_and_identity_scores_of_a_hand_case():
+    from dpom_warp.track_eval import track_scores
+
+    tracks, truth = hand_case()
+    s = track_scores(tracks, truth, list(truth), gates=(0.5,))["penalise_hidden"]["0.5"]
+    assert s["num_switches"] == 2 and s["num_false_positives"] == 1 and s["num_misses"] == 0
+    assert s["mota"] == pytest.approx(1 - (2 + 1) / 8)
+    assert s["motp"] == pytest.approx(0.075)  # mean of 0.05 and 0.1
+    # IDF1: the best one-to-one identity assignment keeps 2 of 4 frames for each person
+    assert s["idf1"] == pytest.approx(2 * 4 / (8 + 9))
+
+
+def test_hota_equals_trackeval():
+    """Our HOTA against TrackEval's on random sequences with switches, misses and false tracks."""
+    from trackeval.metrics import HOTA
+
+    from dpom_warp.track_eval import _distances, frames_of, hota
+
+    rng = np.random.default_rng(3)
+    for trial in range(5):
+        truth, tracks = {}, {}
+        for t in range(15):
+            objs = [{"id": i, "x": float(i + 0.02 * t), "y": 0.0} for i in range(4) if rng.random() > 0.1]
+            truth[str(t)] = objs
+            tracks[str(t)] = [(int(o["id"] + (t > 7 and o["id"] < 2) * 10), o["x"] + rng.normal(0, 0.15),
+                               rng.normal(0, 0.15), 0.0) for o in objs if rng.random() > 0.15]
+            if rng.random() < 0.3:
+                tracks[str(t)].append((99, 10.0 * rng.random(), 1.0, 0.0))
+        per_frame = frames_of(tracks, truth, list(truth), 2, 0.5, None)
+        ours = hota(per_frame, 0.5)
+        gids = sorted({int(g) for g, _, _, _ in per_frame for g in g})
+        tids = sorted({int(x) for _, _, t, _ in per_frame for x in t})
+        data = {"num_timesteps": len(per_frame), "num_gt_ids": len(gids), "num_tracker_ids": len(tids),
+                "num_gt_dets": sum(len(g) for g, _, _, _ in per_frame),
+                "num_tracker_dets": sum(len(t) for _, _, t, _ in per_frame),
+                "gt_ids": [np.array([gids.index(int(x)) for x in g], int) for g, _, _, _ in per_frame],
+                "tracker_ids": [np.array([tids.index(int(x)) for x in t], int) for _, _, t, _ in per_frame],
+                "similarity_scores": [np.clip(1 - _distances(gt, tr) / 0.5, 0, None)
+                                      for _, gt, _, tr in per_frame]}
+        ref = HOTA({"PRINT_CONFIG": False}).eval_sequence(data)
+        assert ours["hota"] == pytest.approx(float(np.mean(ref["HOTA"])), abs=1e-9), trial
+        assert ours["assa"] == pytest.approx(float(np.mean(ref["AssA"])), abs=1e-9)
+        assert ours["deta"] == pytest.approx(float(np.mean(ref["DetA"])), abs=1e-9)
+
+
+def test_hidden_people_ignored_in_the_second_protocol():
+    from dpom_warp.track_eval import track_scores
+
+    truth = {"0": [{"id": 0, "x": 0.0, "y": 0.0, "visibility": 0.05}, {"id": 1, "x": 2.0, "y": 0.0}]}
+    tracks = {"0": [(1, 0.1, 0.0, 0.0), (2, 2.0, 0.1, 0.0)]}
+    s = track_scores(tracks, truth, ["0"], gates=(0.5,))
+    assert s["ignore_hidden"]["0.5"]["mota"] == 1.0 and s["ignore_hidden"]["0.5"]["num_objects"] == 1
+    assert s["penalise_hidden"]["0.5"]["mota"] == 1.0 and s["penalise_hidden"]["0.5"]["num_objects"] == 2
+    tracks = {"0": [(2, 2.0, 0.1, 0.0)]}  # the hidden one missed: only the first protocol minds
+    s = track_scores(tracks, truth, ["0"], gates=(0.5,))
+    assert s["ignore_hidden"]["0.5"]["mota"] == 1.0 and s["penalise_hidden"]["0.5"]["mota"] == 0.5
+
+
+# -- a run's tracks ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def tracked_run(tmp_path_factory):
+    """A small rendered sequence (8 frames, 3 people) run once with tracks and pictures."""
+    import yaml
+
+    from dpom_warp.cli import main
+    from test_cli import small_config
+
+    tmp = tmp_path_factory.mktemp("tracked")
+    path = small_config(tmp)
+    cfg = yaml.safe_load(path.read_text())
+    cfg["synthetic"]["frames"] = 8
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp / "run")]) == 0
+    return tmp / "run", path
+
+
+def test_a_run_writes_tracks_pictures_and_scores(tracked_run):
+    run, _ = tracked_run
+    lines = (run / "tracks.csv").read_text().splitlines()
+    assert lines[0] == TRACKS_HEADER
+    names = {line.split(",")[0] for line in (run / "detections.csv").read_text().splitlines()[1:]}
+    rows = [line.split(",") for line in lines[1:]]
+    assert rows and {r[0] for r in rows} <= {f"{i:04d}.png" for i in range(8)} and names
+    assert (run / "track_table.csv").read_text().startswith(TABLE_HEADER)
+    summary = json.loads((run / "summary.json").read_text())
+    t = summary["tracking"]
+    assert t["method"] == "ksp" and t["tracks"] == len({r[1] for r in rows}) and t["time_s"] > 0
+    assert len(list((run / "images").glob("*.png"))) == 8
+    ev = json.loads((run / "eval.json").read_text())[0]["tracking"]
+    s = ev["tracks"]["ignore_hidden"]["0.5"]
+    assert 0 < s["mota"] <= 1 and 0 < s["idf1"] <= 1 and 0 < s["hota"] <= 1
+    assert "naive" in ev and set(ev["tracks"]["penalise_hidden"]) == {"0.5", "1"}
+
+
+def test_track_command_retracks_without_inferring(tracked_run, tmp_path, capsys):
+    import shutil
+
+    from dpom_warp.cli import main
+
+    run = tmp_path / "run"
+    shutil.copytree(tracked_run[0], run)
+    maps_before = {p.name: p.read_bytes() for p in (run / "maps").iterdir()}
+    assert main(["track", str(run), "--set", "tracking.method=online", "--set", "tracking.delay=3"]) == 0
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["tracking"]["method"] == "online" and summary["tracking"]["delay_frames"] == 3
+    assert summary["config"]["tracking"]["delay"] == 3
+    assert {p.name: p.read_bytes() for p in (run / "maps").iterdir()} == maps_before
+    assert main(["track", str(run), "--set", "tracking.method=ksp"]) == 0
+    assert (run / "tracks.csv").read_bytes() == (tracked_run[0] / "tracks.csv").read_bytes()
+    for p in (tracked_run[0] / "images").iterdir():  # the pictures are drawn again, the same
+        assert (run / "images" / p.name).read_bytes() == p.read_bytes()
+    assert main(["track", str(run), "--set", "tracking.method=off"]) == 0
+    assert not (run / "tracks.csv").exists() and not (run / "track_table.csv").exists()
+    capsys.readouterr()
+    assert main(["track", str(run), "--set", "model.alpha=1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("dpom-warp: error: --set model.alpha: expected a tracking.* key") and "\n" not in err
+    assert main(["track", str(tmp_path / "nothing")]) == 2
+    assert "not a finished dpom-warp run" in capsys.readouterr().err
+
+
+def test_voxel_run_gives_3d_tracks(tmp_path):
+    """Drones: the same files, with z."""
+    import yaml
+
+    from dpom_warp.cli import main
+
+    cfg = yaml.safe_load(open("configs/demo_drones.yaml"))
+    cache = tmp_path / "scene"
+    cfg.update(device="cpu")
+    cfg["input"].update(frames=f"{cache}/frames/*.png", background=f"{cache}/background/*.png")
+    cfg["camera"].update(width=128, height=106, intrinsics={"fx": 91.25, "fy": 91.25, "cx": 63.5, "cy": 52.5})
+    cfg["grid"].update(x=[-2.0, 2.0, 0.2], y=[1.5, 5.5, 0.2], z=[0.4, 2.4, 0.2])
+    cfg["evaluation"].update(ground_truth=f"{cache}/ground_truth.json", plots=False)
+    cfg["output"].update(dir=str(tmp_path / "out"), images=False)
+    cfg["synthetic"].update(cache=str(cache), frames=6, background_frames=3, people=2, seed=4)
+    path = tmp_path / "drones.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress"]) == 0
+    rows = read_tracks_csv(tmp_path / "out" / "tracks.csv")
+    zs = [r[3] for rs in rows.values() for r in rs]
+    assert zs and all(0.4 <= z <= 2.4 for z in zs) and len(set(zs)) > 1
