@@ -14,7 +14,9 @@ the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/
 - real: the real Kinect frame (pose fitted, floor-only background), its picture;
 - eval: `dpom-warp eval` of the demo against its floor-only run, with two of its plots;
 - speed: `python -m bench` on the demo frame and the drone frame, against the NumPy reference;
-- scaleout: one process, `--workers 2` and `--ray` on the demo (`python -m bench.scaleout`).
+- scaleout: one process, `--workers 2` and `--ray` on the demo (`python -m bench.scaleout`);
+- tracking: tracks on five long rendered sequences, KSP, online and naive linking, and the
+  tracker's time and memory on a 10,000-frame run (`python -m bench.tracking`), its picture.
 
 A test (tests/test_docs.py) holds the README to it: every table sits in a generated block and
 the config block is what the models say now.
@@ -312,10 +314,26 @@ def scaleout_block(out: Path) -> str:
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.scaleout`")])
 
 
+def tracking_block(out: Path) -> str:
+    code = subprocess.run([sys.executable, "-m", "bench.tracking", "--output", str(out / "tracking"),
+                           "--long", "10000"], capture_output=True, text=True, cwd=ROOT)
+    if code.returncode:
+        raise SystemExit(code.stderr[-2000:])
+    md = (out / "tracking" / "tracking.md").read_text().strip()
+    from dpom_warp.pipeline import retrack
+
+    scene = out / "tracking" / "6_people_crossing"
+    retrack(scene, ["output.images=true"], log=lambda *_: None)  # the pictures, with the tracks
+    shutil.copy(scene / "images" / "0040.png", DOCS / "tracks.png")
+    return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.tracking`; tracking "
+                                     "time on one core, the maps read from disk")])
+
+
 BUILDERS = {"config": lambda out, jobs: config_block(), "demo": lambda out, jobs: demo_block(out),
             "robustness": robustness_block, "drones": lambda out, jobs: drones_block(out),
             "real": lambda out, jobs: real_block(out), "eval": lambda out, jobs: eval_block(out),
-            "speed": lambda out, jobs: speed_block(out), "scaleout": lambda out, jobs: scaleout_block(out)}
+            "speed": lambda out, jobs: speed_block(out), "scaleout": lambda out, jobs: scaleout_block(out),
+            "tracking": lambda out, jobs: tracking_block(out)}
 
 
 def main():

@@ -8,7 +8,7 @@ while). Every scene is inferred once (background frames, fast path); the tracks 
 methods are computed from the same maps, the naive baseline links the same detections.
 
     python -m bench.tracking [--frames 75] [--jobs 2] [--output runs/tracking] [--tuning]
-                             [--set tracking.KEY=VALUE ...]
+                             [--set tracking.KEY=VALUE ...] [--retrack]
 
 --tuning: another draw (seeds + 1000, cached apart) for choosing tracking defaults; the
 README reports the draw above, on which no parameter was chosen.
@@ -24,7 +24,8 @@ from pathlib import Path
 COMMON = ["synthetic.motion=paths", "synthetic.step_m=0.08", "input.fps=15"]
 SCENES = {
     "6 people crossing": ["synthetic.people=6"],
-    "8 people, leaving and coming back": ["synthetic.people=8", "synthetic.leave=1.5"],
+    "6 people, leaving and coming back": ["synthetic.people=6", "synthetic.area=[-1.5, 1.5, 1.5, 5.5]",
+                                          "synthetic.leave=2.0"],
     "5 people, two cabinets": ["synthetic.people=5", "synthetic.obstacles=2"],
     "crowd of 8, 0.5 m apart": ["synthetic.people=8", "synthetic.min_gap=0.5",
                                 "synthetic.area=[-1.8, 1.8, 2.2, 5.8]"],
@@ -36,7 +37,7 @@ SCENES = {
 
 
 def run_scene(args):
-    name, overrides, frames, out, extra, tuning, seed = args
+    name, overrides, frames, out, extra, tuning, seed, again = args
     import os
 
     os.environ.setdefault("WARP_CACHE_PATH", str(Path(".cache") / f"warp-{os.getpid()}"))
@@ -53,7 +54,10 @@ def run_scene(args):
         "tracking.method=ksp"]
     cfg = load_config("configs/demo_people.yaml", sets)
     run_dir = Path(out) / slug
-    summary = run(cfg, str(run_dir), "cpu", progress=False, log=lambda *_: None, overwrite=True)
+    if again and (run_dir / "summary.json").exists():  # --retrack: the maps of an earlier run
+        summary = json.loads((run_dir / "summary.json").read_text())
+    else:
+        summary = run(cfg, str(run_dir), "cpu", progress=False, log=lambda *_: None, overwrite=True)
     result = {"moda": summary["scores"]["moda"], "frames": summary["frames"],
               "infer_s": summary["timings"]["median_infer_s"]}
     for method in ("ksp", "online"):
@@ -62,6 +66,46 @@ def run_scene(args):
         result[method] = {"report": rep, "scores": ev["tracks"]}
         result["naive"] = {"scores": ev["naive"]}
     return name, result
+
+
+def long_run(run_dir: Path, frames: int, extra=()) -> dict:
+    """Tracking cost on a long run: a scene's maps played forwards then backwards (a
+    continuous sequence) up to `frames` frames, read from disk as the windows need them,
+    tracked by both methods after a warm-up: time per frame, the largest graph, and the
+    memory the tracker holds at its peak (Python's allocations, tracemalloc, in a second
+    pass: maps kept for two windows, the graph, the tracks)."""
+    import tracemalloc
+
+    from dpom_warp.config import apply_overrides, parse_config
+    from dpom_warp.geometry import build_geometry
+    from dpom_warp.tracking import Cells, FrameMaps, run_tracker
+
+    summary = json.loads((run_dir / "summary.json").read_text())
+    cfg = parse_config(apply_overrides(summary["config"], list(extra)))
+    paths = sorted((run_dir / "maps").glob("*.npy"))
+    order = paths + paths[::-1]
+    seq = [order[i % len(order)] for i in range(frames)]
+    geometry = build_geometry(cfg.camera, cfg.grid, cfg.obj)
+    cells = Cells.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
+                     cfg.detection.nms_radius)
+    out = {"frames": frames, "window": cfg.tracking.window, "overlap": cfg.tracking.overlap,
+           "grid_cells": len(cells.positions)}
+    for method, n in (("ksp", frames), ("online", min(frames, 3000))):
+        def track(m):
+            return run_tracker(FrameMaps(seq[:m], keep=2 * cfg.tracking.window), cells, cfg.grid.shape,
+                               cfg.tracking, cfg.inputs.fps, cfg.detection.threshold, method)
+
+        track(min(n, 2 * cfg.tracking.window))  # warm-up: imports, first allocations
+        runs = [track(n) for _ in range(3)]
+        tracemalloc.start()
+        track(min(n, 4 * cfg.tracking.window))
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        reps = sorted((r[1] for r in runs), key=lambda r: r["ms_per_frame"])
+        out[method] = {"frames": n, "ms_per_frame": reps[1]["ms_per_frame"], "tracks": len(runs[0][0]),
+                       "max_nodes": reps[1]["max_nodes"], "max_arcs": reps[1]["max_arcs"],
+                       "peak_mb": peak / 2 ** 20}
+    return out
 
 
 POOLED = ("num_switches", "num_false_positives", "num_misses", "num_objects", "person_frames")
@@ -98,6 +142,10 @@ def table(results: dict, gate: str = "0.5") -> list[str]:
     return lines
 
 
+def _mb(x):
+    return f"{x:.1f} MB"
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=75)
@@ -106,14 +154,32 @@ def main():
     ap.add_argument("--tuning", action="store_true", help="the tuning draw (seeds + 1000)")
     ap.add_argument("--set", action="append", default=[], metavar="tracking.KEY=VALUE",
                     help="tracking override for both methods")
+    ap.add_argument("--retrack", action="store_true",
+                    help="track the maps of the scenes' earlier runs again instead of inferring")
+    ap.add_argument("--long", type=int, default=10000, metavar="FRAMES",
+                    help="also time both methods on a run this long (the first scene's maps "
+                         "played back and forth; 0: no)")
     a = ap.parse_args()
-    jobs = [(n, o, a.frames, a.output + ("_tuning" if a.tuning else ""), a.set, a.tuning, 11 + i)
+    jobs = [(n, o, a.frames, a.output + ("_tuning" if a.tuning else ""), a.set, a.tuning, 11 + i, a.retrack)
             for i, (n, o) in enumerate(SCENES.items())]
     with ProcessPoolExecutor(a.jobs) as pool:
         results = dict(pool.map(run_scene, jobs))
     lines = table(results)
-    print("\n".join(lines))
     out = Path(a.output + ("_tuning" if a.tuning else ""))
+    if a.long:
+        first = out / next(iter(SCENES)).replace(" ", "_").replace(",", "").replace(".", "")
+        results["long"] = long_run(first, a.long, a.set)
+        lo = results["long"]
+        lines += ["", f"Long run (the first scene's maps back and forth, read from disk as needed): KSP "
+                      f"{lo['ksp']['ms_per_frame']:.2f} ms a frame over {lo['ksp']['frames']} frames in "
+                      f"windows of {lo['window']} (overlap {lo['overlap']}; at most {lo['ksp']['max_nodes']} "
+                      f"nodes, {lo['ksp']['max_arcs']} arcs), online {lo['online']['ms_per_frame']:.2f} ms a "
+                      f"frame over {lo['online']['frames']} frames "
+                      f"(at most {lo['online']['max_nodes']} nodes); memory the tracker holds at its peak "
+                      f"(Python allocations: maps of two windows, graph, tracks; {lo['grid_cells']} cells): "
+                      f"{_mb(lo['ksp']['peak_mb'])} (KSP), {_mb(lo['online']['peak_mb'])} (online); "
+                      f"median of 3 runs after a warm-up, one core."]
+    print("\n".join(lines))
     out.mkdir(parents=True, exist_ok=True)
     (out / "tracking.json").write_text(json.dumps(results, indent=2, default=float))
     (out / "tracking.md").write_text("\n".join(lines) + "\n")

@@ -6,6 +6,7 @@
     result = det.detect(depth)              # (H, W) at the camera's full resolution
     for d in result.detections:
         print(d.x, d.y, d.rho, d.box)
+    tracks, report = det.track(det.detect_batch(frames))   # identities over a sequence
 
 The Detector is the CLI's engine side: the same setup (`pipeline.set_up`: pose fit, background,
 stride, sparse iterations, every default) and the same frame-to-detections step
@@ -144,6 +145,20 @@ class Detector:
                 results.append(Result(dets, rho_map, res.rho.reshape(self.config.grid.shape),
                                       res.iterations, res.converged, timings))
         return results
+
+    def track(self, results: list[Result], method: str | None = None):
+        """Tracks over consecutive frames' results, as `dpom-warp run` writes them to tracks.csv
+        (the config's tracking.* and input.fps; `method`: ksp or online instead of the
+        config's). Returns (tracks, report): each track has `id`, `frames` (indices into
+        `results`), `xyz` (metres), `rho` and `bridged` (frames without a map peak)."""
+        from .tracking import Cells, run_tracker
+
+        cfg, geometry = self.config, self.worker.geometry
+        cells = Cells.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
+                         cfg.detection.nms_radius)
+        maps = np.stack([np.asarray(r.rho_star, np.float32).ravel() for r in results])
+        return run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, cfg.inputs.fps,
+                           cfg.detection.threshold, method)
 
     def _metres(self, depth, index: int) -> np.ndarray:
         depth = np.asarray(depth)

@@ -481,6 +481,9 @@ class TrackingSection(Node):
     min_rho: Num = Field(_td("min_rho"), gt=0, lt=0.5, description="rho* floor of a node's cost: a "
                                                                    "bridged frame costs -log(min_rho / (1 - min_rho))")
     max_rho: Num = Field(_td("max_rho"), gt=0.5, lt=1, description="rho* ceiling of a node's cost")
+    jitter: Num = Field(_td("jitter"), ge=0, description="how far a map's peak may wander from the "
+                                                         "person between frames, metres (reach = "
+                                                         "max_speed / fps + jitter)")
     entry_cost: Num = Field(_td("entry_cost"), ge=0, description="starting or ending a track at an entry "
                                                                  "cell (grid border, edge of the view, regions)")
     appear_cost: Num = Field(_td("appear_cost"), ge=0, description="starting or ending one anywhere else")

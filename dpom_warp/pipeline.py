@@ -403,14 +403,14 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
     picture with the tracks (deferred until now: pictures_deferred). Returns the `tracking`
     block of summary.json. tracking.method off (or a single frame): no track files."""
     from .render import frame_picture
-    from .tracking import Cells, per_frame, run_tracker, track_table, tracks_csv
+    from .tracking import Cells, FrameMaps, per_frame, run_tracker, track_table, tracks_csv
 
     method = cfg.tracking.resolved_method(len(done))
     if method == "off":
         for name in TRACK_FILES:
             (out / name).unlink(missing_ok=True)
         return {"method": "off"}
-    maps = np.stack([np.load(out / "maps" / f"{f.stem}.npy").ravel() for f in done])
+    maps = FrameMaps([out / "maps" / f"{f.stem}.npy" for f in done], keep=2 * cfg.tracking.window)
     cells = Cells.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
                      cfg.detection.nms_radius)
     tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, cfg.inputs.fps,

@@ -37,9 +37,10 @@ class TrackingOptions:
     max_speed: float = 2.0
     prune: float = 0.02
     peak: float = 0.3
-    min_rho: float = 0.01
+    min_rho: float = 0.02
     max_rho: float = 0.999
-    entry_cost: float = 4.0
+    jitter: float = 0.2
+    entry_cost: float = 7.0
     appear_cost: float = 20.0
     max_gap: int = 15
     window: int = 300
@@ -94,6 +95,14 @@ class Cells:
         steps = [grid.x[2], grid.y[2]] + ([grid.z[2]] if grid.mode == "voxel" else [])
         return cls(np.asarray(p, float), float(max(steps)), entry, nms_radius)
 
+    def nearest(self, xyz) -> int:
+        """The cell nearest to a point."""
+        if not hasattr(self, "_tree"):
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(self.positions)
+        return int(self._tree.query(np.asarray(xyz, float))[1])
+
 
 @dataclass
 class Track:
@@ -105,6 +114,32 @@ class Track:
     xyz: np.ndarray
     rho: np.ndarray
     bridged: np.ndarray
+
+
+class FrameMaps:
+    """A run's maps (maps/<stem>.npy, in frame order) read as the windows need them, flat,
+    the last `keep` kept: a long run's maps are never all in memory. `maps[s:e]` is the
+    (e - s, K) array of frames s..e-1, `maps[t]` one frame."""
+
+    def __init__(self, paths, keep: int = 512):
+        self.paths, self.keep, self._cache = list(paths), keep, {}
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    def _one(self, t: int) -> np.ndarray:
+        m = self._cache.get(t)
+        if m is None:
+            m = np.load(self.paths[t]).astype(np.float32).ravel()
+            if len(self._cache) >= self.keep:
+                self._cache.pop(next(iter(self._cache)))
+            self._cache[t] = m
+        return m
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return np.stack([self._one(t) for t in range(*index.indices(len(self)))])
+        return self._one(int(index))
 
 
 # -- the flow over a window of frames --------------------------------------------------------
@@ -123,18 +158,40 @@ def peaks(rho_map: np.ndarray, cells: Cells, threshold: float) -> np.ndarray:
     cand = np.flatnonzero(local_maxima(rho_map).ravel() & (flat >= threshold))
     cand = cand[np.lexsort((cand, -flat[cand]))]
     kept: list[int] = []
+    r2 = cells.nms_radius ** 2
     for k in cand:
-        if all(np.linalg.norm(cells.positions[k] - cells.positions[j]) >= cells.nms_radius for j in kept):
+        if not kept or (((cells.positions[kept] - cells.positions[k]) ** 2).sum(axis=1) >= r2).all():
             kept.append(int(k))
     return np.array(sorted(kept), dtype=np.int64)
 
 
+class PeakCache:
+    """Each frame's peaks (the graph's nodes), found once however many windows hold it."""
+
+    def __init__(self, cells: Cells, shape: tuple, prune: float, keep: int = 1024):
+        self.cells, self.shape, self.prune, self.keep, self.found = cells, shape, prune, keep, {}
+
+    def window(self, start: int, maps: np.ndarray) -> list[np.ndarray]:
+        out = []
+        for i in range(len(maps)):
+            ks = self.found.get(start + i)
+            if ks is None:
+                ks = peaks(maps[i].reshape(self.shape), self.cells, self.prune)
+                if len(self.found) >= self.keep:
+                    self.found.pop(next(iter(self.found)))
+                self.found[start + i] = ks
+            out.append(ks)
+        return out
+
+
 def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
-                 anchors: dict | None = None) -> tuple[list[list[tuple[int, int]]], dict]:
+                 anchors: dict | None = None, nodes: list | None = None
+                 ) -> tuple[list[list[tuple[int, int]]], dict]:
     """The optimal tracks over `maps` (T, K) rho*: a list of paths, each a list of (t, k)
     in frame order (frames a path skips are bridged). `anchors` (online): cell k -> the
     only cells where a path may start at t = 0 (the tracks committed there); without it a
-    path may start anywhere at t = 0 and end anywhere at the last frame."""
+    path may start anywhere at t = 0 and end anywhere at the last frame. `nodes`: each
+    frame's peaks when the caller has them (PeakCache)."""
     from ortools.graph.python import min_cost_flow
     from scipy.spatial import cKDTree
 
@@ -144,6 +201,8 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     for t in range(T):
         if t == 0 and anchors is not None:
             ks = np.array(sorted(anchors), dtype=np.int64)
+        elif nodes is not None:
+            ks = nodes[t]
         else:
             ks = peaks(maps[t].reshape(shape), cells, opt.prune)
         node_t.append(np.full(len(ks), t))
@@ -164,35 +223,33 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     gap = float(_costs(np.array([opt.min_rho]), opt)[0])
     src, snk = 2 * n, 2 * n + 1
     tails, heads, costs = [np.arange(n) * 2], [np.arange(n) * 2 + 1], [cost]  # in -> out
-    reach = [opt.max_speed * s * dt + cells.step for s in range(opt.max_gap + 2)]
-    trees = [cKDTree(cells.positions[k]) if len(k) else None for k in node_k]
-    for t in range(T - 1):
-        a = trees[t]
-        if a is None:
+    reach = [opt.max_speed * s * dt + max(opt.jitter, cells.step) for s in range(opt.max_gap + 2)]
+    # moves to the next frame from every node, bridges of s frames between peaks: for each s
+    # one KD-tree query over the window, frames kept apart by a time axis far larger than
+    # any reach (a node of frame t, shifted by s, meets only the nodes of frame t + s)
+    pos = cells.positions[all_k]
+    apart = 1e4 + 10 * reach[-1]
+    is_peak = np.concatenate(peak_of)
+    for s in range(1, min(opt.max_gap + 1, T - 1) + 1):
+        src_nodes = np.flatnonzero((all_t + s < T) & (is_peak if s > 1 else True))
+        dst_nodes = np.flatnonzero((all_t >= s) & (is_peak if s > 1 else True))
+        if not len(src_nodes) or not len(dst_nodes):
             continue
-        for s in range(1, opt.max_gap + 2):
-            if t + s >= T or trees[t + s] is None:
-                continue
-            if s == 1:
-                pairs = a.sparse_distance_matrix(trees[t + 1], reach[1], output_type="ndarray")
-                i, j = pairs["i"], pairs["j"]
-            else:  # a bridge: from a peak to a peak, paying the gap cost per skipped frame
-                pa, pb = np.flatnonzero(peak_of[t]), np.flatnonzero(peak_of[t + s])
-                if not len(pa) or not len(pb):
-                    continue
-                d = np.linalg.norm(cells.positions[node_k[t][pa]][:, None]
-                                   - cells.positions[node_k[t + s][pb]][None], axis=2)
-                ia, ib = np.nonzero(d <= reach[s])
-                i, j = pa[ia], pb[ib]
-            tails.append((offsets[t] + i) * 2 + 1)
-            heads.append((offsets[t + s] + j) * 2)
-            costs.append(np.full(len(i), (s - 1) * gap))
+        a = cKDTree(np.c_[pos[src_nodes], (all_t[src_nodes] + s) * apart])
+        b = cKDTree(np.c_[pos[dst_nodes], all_t[dst_nodes] * apart])
+        pairs = a.sparse_distance_matrix(b, reach[s], output_type="ndarray")
+        i, j = src_nodes[pairs["i"]], dst_nodes[pairs["j"]]
+        tails.append(i * 2 + 1)
+        heads.append(j * 2)
+        costs.append(np.full(len(i), (s - 1) * gap))
     entry = cells.entry[all_k]
     enter = np.where(first, 0.0, np.where(entry, opt.entry_cost, opt.appear_cost))
     leave = np.where(last, 0.0, np.where(entry, opt.entry_cost, opt.appear_cost))
+    if anchors is not None:  # a committed track pays its end as offline: dropping it is not free
+        enter[first] = -leave[first]
     tails += [np.full(n, src), np.arange(n) * 2 + 1, [src]]
     heads += [np.arange(n) * 2, np.full(n, snk), [snk]]
-    supply = max(1, int(np.sum(cost < 0)))
+    supply = max(1, int(np.sum(cost < 0)) + (len(anchors) if anchors is not None else 0))
     costs += [enter, leave, [0.0]]
     tails, heads = np.concatenate(tails).astype(np.int64), np.concatenate(heads).astype(np.int64)
     costs = np.round(np.concatenate(costs) * SCALE).astype(np.int64)
@@ -232,8 +289,7 @@ def _expand(path, t0, maps, cells, threshold):
             pb = cells.positions[nxt[1]]
             for t in range(ta + 1, nxt[0]):
                 p = pa + (t - ta) / (nxt[0] - ta) * (pb - pa)
-                k = int(np.argmin(np.linalg.norm(cells.positions - p, axis=1)))
-                out.append((t0 + t, p, float(maps[t, k]), True))
+                out.append((t0 + t, p, float(maps[t, cells.nearest(p)]), True))
     return out
 
 
@@ -260,7 +316,7 @@ def track_offline(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpt
     path of a later window takes the identity of the earlier window's path it agrees with
     most in the overlap (the same cell within one step, at least a quarter of the frames),
     and the windows meet in the overlap's middle."""
-    T = maps.shape[0]
+    T = len(maps)
     win = max(2, opt.window)
     lap = min(max(0, opt.overlap), win - 1)
     starts = [0]
@@ -269,14 +325,16 @@ def track_offline(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpt
     ids: dict[int, list] = {}
     prev: dict[int, dict] = {}  # id -> {t: xyz} of the previous window
     next_id, stats = 0, {"windows": len(starts), "nodes": 0, "arcs": 0, "max_nodes": 0, "max_arcs": 0}
+    cache = PeakCache(cells, shape, opt.prune, keep=2 * win)
     for w, s in enumerate(starts):
         e = min(T, s + win)
-        paths, st = solve_window(maps[s:e], cells, shape, opt, dt)
+        window = maps[s:e]
+        paths, st = solve_window(window, cells, shape, opt, dt, nodes=cache.window(s, window))
         for key in ("nodes", "arcs"):
             stats[key] += st[key]
             stats[f"max_{key}"] = max(stats[f"max_{key}"], st[key])
         cut = s + lap // 2 if w > 0 else s  # frames before `cut` come from the earlier window
-        rows_now = [_expand(p, s, maps[s:e], cells, threshold) for p in paths]
+        rows_now = [_expand(p, s, window, cells, threshold) for p in paths]
         assign = _stitch(prev, rows_now, s, min(e, s + lap), cells.step) if w > 0 else {}
         current: dict[int, dict] = {}
         for j, rows in enumerate(rows_now):
@@ -320,24 +378,26 @@ def track_online(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     """The causal tracker: frames arrive one by one; when frame t arrives the flow is solved
     over the frames from the last committed one (whose tracks are the only starts there) to
     t, and frame t - delay is committed. Identities, once committed, never change."""
-    T, delay = maps.shape[0], max(0, opt.delay)
+    T, delay = len(maps), max(0, opt.delay)
     ids: dict[int, list] = {}
     at: dict[int, tuple] = {}  # cell k of the last committed frame -> (id, xyz)
     next_id, committed = 0, -1
     stats = {"solves": 0, "max_nodes": 0, "max_arcs": 0, "delay_frames": delay}
+    cache = PeakCache(cells, shape, opt.prune, keep=2 * delay + 8)
     for t in range(T):
         c = t - delay if t < T - 1 else T - 1  # at the end the rest is committed at once
         if c < 0 or c <= committed:
             continue
         a = committed if committed >= 0 else 0
         anchors = {k: v for k, v in at.items()} if committed >= 0 else None
-        paths, st = solve_window(maps[a:t + 1], cells, shape, opt, dt, anchors)
+        window = maps[a:t + 1]
+        paths, st = solve_window(window, cells, shape, opt, dt, anchors, cache.window(a, window))
         stats["solves"] += 1
         stats["max_nodes"] = max(stats["max_nodes"], st["nodes"])
         stats["max_arcs"] = max(stats["max_arcs"], st["arcs"])
         new_at = {}
         for p in paths:
-            rows = _expand(p, a, maps[a:t + 1], cells, threshold)
+            rows = _expand(p, a, window, cells, threshold)
             if committed >= 0:
                 if p[0][0] == 0:
                     tid = at[p[0][1]][0]
@@ -356,8 +416,7 @@ def track_online(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
             ids[tid] += rows
             last = rows[-1]
             if last[0] == c:
-                k = int(np.argmin(np.linalg.norm(cells.positions - last[1], axis=1)))
-                new_at.setdefault(k, (tid, last[1]))
+                new_at.setdefault(cells.nearest(last[1]), (tid, last[1]))
         at, committed = new_at, c
     return _tracks_from({k: v for k, v in ids.items() if v}), stats
 
@@ -387,8 +446,8 @@ def link_naive(positions: list[np.ndarray], gate: float) -> list[list[int]]:
 
 def run_tracker(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, fps: float,
                 threshold: float = 0.5, method: str | None = None) -> tuple[list[Track], dict]:
-    """Tracks of `maps` (T, K) by `method` (default opt's, resolved for T frames) and a report
-    for summary.json (method, tracks, time, graph size)."""
+    """Tracks of `maps` ((T, K) array or FrameMaps) by `method` (default opt's, resolved for
+    T frames) and a report for summary.json (method, tracks, time, graph size)."""
     method = method or opt.resolved_method(len(maps))
     t = time.perf_counter()
     if method == "off":

@@ -50,15 +50,21 @@ def test_api_gives_the_cli_detections_on_the_demo(demo_run):
     assert cfg.model.sparse_epsilon > 0
     frames = sorted((ROOT / ".cache" / "demo_people" / "frames").glob("*.png"))
     assert len(frames) == summary["frames"] == 20
-    rows, iterations = [], []
+    rows, iterations, results = [], [], []
     for f in frames:
         depth = np.asarray(Image.open(f))  # uint16 in the config's depth units
         result = det.detect(depth)
         rows += api_rows(f.name, result)
         iterations.append(result.iterations)
+        results.append(result)
         assert result.rho_star.shape == cfg.grid.shape and result.timings["total_s"] > 0
     assert rows == csv_rows(demo_run / "detections.csv")
     assert iterations == [p["iterations"] for p in summary["per_frame"]]  # the same work per frame
+    from dpom_warp.tracking import tracks_csv
+
+    tracks, report = det.track(results)  # the same tracks as tracks.csv
+    assert report["method"] == "ksp" and len(tracks) >= 5
+    assert tracks_csv(tracks, [f.name for f in frames]) == (demo_run / "tracks.csv").read_text()
 
 
 def test_api_float_metres_and_batches_match_single_frames(tmp_path):
