@@ -100,7 +100,7 @@ class Detector:
         quiet = log or (lambda *_: None)
         render_synthetic(cfg, quiet)
         needs_frames = cfg.inputs.auto_background or (cfg.pose_auto and not cfg.inputs.background)
-        frames = expand(cfg.inputs.frames, "input.frames") if needs_frames and cfg.inputs.frames else []
+        frames = expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, quiet) if needs_frames and cfg.inputs.frames else []
         return cls(cfg, set_up(cfg, frames, device, quiet))
 
     @property

@@ -6,6 +6,7 @@ commands:
   dpom-warp fit-ground DEPTH... --camera CAMERA.yaml [--output POSE.yaml]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
   dpom-warp track RUN_DIR [--set tracking.KEY=VALUE ...]
+  dpom-warp info SOURCE [--topic TOPIC] [--json]
   dpom-warp schema [--output FILE]
 
 `dpom-warp COMMAND --help` explains each; the README has the config reference.
@@ -177,6 +178,35 @@ def _track(args) -> int:
     return 0
 
 
+def _info(args) -> int:
+    import json
+
+    from .sources import open_source
+
+    info = open_source(args.source, args.topic, "SOURCE").info().as_json()
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    i = info["intrinsics"]
+    lines = [f"{info['path']}: {info['kind']}",
+             f"  depth stream: {info['topic'] or '-'} ({info['encoding'] or '-'}), {info['frames']} frames "
+             f"of {info['width']}x{info['height']}",
+             f"  intrinsics: " + (f"fx {i['fx']:.3f}, fy {i['fy']:.3f}, cx {i['cx']:.3f}, cy {i['cy']:.3f}"
+                                  if i else "none (give camera.intrinsics in the config)"),
+             f"  distortion: {info['distortion'] or 'none'}",
+             f"  depth scale: " + (f"{info['depth_scale']:.7g} m per unit" if info["depth_scale"]
+                                   else "float metres" if info["encoding"] == "32FC1" else "-"),
+             f"  duration: " + (f"{info['duration_s']:.3f} s, {info['rate_hz']:.2f} frames/s"
+                                if info["duration_s"] else "-"),
+             f"  IMU: {'yes' if info['imu'] else 'no'}"]
+    if len(info["streams"]) > 1:
+        lines.append("  streams: " + "; ".join(f"{s['topic']} ({s['type']}"
+                                               + (f", {s['messages']}" if s.get("messages") else "") + ")"
+                                               for s in info["streams"][:40]))
+    print("\n".join(lines))
+    return 0
+
+
 def _schema(args) -> int:
     import json
 
@@ -219,7 +249,8 @@ def main(argv: list[str] | None = None) -> int:
         return sub.add_parser(name, help=text, description=description, formatter_class=HelpFormatter)
 
     p = command("run", "run DPOM over a sequence of depth frames",
-                "Run DPOM over a config's depth frames: detections.csv, maps, pictures, summary.json\n"
+                "Run DPOM over a config's depth frames: detections.csv, maps, tracks.csv, pictures,\n"
+                "summary.json "
                 "(and scores with ground truth) in the output folder. Relative paths in a config are\n"
                 "relative to the config file's folder; paths given with --set, to this folder.")
     p.add_argument("config", nargs="+", metavar="CONFIG", help="YAML run config (see README); several: one run each, "
@@ -273,6 +304,14 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="override tracking.*, input.fps or output.images, e.g. --set "
                         "tracking.method=online; repeatable")
+    n = command("info", "what a recording or a folder of frames holds",
+                "Print what a recording (.bag, .db3, .mcap, a ROS 2 bag folder, .mkv) or a glob of\n"
+                "depth frames holds: depth stream, frames, size, intrinsics, distortion, depth scale,\n"
+                "duration and rate, IMU, the other streams.")
+    n.add_argument("source", metavar="SOURCE", help="a recording, or a glob of depth frames (quote it)")
+    n.add_argument("--topic", help="the depth stream, when the recording has several")
+    n.add_argument("--json", action="store_true", help="print JSON (frames, width, height, intrinsics, "
+                                                       "depth_scale, ...)")
     m = command("schema", "write the JSON Schema of run configs (for editors)",
                 "Write the JSON Schema of run configs: point an editor's YAML support at it to\n"
                 "complete and check configs (configs/dpom-warp.schema.json is this output).")
@@ -290,6 +329,8 @@ def main(argv: list[str] | None = None) -> int:
             return _schema(args)
         if args.command == "track":
             return _track(args)
+        if args.command == "info":
+            return _info(args)
     except (ConfigError, InputError) as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 2

@@ -86,6 +86,18 @@ def _numbers(n: int):
     return BeforeValidator(check)
 
 
+def _lens(v):
+    """OpenCV's distortion: [k1, k2, p1, p2, k3] or the rational [k1, k2, p1, p2, k3, k4, k5, k6]."""
+    if (not isinstance(v, (list, tuple)) or len(v) not in (5, 8)
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+        raise _fail(f"expected a list of 5 or 8 numbers, found {_fmt(v)}"
+                    + (f" of length {len(v)}" if isinstance(v, (list, tuple)) else ""))
+    return tuple(float(x) for x in v)
+
+
+Lens = Annotated[tuple[float, ...], BeforeValidator(_lens)]
+
+
 class PathValue:
     """Marks a config value that is a file, folder or glob: relative to the config's folder."""
 
@@ -194,12 +206,15 @@ class InputSection(Node):
     """The depth frames and the background."""
 
     frames: FilePath | None = Field(None, description="glob of depth frames (16-bit PNG or .npy, in depth "
-                                                      "units), processed in sorted order; "
+                                                      "units), processed in sorted order, or a recording "
+                                                      "(.bag, .db3, .mcap, a ROS 2 bag folder, .mkv); "
                                                       "required by dpom-warp run")
     background: Union[Literal["auto"], FilePath, None] = Field(
         None, description="glob of background frames (no people); auto: estimated from the run's own "
                           "frames; null: the floor-only background")
-    depth_scale: Num = Field(0.001, gt=0, description="metres per unit of the files' values; 0 = no reading")
+    depth_scale: Num = Field(0.001, gt=0, description="metres per unit of the files' values; 0 = no "
+                                                      "reading (default: the recording's, else 0.001)")
+    topic: Str | None = Field(None, description="a recording's depth stream (default: its only one)")
     stride: Stride = Field("auto", description="inference on blocks of stride x stride pixels; auto: the "
                                                "coarsest stride (up to 8) leaving 6 pixels across the "
                                                "object at the farthest cell; pictures, boxes and the "
@@ -320,13 +335,15 @@ def _inside_image(camera):
 class CameraSection(Node):
     """The depth camera: image size, intrinsics, pose, lens."""
 
-    width: Int = Field(ge=1, description="image width in pixels; frames must match")
-    height: Int = Field(ge=1, description="image height in pixels")
-    intrinsics: Intrinsics
+    width: Int = Field(ge=1, description="image width in pixels; frames must match (default: the "
+                                         "recording's)")
+    height: Int = Field(ge=1, description="image height in pixels (default: the recording's)")
+    intrinsics: Intrinsics = Field(description="fx, fy, cx, cy (default: the recording's camera information)")
     extrinsics: Extrinsics = Field(description="auto (fit the floor), {T_world_from_camera: 4x4} or "
                                                "{height, pitch_deg, roll_deg, yaw_deg, x, y}")
-    distortion: Annotated[tuple[float, float, float, float, float], _numbers(5)] | None = Field(
-        None, description="[k1, k2, p1, p2, k3] (OpenCV model)")
+    distortion: Lens | None = Field(
+        None, description="[k1, k2, p1, p2, k3] or [k1, k2, p1, p2, k3, k4, k5, k6] (OpenCV's models); "
+                          "default: the recording's")
     ground: GroundSection = GroundSection()
 
     @model_validator(mode="after")
@@ -678,6 +695,7 @@ class Inputs:
     background: str | None = None
     depth_scale: float = 0.001
     fps: float = 15.0
+    topic: str | None = None
     stride: int | str = "auto"  # "auto" or an integer >= 1 (dpom_warp.resolution)
     reduce: str = "median"
     background_auto: AutoBackground = AutoBackground()  # for background: auto
@@ -737,15 +755,54 @@ def _fill(cls, section: BaseModel, **changes):
     return cls(**{k: v for k, v in section.model_dump().items() if k in names}, **changes)
 
 
+def camera_from_recording(raw: dict) -> dict:
+    """A config whose input.frames is a recording, with the camera keys it leaves out
+    (camera.width, height, intrinsics, distortion, input.depth_scale) taken from the
+    recording (the keys it gives win: the run says where they differ)."""
+    from .io import InputError
+    from .sources import is_recording, open_source
+
+    inp, cam = raw.get("input"), raw.get("camera", {})
+    if (not isinstance(inp, dict) or not isinstance(inp.get("frames"), str) or not isinstance(cam, dict)
+            or not is_recording(inp["frames"])):
+        return raw
+    missing = [k for k in ("width", "height", "intrinsics", "distortion") if k not in cam]
+    if not missing and "depth_scale" in inp:
+        return raw
+    try:
+        info = open_source(inp["frames"], inp.get("topic")).info()
+    except InputError as e:
+        raise ConfigError(str(e)) from None
+    out = copy.deepcopy(raw)
+    cam = out.setdefault("camera", {})
+    if "intrinsics" not in cam:
+        if info.intrinsics is None:
+            raise ConfigError(f"camera.intrinsics: required key is missing, and {inp['frames']} carries no "
+                              f"camera information for {info.topic} (no sensor_msgs/CameraInfo); expected "
+                              f"camera.intrinsics in the config")
+        cam["intrinsics"] = dict(info.intrinsics)
+    for key, value in (("width", info.width), ("height", info.height)):
+        if key not in cam and value:
+            cam[key] = value
+    if "distortion" not in cam and info.distortion:
+        cam["distortion"] = list(info.distortion)
+    if "depth_scale" not in inp:
+        out["input"]["depth_scale"] = float(f"{info.depth_scale:.7g}") if info.depth_scale else 0.001
+    return out
+
+
 def parse_config(raw: dict[str, Any]) -> RunConfig:
-    """Validate a config mapping (as loaded from YAML) into a RunConfig."""
+    """Validate a config mapping (as loaded from YAML) into a RunConfig (a recording's camera
+    fills in the camera keys the config leaves out)."""
+    raw = camera_from_recording(raw) if isinstance(raw, dict) else raw
     try:
         c = ConfigFile.model_validate(raw)
     except ValidationError as e:
         raise ConfigError(_first_error(e)) from None
     s = c.input
     inputs = Inputs(frames=s.frames, background=s.background, depth_scale=s.depth_scale, fps=s.fps,
-                    stride=s.stride, reduce=s.reduce, background_auto=_fill(AutoBackground, s.background_auto))
+                    topic=s.topic, stride=s.stride, reduce=s.reduce,
+                    background_auto=_fill(AutoBackground, s.background_auto))
     cam, ext = c.camera, c.camera.extrinsics
     pose_auto = ext == "auto"
     if pose_auto:
@@ -879,7 +936,7 @@ class CameraFile(Node):
     height: Int = Field(ge=1)
     intrinsics: Intrinsics
     depth_scale: Num = Field(0.001, gt=0)
-    distortion: Annotated[tuple[float, float, float, float, float], _numbers(5)] | None = None
+    distortion: Lens | None = None
 
     @model_validator(mode="after")
     def _principal_point(self):

@@ -45,7 +45,9 @@ def pose_from_angles(height_m: float, pitch_deg: float, roll_deg: float = 0.0,
 @dataclass(frozen=True)
 class Camera:
     """Pinhole depth camera: image size, intrinsics (pixels), pose in the world frame and
-    optional lens distortion (k1, k2, p1, p2, k3; OpenCV's Brown-Conrady model)."""
+    optional lens distortion (k1, k2, p1, p2, k3; OpenCV's Brown-Conrady model, or its rational
+    model k1, k2, p1, p2, k3, k4, k5, k6: the radial factor divided by 1 + k4 r^2 + k5 r^4 +
+    k6 r^6, as Azure Kinect calibrations give it)."""
 
     width: int
     height: int
@@ -54,15 +56,15 @@ class Camera:
     cx: float
     cy: float
     T_world_from_camera: np.ndarray = field(default_factory=lambda: np.eye(4))
-    distortion: tuple[float, float, float, float, float] | None = None
+    distortion: tuple[float, ...] | None = None
 
     def distort(self, x, y):
         """Distorted normalised image coordinates of undistorted ones (x = X/Z, y = Y/Z)."""
         if self.distortion is None:
             return x, y
-        k1, k2, p1, p2, k3 = self.distortion
+        k1, k2, p1, p2, k3, k4, k5, k6 = (tuple(self.distortion) + (0.0, 0.0, 0.0))[:8]
         r2 = x * x + y * y
-        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
         return (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
                 y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
 

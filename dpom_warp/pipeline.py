@@ -32,14 +32,55 @@ CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
 
 
 
-def expand(pattern: str, key: str) -> list[Path]:
+FRAME_SUFFIXES = (".png", ".npy")
+
+
+def expand(pattern: str, key: str, topic: str | None = None, log=print) -> list[Path]:
+    """The frame files input.frames (or input.background) names: a glob's files in sorted
+    order, or a recording's frames read into its cache (sources.materialise)."""
+    return source_frames(pattern, key, topic, log)[0]
+
+
+def source_frames(pattern: str, key: str, topic: str | None = None, log=print) -> tuple[list[Path], dict | None]:
+    """(frame files, the recording's source.json or None for a glob)."""
+    from .sources import RECORDING_SUFFIXES, is_recording, materialise
+
+    if is_recording(pattern):
+        meta = materialise(pattern, topic, key, log)
+        files = [Path(meta["folder"]) / f["frame"] for f in meta["frames"]]
+        if not files:
+            reason = meta["skipped"][0]["reason"] if meta["skipped"] else "no depth frames"
+            raise InputError(f"{key}: {pattern}: no readable depth frame ({reason})")
+        return files, meta
     files = sorted(Path(p) for p in glob.glob(os.path.expanduser(pattern)))
     files = [f for f in files if f.is_file()]
     if not files:
         where = os.path.abspath(os.path.expanduser(pattern))
         raise InputError(f"{key}: no files match {pattern!r} (looked for {where}; relative paths in a "
                          f"config file are relative to its folder)")
-    return files
+    if len(files) == 1 and files[0].suffix.lower() not in FRAME_SUFFIXES and files[0].suffix:
+        raise InputError(f"{key}: {files[0]}: unknown format {files[0].suffix!r}; expected a glob of 16-bit "
+                         f"PNG or .npy frames, or a recording ({', '.join(RECORDING_SUFFIXES)}, a ROS 2 "
+                         f"bag's folder)")
+    return files, None
+
+
+def recording_notes(cfg: RunConfig, meta: dict) -> list[str]:
+    """Where the config's camera differs from the recording's (the config's is used)."""
+    info, cam, notes = meta["info"], cfg.camera, []
+    mine = {"width": cam.width, "height": cam.height}
+    for key in ("width", "height"):
+        if info.get(key) and info[key] != mine[key]:
+            notes.append(f"camera.{key}: the config's {mine[key]} differs from the recording's {info[key]}")
+    if info.get("intrinsics"):
+        for k, v in info["intrinsics"].items():
+            given = getattr(cam, k)
+            if abs(given - v) > 1e-6 * max(1.0, abs(v)):
+                notes.append(f"camera.intrinsics.{k}: the config's {given:g} differs from the recording's {v:g}")
+    if abs(cfg.inputs.depth_scale - meta["depth_scale"]) > 1e-9 * meta["depth_scale"]:
+        notes.append(f"input.depth_scale: the config's {cfg.inputs.depth_scale:g} differs from the "
+                     f"recording's {meta['depth_scale']:g}")
+    return [n + " (the config's is used)" for n in notes]
 
 
 def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
@@ -160,6 +201,7 @@ class RunPlan(Setup):
     truth: dict | None
     t_start: float
     records: dict = dataclasses.field(default_factory=dict)
+    timestamps: dict = dataclasses.field(default_factory=dict)  # a recording's: frame -> seconds
     todo: list = dataclasses.field(default_factory=list)
     grown: list = dataclasses.field(default_factory=list)
     by_worker: Counter = dataclasses.field(default_factory=Counter)
@@ -214,8 +256,17 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     if cfg.inputs.frames is None:
         raise ConfigError("input.frames: required key is missing (the frames to run on)")
     shape = (cfg.camera.height, cfg.camera.width)
-    frames, skipped = check_frames(expand(cfg.inputs.frames, "input.frames"), cfg.inputs.depth_scale,
-                                   shape, strict)
+    files, meta = source_frames(cfg.inputs.frames, "input.frames", cfg.inputs.topic, log)
+    unread, timestamps = [], {}
+    if meta is not None:
+        for note in recording_notes(cfg, meta):
+            log(note)
+        unread = list(meta["skipped"])
+        if unread and strict:
+            raise InputError(unread[0]["reason"])
+        timestamps = {f["frame"]: f["timestamp"] for f in meta["frames"]}
+    frames, skipped = check_frames(files, cfg.inputs.depth_scale, shape, strict)
+    skipped = unread + skipped
     for item in skipped:
         log(f"skipping {item['reason']}")
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
@@ -226,7 +277,8 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     s = set_up(cfg, frames, device, log, parallel)
     s.spec.pictures = cfg.output.images and not pictures_deferred(cfg, len(frames))
     return RunPlan(**{f.name: getattr(s, f.name) for f in dataclasses.fields(Setup)}, cfg=cfg,
-                   out=out, frames=frames, skipped=skipped, truth=truth, t_start=t_start)
+                   out=out, frames=frames, skipped=skipped, truth=truth, t_start=t_start,
+                   timestamps=timestamps)
 
 
 def render_synthetic(cfg: RunConfig, log=print) -> None:
@@ -249,7 +301,7 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
     Detector both infer with. `frames`: the run's frames (read only for `auto` background
     and for a floor fit without background frames)."""
     auto_bg = cfg.inputs.auto_background
-    bg_files = (expand(cfg.inputs.background, "input.background")
+    bg_files = (expand(cfg.inputs.background, "input.background", cfg.inputs.topic, log)
                 if cfg.inputs.background and not auto_bg else [])
     bg_frames = [read_frame(cfg, f) for f in bg_files]  # a bad one is fatal
     try:
@@ -352,6 +404,8 @@ def collect(plan: RunPlan, outcomes, strict: bool, log=print) -> None:
 def accept(plan: RunPlan, name: str, output: FrameOutput | None, error: str | None, strict: bool,
            log=print) -> None:
     if error is None:
+        if name in plan.timestamps:
+            output.record["timestamp"] = output.record["stats"]["timestamp"] = plan.timestamps[name]
         plan.records[name] = write_output(plan.out, output)
         plan.grown += output.grown
         plan.by_worker[output.record["stats"]["worker"]] += 1
@@ -375,7 +429,8 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     summary["inference"] = plan.inference
     summary["runner"] = {**runner, "frames_resumed": len(done) - sum(plan.by_worker.values()),
                          "frames_per_worker": dict(sorted(plan.by_worker.items()))}
-    summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth, log=lambda *_: None)
+    summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth, log=lambda *_: None,
+                                    fps=fps_of([plan.records[f.name].get("timestamp") for f in done]))
     summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))
@@ -391,17 +446,28 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     return summary
 
 
+def fps_of(timestamps: list) -> float | None:
+    """The frame rate of frames with timestamps (the median interval), None without."""
+    ts = [t for t in timestamps if t is not None]
+    if len(ts) < 2 or len(ts) < len(timestamps):
+        return None
+    gaps = [b - a for a, b in zip(ts, ts[1:]) if b > a]
+    return 1.0 / statistics.median(gaps) if gaps else None
+
+
 def pictures_deferred(cfg: RunConfig, frames: int) -> bool:
     """Whether a run's pictures are drawn after tracking (they show the tracks) rather than
     by whoever infers each frame."""
     return cfg.output.images and cfg.tracking.resolved_method(frames) != "off"
 
 
-def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None, log=print) -> dict:
+def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None, log=print,
+              fps: float | None = None) -> dict:
     """Tracks of a run whose maps are written (maps/<stem>.npy of the `done` frames, in
     order): tracks.csv and track_table.csv, then, when the run has pictures, every frame's
-    picture with the tracks (deferred until now: pictures_deferred). Returns the `tracking`
-    block of summary.json. tracking.method off (or a single frame): no track files."""
+    picture with the tracks (deferred until now: pictures_deferred). `fps`: the frames' rate
+    from their timestamps (default input.fps). Returns the `tracking` block of summary.json.
+    tracking.method off (or a single frame): no track files."""
     from .render import frame_picture
     from .tracking import Cells, FrameMaps, per_frame, run_tracker, track_table, tracks_csv
 
@@ -413,11 +479,13 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
     maps = FrameMaps([out / "maps" / f"{f.stem}.npy" for f in done], keep=2 * cfg.tracking.window)
     cells = Cells.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
                      cfg.detection.nms_radius)
-    tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, cfg.inputs.fps,
-                                 cfg.detection.threshold, method)
+    rate = fps or cfg.inputs.fps
+    tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, rate, cfg.detection.threshold,
+                                 method)
+    report["fps_from"] = "timestamps" if fps else "input.fps"
     names = [f.name for f in done]
     write_text_atomic(out / "tracks.csv", tracks_csv(tracks, names))
-    write_text_atomic(out / "track_table.csv", track_table(tracks, names, cfg.inputs.fps))
+    write_text_atomic(out / "track_table.csv", track_table(tracks, names, rate))
     log(f"{len(tracks)} tracks ({method}) in {report['time_s']:.2f} s "
         f"({report['ms_per_frame']:.1f} ms per frame)")
     if cfg.output.images:
@@ -473,7 +541,7 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
             summary["ground_fit"]["T_world_from_camera"], float))
     names = [p["frame"] for p in summary["per_frame"]]
     if cfg.output.images:
-        by_name = {f.name: f for f in expand(cfg.inputs.frames, "input.frames")}
+        by_name = {f.name: f for f in expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, log)}
         missing = [n for n in names if n not in by_name]
         if missing:
             raise InputError(f"input.frames: {cfg.inputs.frames} has no frame {missing[0]} of the run "
@@ -487,7 +555,8 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
             raise InputError(f"{run_dir / 'maps' / (Path(n).stem + '.npy')}: missing occupancy map")
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
-    report = track_run(cfg, run_dir, done, geometry, truth, log)
+    report = track_run(cfg, run_dir, done, geometry, truth, log,
+                       fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]))
     summary["config"], summary["tracking"] = cfg.resolved, report
     write_json_atomic(run_dir / "summary.json", _jsonable(summary))
     write_json_atomic(run_dir / RUN_STATE, {"config": _jsonable(cfg.resolved)})

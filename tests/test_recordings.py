@@ -1,0 +1,362 @@
+"""Recordings as input: ROS 1, ROS 2 (sqlite) and MCAP bags written here with rosbags from
+rendered frames give the PNG run's detections (16UC1 and compressedDepth identical, 32FC1
+within 1 mm of depth); the two real recordings read with their size, intrinsics and depth
+values (against an independent decoding); `dpom-warp info`; the one-line errors."""
+
+import csv
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from PIL import Image
+
+from dpom_warp.cli import main
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+RS_BAG = REAL / "realsense_d435" / "single_depth_color_640x480.bag"
+AZURE = REAL / "azure_kinect" / "recording.mkv"
+
+
+@pytest.fixture(autouse=True)
+def recording_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("DPOM_WARP_CACHE", str(tmp_path / "recordings-cache"))
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """A small rendered sequence (4 frames) and its PNG run."""
+    from test_cli import small_config
+
+    tmp = tmp_path_factory.mktemp("rec")
+    path = small_config(tmp)
+    cfg = yaml.safe_load(path.read_text())
+    cfg["synthetic"]["frames"] = 4
+    cfg["input"]["background"] = None
+    cfg["output"]["images"] = False
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp / "png")]) == 0
+    del cfg["synthetic"]
+    cfg["evaluation"]["ground_truth"] = None
+    return tmp, cfg
+
+
+def rows(run: Path, rename=None):
+    out = [r for r in csv.reader(open(run / "detections.csv"))][1:]
+    return [[rename(r[0]) if rename else r[0]] + r[1:] for r in out]
+
+
+def typestore(ros1: bool):
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+
+
+def make(ts, msgtype, **values):
+    """A message of the typestore's `msgtype` (its field names matched case-insensitively: ROS 1's
+    CameraInfo says K where ROS 2's says k; a ROS 1 header has a seq)."""
+    cls = ts.types[msgtype]
+    names = {n.lower(): n for n in cls.__dataclass_fields__}
+    if "seq" in names and "seq" not in values:
+        values["seq"] = 0
+    return cls(**{names[k.lower()]: v for k, v in values.items()})
+
+
+def messages(ts, frames: list[Path], encoding: str, camera: dict | None, compressed=False, truncate=None):
+    """(topic, msgtype, message) in order: the camera info, then the depth frames."""
+    out = []
+    for i, f in enumerate(frames):
+        mm = np.asarray(Image.open(f)).astype(np.uint16)
+        stamp = make(ts, "builtin_interfaces/msg/Time", sec=100 + i // 10, nanosec=(i % 10) * 100_000_000)
+        head = make(ts, "std_msgs/msg/Header", stamp=stamp, frame_id="depth")
+        if camera is not None and i == 0:
+            k = np.array([camera["fx"], 0, camera["cx"], 0, camera["fy"], camera["cy"], 0, 0, 1], float)
+            roi = make(ts, "sensor_msgs/msg/RegionOfInterest", x_offset=0, y_offset=0, height=0, width=0,
+                       do_rectify=False)
+            out.append(("/cam/depth/camera_info", "sensor_msgs/msg/CameraInfo", make(
+                ts, "sensor_msgs/msg/CameraInfo", header=head, height=mm.shape[0], width=mm.shape[1],
+                distortion_model="plumb_bob", d=np.zeros(5), k=k, r=np.eye(3).ravel(), p=np.zeros(12),
+                binning_x=0, binning_y=0, roi=roi)))
+        if compressed:
+            import io
+
+            png = io.BytesIO()
+            Image.fromarray(mm).save(png, format="PNG")
+            data = np.frombuffer(struct.pack("<iff", 0, 0.0, 0.0) + png.getvalue(), np.uint8)
+            out.append(("/cam/depth/image_raw/compressedDepth", "sensor_msgs/msg/CompressedImage",
+                        make(ts, "sensor_msgs/msg/CompressedImage", header=head,
+                             format="16UC1; compressedDepth png", data=data)))
+            continue
+        if encoding == "32FC1":
+            m = mm.astype(np.float32) / 1000.0
+            m[mm == 0] = np.nan  # REP 118: no reading
+            data, step = np.frombuffer(m.tobytes(), np.uint8), 4 * mm.shape[1]
+        else:
+            data, step = np.frombuffer(mm.tobytes(), np.uint8), 2 * mm.shape[1]
+        if truncate == i:
+            data = data[: len(data) // 2]
+        out.append(("/cam/depth/image_raw", "sensor_msgs/msg/Image",
+                    make(ts, "sensor_msgs/msg/Image", header=head, height=mm.shape[0], width=mm.shape[1],
+                         encoding=encoding, is_bigendian=0, step=step, data=data)))
+    return out
+
+
+def write_bag(path: Path, kind: str, msgs):
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+
+    ts = typestore(kind == "ros1")
+    if kind == "ros1":
+        writer = Writer1(path)
+    else:
+        plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
+        writer = Writer2(path, version=8, storage_plugin=plugin)
+    conns = {}
+    with writer:
+        for i, (topic, msgtype, msg) in enumerate(msgs):
+            if topic not in conns:
+                conns[topic] = writer.add_connection(topic, msgtype, typestore=ts)
+            raw = ts.serialize_ros1(msg, msgtype) if kind == "ros1" else ts.serialize_cdr(msg, msgtype)
+            writer.write(conns[topic], 1_000_000_000 + i * 1000, raw)
+    return path
+
+
+def recording_config(tmp_path, cfg, frames, name="rec.yaml", **extra):
+    c = json.loads(json.dumps(cfg))
+    c["input"] = {"frames": str(frames), **extra.pop("input", {})}
+    for k in ("width", "height", "intrinsics"):
+        c["camera"].pop(k)
+    c["output"]["dir"] = str(tmp_path / "out")
+    c.update(extra)
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(c))
+    return path
+
+
+def camera_of(cfg):
+    return dict(cfg["camera"]["intrinsics"])
+
+
+PNG_NAME = "{:04d}.png"
+
+
+def same_as_png(tmp_path, scene, out):
+    png = rows(scene[0] / "png")
+    rec = rows(out, rename=lambda n: PNG_NAME.format(int(n)))
+    assert rec == png and png
+    assert [r[0] for r in rows(out)][0] == "000000"  # frames named by their index in the stream
+
+
+@pytest.mark.parametrize("kind", ["ros1", "ros2", "mcap"])
+def test_16bit_bags_give_the_png_run(tmp_path, scene, kind):
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))
+    name = {"ros1": "seq.bag", "ros2": "seq", "mcap": "seq"}[kind]
+    bag = write_bag(tmp_path / name, kind, messages(typestore(kind == "ros1"), frames, "16UC1", camera_of(cfg)))
+    if kind == "mcap":
+        bag = next(bag.glob("*.mcap"))  # the .mcap file itself
+    path = recording_config(tmp_path, cfg, bag)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    same_as_png(tmp_path, scene, tmp_path / "out")
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["config"]["camera"]["intrinsics"] == camera_of(cfg)  # the camera from the bag
+    assert summary["config"]["camera"]["width"] == cfg["camera"]["width"]
+    assert [p["timestamp"] for p in summary["per_frame"]] == pytest.approx([100.0, 100.1, 100.2, 100.3])
+    assert summary["tracking"]["fps_from"] == "timestamps" and summary["tracking"]["fps"] == pytest.approx(10.0)
+
+
+def test_compressed_depth_and_32fc1_bags(tmp_path, scene):
+    """compressedDepth PNG gives the same detections; 32FC1 metres (NaN = no reading) too,
+    its depth within 1 mm of the PNG's."""
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))
+    ts = typestore(False)
+    bag = write_bag(tmp_path / "comp", "ros2", messages(ts, frames, "16UC1", camera_of(cfg), compressed=True))
+    (tmp_path / "a").mkdir()
+    assert main(["run", str(recording_config(tmp_path / "a", cfg, bag)), "--no-progress"]) == 0
+    same_as_png(tmp_path, scene, tmp_path / "a" / "out")
+    bag = write_bag(tmp_path / "float.bag", "ros1", messages(typestore(True), frames, "32FC1", camera_of(cfg)))
+    (tmp_path / "b").mkdir()
+    assert main(["run", str(recording_config(tmp_path / "b", cfg, bag)), "--no-progress"]) == 0
+    same_as_png(tmp_path, scene, tmp_path / "b" / "out")
+    from dpom_warp.sources import open_source
+
+    for fr, f in zip(open_source(bag).frames(), frames):
+        mm = np.asarray(Image.open(f)).astype(np.float64)
+        metres = np.nan_to_num(fr.depth.astype(np.float64))
+        assert np.abs(metres * 1000 - mm).max() <= 1.0
+
+
+def test_a_truncated_message_is_skipped_with_its_reason(tmp_path, scene, capsys):
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))
+    bag = write_bag(tmp_path / "bad.bag", "ros1", messages(typestore(True), frames, "16UC1", camera_of(cfg),
+                                                           truncate=2))
+    path = recording_config(tmp_path, cfg, bag)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["frames"] == 3 and summary["skipped"][0]["frame"] == "000002"
+    assert "truncated image" in summary["skipped"][0]["reason"]
+    assert "skipping" in capsys.readouterr().out
+    assert main(["run", str(path), "--no-progress", "--overwrite", "--strict"]) == 2
+
+
+def test_recording_errors_are_one_line(tmp_path, scene, capsys):
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))[:2]
+    ts = typestore(True)
+    two = messages(ts, frames, "16UC1", camera_of(cfg))
+    two += [(t.replace("image_raw", "other"), m, x) for t, m, x in messages(ts, frames, "16UC1", None)]
+    bag = write_bag(tmp_path / "two.bag", "ros1", two)
+    cases = [
+        (recording_config(tmp_path, cfg, bag), "input.topic: ", "has 2 depth streams; expected one chosen, "
+                                                                "found /cam/depth/image_raw, /cam/depth/other"),
+        (recording_config(tmp_path, cfg, bag, "nope.yaml", input={"topic": "/nope"}), "input.topic: ",
+         "has no depth stream '/nope'"),
+    ]
+    nocam = write_bag(tmp_path / "nocam.bag", "ros1", messages(ts, frames, "16UC1", None))
+    cases.append((recording_config(tmp_path, cfg, nocam, "nocam.yaml"), "camera.intrinsics: required key is missing",
+                  "carries no camera information"))
+    other = tmp_path / "clip.avi"
+    other.write_bytes(b"RIFF")
+    c = json.loads(json.dumps(cfg))
+    c["input"]["frames"] = str(other)
+    p = tmp_path / "avi.yaml"
+    p.write_text(yaml.safe_dump(c))
+    cases.append((p, "input.frames: ", "unknown format '.avi'"))
+    for path, start, part in cases:
+        assert main(["run", str(path), "--no-progress", "--overwrite"]) == 2, part
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and err.startswith("dpom-warp: error: ") and start in err and part in err, err
+    assert not (tmp_path / "out").exists()  # nothing written
+
+
+def test_without_the_sensors_extra_the_error_says_how_to_install(monkeypatch):
+    from dpom_warp import sources
+    from dpom_warp.io import InputError
+
+    with pytest.raises(InputError, match=r'needs the optional package nonexistent_reader; install it with '
+                                         r'pip install "dpom-warp\[sensors\]"'):
+        sources.need("nonexistent_reader", "input.frames: x.bag (a ROS bag)")
+
+
+# -- the real recordings ----------------------------------------------------------------------
+def ros1_image_messages(path: Path, topic: str):
+    """Depth images of a ROS 1 bag read without rosbags: the bag format's records walked by
+    hand (chunks, connections 0x07, message data 0x02; ROS 1 serialisation of sensor_msgs/Image)."""
+    data = path.read_bytes()
+    pos = data.index(b"\n") + 1  # "#ROSBAG V2.0\n"
+    conns, images = {}, []
+
+    def fields(header):
+        out, i = {}, 0
+        while i < len(header):
+            (n,) = struct.unpack_from("<i", header, i)
+            k, _, v = header[i + 4:i + 4 + n].partition(b"=")
+            out[k.decode()] = v
+            i += 4 + n
+        return out
+
+    while pos < len(data):
+        (hl,) = struct.unpack_from("<i", data, pos)
+        h = fields(data[pos + 4:pos + 4 + hl])
+        pos += 4 + hl
+        (dl,) = struct.unpack_from("<i", data, pos)
+        body = data[pos + 4:pos + 4 + dl]
+        pos += 4 + dl
+        op = h.get("op", b"\x00")[0]
+        if op == 0x05:  # a chunk: records inside (lz4 frames in RealSense recordings)
+            if h["compression"] == b"lz4":
+                import lz4.frame
+
+                body = lz4.frame.decompress(body)
+            elif h["compression"] == b"bz2":
+                import bz2
+
+                body = bz2.decompress(body)
+            i = 0
+            while i < len(body):
+                (hl2,) = struct.unpack_from("<i", body, i)
+                h2 = fields(body[i + 4:i + 4 + hl2])
+                i += 4 + hl2
+                (dl2,) = struct.unpack_from("<i", body, i)
+                b2 = body[i + 4:i + 4 + dl2]
+                i += 4 + dl2
+                op2 = h2["op"][0]
+                if op2 == 0x07:
+                    conns[struct.unpack("<i", h2["conn"])[0]] = h2["topic"].decode()
+                elif op2 == 0x02 and conns.get(struct.unpack("<i", h2["conn"])[0]) == topic:
+                    j = 12
+                    (n,) = struct.unpack_from("<i", b2, j)
+                    j += 4 + n  # frame_id
+                    height, width = struct.unpack_from("<II", b2, j)
+                    j += 8
+                    (n,) = struct.unpack_from("<i", b2, j)
+                    enc = b2[j + 4:j + 4 + n].decode()
+                    j += 4 + n + 1
+                    (step,) = struct.unpack_from("<I", b2, j)
+                    (n,) = struct.unpack_from("<i", b2, j + 4)
+                    raw = np.frombuffer(b2[j + 8:j + 8 + n], "<u2").reshape(height, width)
+                    images.append((enc, raw))
+    return images
+
+
+def test_realsense_recording_reads_right_and_runs(tmp_path, capsys):
+    from dpom_warp.sources import open_source
+
+    src = open_source(RS_BAG)
+    info = src.info()
+    assert (info.width, info.height, info.frames, info.encoding) == (640, 480, 2, "mono16")
+    assert info.intrinsics["fx"] == pytest.approx(390.43, abs=0.01) and info.intrinsics["cy"] == pytest.approx(242.19, abs=0.01)
+    assert info.depth_scale == pytest.approx(0.001, rel=1e-6)
+    ours = [fr.depth for fr in src.frames()]
+    theirs = ros1_image_messages(RS_BAG, info.topic)
+    assert len(ours) == len(theirs) == 2
+    for a, (enc, b) in zip(ours, theirs):
+        assert enc == "mono16" and np.array_equal(a, b)
+        assert a[a > 0].min() == 341 and 3000 < a.max() < 3200
+    cfg = {"device": "cpu", "input": {"frames": str(RS_BAG)},
+           "camera": {"extrinsics": {"height": 1.2, "pitch_deg": 10.0}},
+           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]},
+           "output": {"dir": str(tmp_path / "out"), "images": False}}
+    path = tmp_path / "rs.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress"]) == 0
+    assert sorted(p.name for p in (tmp_path / "out" / "maps").iterdir()) == ["000000.npy", "000001.npy"]
+    capsys.readouterr()
+    assert main(["info", str(RS_BAG), "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert js["frames"] == 2 and (js["width"], js["height"]) == (640, 480)
+    assert set(js["intrinsics"]) == {"fx", "fy", "cx", "cy"} and js["depth_scale"] == pytest.approx(0.001)
+
+
+def test_azure_kinect_recording_reads_right_and_runs(tmp_path):
+    import av
+
+    from dpom_warp.sources import open_source
+
+    src = open_source(AZURE)
+    info = src.info()
+    assert (info.width, info.height, info.frames, info.imu) == (640, 576, 1, True)
+    assert info.depth_scale == 0.001 and len(info.distortion) == 8
+    # the Azure Kinect SDK's NFOV unbinned depth camera of this device: fx ~ 504.6, cx ~ 332.8
+    assert info.intrinsics["fx"] == pytest.approx(504.61, abs=0.01) and info.intrinsics["cx"] == pytest.approx(332.78, abs=0.01)
+    (ours,) = [fr.depth for fr in src.frames()]
+    with av.open(str(AZURE)) as c:  # FFmpeg's own decoding of the track
+        s = next(s for s in c.streams if s.metadata.get("title") == "DEPTH")
+        frame = next(f for f in c.decode(s))
+        theirs = frame.to_ndarray()
+    assert theirs.shape == ours.shape and np.array_equal(theirs.astype(np.uint16), ours)
+    assert ours[ours > 0].min() == 165 and ours.max() == 3690
+    cfg = {"device": "cpu", "input": {"frames": str(AZURE)},
+           "camera": {"extrinsics": {"height": 1.2, "pitch_deg": 10.0}},
+           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]},
+           "output": {"dir": str(tmp_path / "out"), "images": False}}
+    path = tmp_path / "az.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress"]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["frames"] == 1 and len(summary["config"]["camera"]["distortion"]) == 8
