@@ -16,7 +16,9 @@ the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/
 - speed: `python -m bench` on the demo frame and the drone frame, against the NumPy reference;
 - scaleout: one process, `--workers 2` and `--ray` on the demo (`python -m bench.scaleout`);
 - tracking: tracks on five long rendered sequences, KSP, online and naive linking, and the
-  tracker's time and memory on a 10,000-frame run (`python -m bench.tracking`), its picture.
+  tracker's time and memory on a 10,000-frame run (`python -m bench.tracking`), its picture;
+- recordings: the demo's frames as ROS 1, ROS 2, MCAP and 32FC1 bags: reading cost and the
+  detections against the PNG run (`python -m bench.recordings`).
 
 A test (tests/test_docs.py) holds the README to it: every table sits in a generated block and
 the config block is what the models say now.
@@ -329,11 +331,21 @@ def tracking_block(out: Path) -> str:
                                      "time on one core, the maps read from disk")])
 
 
+def recordings_block(out: Path) -> str:
+    code = subprocess.run([sys.executable, "-m", "bench.recordings", "--output", str(out / "recordings")],
+                          capture_output=True, text=True, cwd=ROOT)
+    if code.returncode:
+        raise SystemExit(code.stderr[-2000:])
+    md = (out / "recordings" / "recordings.md").read_text().strip()
+    return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.recordings`")])
+
+
 BUILDERS = {"config": lambda out, jobs: config_block(), "demo": lambda out, jobs: demo_block(out),
             "robustness": robustness_block, "drones": lambda out, jobs: drones_block(out),
             "real": lambda out, jobs: real_block(out), "eval": lambda out, jobs: eval_block(out),
             "speed": lambda out, jobs: speed_block(out), "scaleout": lambda out, jobs: scaleout_block(out),
-            "tracking": lambda out, jobs: tracking_block(out)}
+            "tracking": lambda out, jobs: tracking_block(out),
+            "recordings": lambda out, jobs: recordings_block(out)}
 
 
 def main():

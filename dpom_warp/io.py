@@ -77,9 +77,21 @@ def write_depth_png(path, depth_m: np.ndarray, depth_scale: float = 0.001):
         Image.fromarray(units).save(tmp, format="PNG")
 
 
+NPY_MAGIC = b"\x93NUMPY"
+
+
+def _is_npy(path: Path, data: bytes | None) -> bool:
+    """A file without a telling suffix (a recording's cached frames) that holds an array."""
+    if data is not None:
+        return data[:6] == NPY_MAGIC
+    with open(path, "rb") as f:
+        return f.read(6) == NPY_MAGIC
+
+
 def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | None = None,
                data: bytes | None = None) -> np.ndarray:
-    """Read a depth frame (16-bit PNG in depth units, or .npy) as float32 metres, 0 = no reading.
+    """Read a depth frame (16-bit PNG in depth units, or .npy; a file named without a suffix is
+    told by its content) as float32 metres, 0 = no reading.
 
     Args:
         path: the file.
@@ -96,7 +108,7 @@ def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | No
     if data is None and not path.is_file():
         raise InputError(f"{path}: no such file")
     source = path if data is None else io.BytesIO(data)
-    if path.suffix.lower() == ".npy":
+    if path.suffix.lower() == ".npy" or (path.suffix.lower() != ".png" and _is_npy(path, data)):
         try:
             raw = np.load(source, allow_pickle=False)
         except Exception as e:  # noqa: BLE001 - numpy raises many kinds

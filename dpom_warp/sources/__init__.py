@@ -6,8 +6,8 @@ says what it holds (`info`: size, intrinsics, distortion, depth scale, frame cou
 topics, IMU) and yields its depth frames in order, one at a time (`frames`), each with its
 index, timestamp and either the depth array or the reason it cannot be read.
 
-A run reads a recording once, streamed, into a cache folder of 16-bit PNG frames named by their
-index in the stream (`000000`, `000001`, ...: the names detections.csv carries) in the
+A run reads a recording once, streamed, into a cache folder of 16-bit frames (.npy arrays, named
+without a suffix: read_depth tells them by their content) named by their index in the stream (`000000`, `000001`, ...: the names detections.csv carries) in the
 recording's own depth units (32FC1 metres become millimetres), with the recording's camera,
 timestamps and unreadable messages in `source.json`; every later step (the checks, the
 background, the floor fit, --workers and Ray, --resume, `dpom-warp track`) reads those files
@@ -30,7 +30,7 @@ from ..io import InputError, atomic_path, write_json_atomic
 
 RECORDING_SUFFIXES = {".bag": "ROS 1 bag", ".db3": "ROS 2 bag (sqlite)", ".mcap": "ROS 2 bag (MCAP)",
                       ".mkv": "Azure Kinect recording"}
-CACHE_VERSION = 1
+CACHE_VERSION = 2  # 2: .npy frames
 INSTALL = 'pip install "dpom-warp[sensors]"'
 
 
@@ -136,8 +136,6 @@ def materialise(spec: str, topic: str | None = None, key: str = "input.frames", 
     """Read the recording `spec` once into its cache folder (unless there already); returns
     its source.json: info, frames (name, timestamp), skipped (name, reason), depth_scale of
     the cached units, folder."""
-    from PIL import Image
-
     path = Path(os.path.expanduser(spec))
     source = open_source(path, topic, key)
     info = source.info()
@@ -162,8 +160,9 @@ def materialise(spec: str, topic: str | None = None, key: str = "input.frames", 
         if np.issubdtype(units.dtype, np.floating):
             metres = np.where(np.isfinite(units) & (units > 0), units, 0.0)
             units = np.clip(np.round(metres / scale), 0, 65535)
-        with atomic_path(folder / name, suffix=".png") as tmp:
-            Image.fromarray(np.asarray(units, np.uint16)).save(tmp, format="PNG", compress_level=1)
+        with atomic_path(folder / name, suffix=".npy") as tmp:
+            with open(tmp, "wb") as f:
+                np.save(f, np.asarray(units, np.uint16))
         frames.append({"frame": name, "timestamp": fr.timestamp})
     meta = {"info": info.as_json(), "frames": frames, "skipped": skipped, "depth_scale": scale,
             "folder": str(folder), "recording": str(path)}
