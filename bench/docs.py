@@ -18,7 +18,9 @@ the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/
 - tracking: tracks on five long rendered sequences, KSP, online and naive linking, and the
   tracker's time and memory on a 10,000-frame run (`python -m bench.tracking`), its picture;
 - recordings: the demo's frames as ROS 1, ROS 2, MCAP and 32FC1 bags: reading cost and the
-  detections against the PNG run (`python -m bench.recordings`).
+  detections against the PNG run (`python -m bench.recordings`);
+- live: the live mode on the demo's frames played at 30 fps by a software camera
+  (`python -m bench.live`).
 
 A test (tests/test_docs.py) holds the README to it: every table sits in a generated block and
 the config block is what the models say now.
@@ -340,12 +342,22 @@ def recordings_block(out: Path) -> str:
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.recordings`")])
 
 
+def live_block(out: Path) -> str:
+    code = subprocess.run([sys.executable, "-m", "bench.live", "--output", str(out / "live")],
+                          capture_output=True, text=True, cwd=ROOT)
+    if code.returncode:
+        raise SystemExit(code.stderr[-2000:])
+    md = (out / "live" / "live.md").read_text().strip()
+    return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.live`")])
+
+
 BUILDERS = {"config": lambda out, jobs: config_block(), "demo": lambda out, jobs: demo_block(out),
             "robustness": robustness_block, "drones": lambda out, jobs: drones_block(out),
             "real": lambda out, jobs: real_block(out), "eval": lambda out, jobs: eval_block(out),
             "speed": lambda out, jobs: speed_block(out), "scaleout": lambda out, jobs: scaleout_block(out),
             "tracking": lambda out, jobs: tracking_block(out),
-            "recordings": lambda out, jobs: recordings_block(out)}
+            "recordings": lambda out, jobs: recordings_block(out),
+            "live": lambda out, jobs: live_block(out)}
 
 
 def main():

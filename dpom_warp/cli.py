@@ -2,7 +2,7 @@
 
 commands:
   dpom-warp run CONFIG... [--output DIR] [--device D] [--set KEY.PATH=VALUE ...]
-                [--workers N] [--ray [ADDRESS]] [--resume | --overwrite]
+                [--workers N] [--ray [ADDRESS]] [--resume | --overwrite] [--max-frames N]
   dpom-warp fit-ground DEPTH... --camera CAMERA.yaml [--output POSE.yaml]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
   dpom-warp track RUN_DIR [--set tracking.KEY=VALUE ...]
@@ -32,6 +32,8 @@ def _run(args) -> int:
         raise ConfigError("--overwrite and --resume: expected at most one of them")
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers: expected a number >= 1, found {args.workers}")
+    if args.max_frames is not None and args.max_frames < 1:
+        raise ConfigError(f"--max-frames: expected a number >= 1, found {args.max_frames}")
     if args.device:
         check_device(args.device, "--device")
     if args.ray is not None:
@@ -45,7 +47,8 @@ def _run(args) -> int:
             if many:
                 print(f"== {source}")
             summary = run(cfg, out, args.device, progress=not args.no_progress, strict=args.strict,
-                          overwrite=args.overwrite, resume=args.resume, workers=args.workers or 1)
+                          overwrite=args.overwrite, resume=args.resume, workers=args.workers or 1,
+                          max_frames=args.max_frames)
             _report(summary, out)
         return 0
     from .cluster import run_on_ray
@@ -93,6 +96,11 @@ def _report(summary: dict, out: str) -> None:
         cap = summary["config"]["model"]["max_iterations"]
         print(f"{len(names)} frame(s) stopped at model.max_iterations ({cap}) without converging: "
               f"{', '.join(names[:5])}{', ...' if len(names) > 5 else ''} (listed in summary.json)")
+    live = summary.get("live")
+    if live:
+        print(f"live: {live['frames']} frames inferred of {live['received']} received ({live['dropped']} "
+              f"dropped), {live['frames_per_s'] or 0:.1f} frames/s, latency median "
+              f"{live['latency_ms_median'] or 0:.0f} ms (stopped by {live['stopped_by']})")
     t = summary["timings"]
     print(f"{summary['frames']} frames, {summary['detections']} detections; median "
           f"{1000 * t['median_infer_s']:.0f} ms per frame ({t['median_iterations']:.0f} iterations) "
@@ -274,6 +282,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty output folder")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in its output folder, skipping finished frames")
+    p.add_argument("--max-frames", type=int, metavar="N",
+                   help="a live camera (input.frames: realsense): stop after N frames (default: at Ctrl-C)")
     g = command("fit-ground", "find the floor and the camera pose from depth frames",
                 "Fit the floor plane in depth frames of one camera and print (or write) the pose to\n"
                 "paste under a config's camera.extrinsics.")

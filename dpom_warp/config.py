@@ -518,6 +518,7 @@ class OutputSection(Node):
 
     dir: FilePath = Field("runs/out", description="output folder (--output overrides)")
     images: Bool = Field(True, description="a picture per frame")
+    images_every: Int = Field(1, ge=1, description="live runs: a picture of every Nth frame")
     ply: Bool = Field(False, description="the frame's points and the detected boxes as .ply files")
 
 
@@ -709,6 +710,7 @@ class Inputs:
 class Output:
     dir: str = "runs/out"
     images: bool = True
+    images_every: int = 1
     ply: bool = False
 
 
@@ -756,15 +758,16 @@ def _fill(cls, section: BaseModel, **changes):
 
 
 def camera_from_recording(raw: dict) -> dict:
-    """A config whose input.frames is a recording, with the camera keys it leaves out
+    """A config whose input.frames is a recording or a live camera, with the camera keys it leaves out
     (camera.width, height, intrinsics, distortion, input.depth_scale) taken from the
     recording (the keys it gives win: the run says where they differ)."""
     from .io import InputError
     from .sources import is_recording, open_source
+    from .sources.realsense import is_live
 
     inp, cam = raw.get("input"), raw.get("camera", {})
     if (not isinstance(inp, dict) or not isinstance(inp.get("frames"), str) or not isinstance(cam, dict)
-            or not is_recording(inp["frames"])):
+            or not (is_recording(inp["frames"]) or is_live(inp["frames"]))):
         return raw
     missing = [k for k in ("width", "height", "intrinsics", "distortion") if k not in cam]
     if not missing and "depth_scale" in inp:
@@ -884,7 +887,10 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
 
 def resolve_paths(raw: dict, base: str | Path) -> dict:
     """A copy of `raw` whose relative path values (path_keys) are joined to `base`, the config
-    file's folder (normalised, so a config in configs/ naming ../x gives x)."""
+    file's folder (normalised, so a config in configs/ naming ../x gives x); `auto` and a live
+    camera (`realsense[:SERIAL]`) are not paths."""
+    from .sources.realsense import is_live
+
     out = copy.deepcopy(raw)
     for key in path_keys():
         *parents, last = key.split(".")
@@ -894,7 +900,8 @@ def resolve_paths(raw: dict, base: str | Path) -> dict:
         if not isinstance(node, dict):
             continue
         v = node.get(last)
-        if isinstance(v, str) and v != "auto" and not os.path.isabs(os.path.expanduser(v)):
+        if (isinstance(v, str) and v != "auto" and not is_live(v)
+                and not os.path.isabs(os.path.expanduser(v))):
             node[last] = os.path.normpath(os.path.join(base, v))
     return out
 

@@ -216,8 +216,10 @@ class RunPlan(Setup):
 
 def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None,
         progress: bool = True, log=print, strict: bool = False, overwrite: bool = False,
-        resume: bool = False, workers: int = 1) -> dict:
+        resume: bool = False, workers: int = 1, max_frames: int | None = None) -> dict:
     """Run DPOM over the configured frames; returns the summary also written to summary.json.
+    A live camera (`input.frames: realsense[:SERIAL]`) runs until Ctrl-C or `max_frames`
+    (live.run_live).
 
     A frame whose file is bad, or whose lists would exceed the memory budget, is reported
     and skipped (listed in summary.json), unless `strict`. Each frame's outputs (map,
@@ -226,6 +228,12 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     frames are inferred by that many processes, each with its own engine (Warp runs CPU
     kernels on one thread), and written here: the same files.
     """
+    from .sources.realsense import is_live
+
+    if cfg.inputs.frames is not None and is_live(cfg.inputs.frames):
+        from .live import run_live
+
+        return run_live(cfg, output_dir, device, log, max_frames, overwrite)
     plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1)
     open_output(plan, overwrite, resume, log)
     if workers > 1 and len(plan.todo) > 1:
@@ -461,6 +469,14 @@ def pictures_deferred(cfg: RunConfig, frames: int) -> bool:
     return cfg.output.images and cfg.tracking.resolved_method(frames) != "off"
 
 
+def track_table_files(out: Path, tracks, names: list[str], fps: float) -> None:
+    """tracks.csv and track_table.csv of `tracks` over the frames `names`."""
+    from .tracking import track_table, tracks_csv
+
+    write_text_atomic(out / "tracks.csv", tracks_csv(tracks, names))
+    write_text_atomic(out / "track_table.csv", track_table(tracks, names, fps))
+
+
 def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None, log=print,
               fps: float | None = None) -> dict:
     """Tracks of a run whose maps are written (maps/<stem>.npy of the `done` frames, in
@@ -469,7 +485,7 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
     from their timestamps (default input.fps). Returns the `tracking` block of summary.json.
     tracking.method off (or a single frame): no track files."""
     from .render import frame_picture
-    from .tracking import Cells, FrameMaps, per_frame, run_tracker, track_table, tracks_csv
+    from .tracking import Cells, FrameMaps, per_frame, run_tracker
 
     method = cfg.tracking.resolved_method(len(done))
     if method == "off":
@@ -484,8 +500,7 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
                                  method)
     report["fps_from"] = "timestamps" if fps else "input.fps"
     names = [f.name for f in done]
-    write_text_atomic(out / "tracks.csv", tracks_csv(tracks, names))
-    write_text_atomic(out / "track_table.csv", track_table(tracks, names, rate))
+    track_table_files(out, tracks, names, rate)
     log(f"{len(tracks)} tracks ({method}) in {report['time_s']:.2f} s "
         f"({report['ms_per_frame']:.1f} ms per frame)")
     if cfg.output.images:

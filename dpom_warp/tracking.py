@@ -373,52 +373,72 @@ def _stitch(prev: dict, rows_now: list, a: int, b: int, step: float) -> dict:
     return {int(j): old[i] for j, i in zip(rj, ri) if agree[j, i] >= need}
 
 
-def track_online(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
-                 threshold: float = 0.5) -> tuple[list[Track], dict]:
-    """The causal tracker: frames arrive one by one; when frame t arrives the flow is solved
-    over the frames from the last committed one (whose tracks are the only starts there) to
-    t, and frame t - delay is committed. Identities, once committed, never change."""
-    T, delay = len(maps), max(0, opt.delay)
-    ids: dict[int, list] = {}
-    at: dict[int, tuple] = {}  # cell k of the last committed frame -> (id, xyz)
-    next_id, committed = 0, -1
-    stats = {"solves": 0, "max_nodes": 0, "max_arcs": 0, "delay_frames": delay}
-    cache = PeakCache(cells, shape, opt.prune, keep=2 * delay + 8)
-    for t in range(T):
-        c = t - delay if t < T - 1 else T - 1  # at the end the rest is committed at once
-        if c < 0 or c <= committed:
-            continue
+class OnlineTracker:
+    """The causal tracker, fed one map at a time (`push`): when frame t arrives the flow is
+    solved over the frames from the last committed one (whose tracks are the only starts
+    there) to t, and frame t - delay is committed; `finish` commits the rest. Identities,
+    once committed, never change. Holds at most delay + 1 maps."""
+
+    def __init__(self, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float, threshold: float = 0.5):
+        self.cells, self.shape, self.opt, self.dt, self.threshold = cells, shape, opt, dt, threshold
+        self.delay = max(0, opt.delay)
+        self.ids: dict[int, list] = {}
+        self.at: dict[int, tuple] = {}  # cell k of the last committed frame -> (id, xyz)
+        self.next_id, self.committed, self.t = 0, -1, -1
+        self.window: list[np.ndarray] = []  # maps from frame max(committed, 0) on
+        self.stats = {"solves": 0, "max_nodes": 0, "max_arcs": 0, "delay_frames": self.delay}
+        self.cache = PeakCache(cells, shape, opt.prune, keep=2 * self.delay + 8)
+
+    def push(self, rho_map: np.ndarray) -> None:
+        self.t += 1
+        self.window.append(np.asarray(rho_map, np.float32).ravel())
+        c = self.t - self.delay
+        if c >= 0 and c > self.committed:
+            self._commit(c)
+
+    def finish(self) -> tuple[list[Track], dict]:
+        if self.t > self.committed:
+            self._commit(self.t)
+        return _tracks_from({k: v for k, v in self.ids.items() if v}), self.stats
+
+    def _commit(self, c: int) -> None:
+        committed, cells = self.committed, self.cells
         a = committed if committed >= 0 else 0
-        anchors = {k: v for k, v in at.items()} if committed >= 0 else None
-        window = maps[a:t + 1]
-        paths, st = solve_window(window, cells, shape, opt, dt, anchors, cache.window(a, window))
-        stats["solves"] += 1
-        stats["max_nodes"] = max(stats["max_nodes"], st["nodes"])
-        stats["max_arcs"] = max(stats["max_arcs"], st["arcs"])
+        anchors = dict(self.at) if committed >= 0 else None
+        window = np.stack(self.window)
+        paths, st = solve_window(window, cells, self.shape, self.opt, self.dt, anchors, self.cache.window(a, window))
+        self.stats["solves"] += 1
+        self.stats["max_nodes"] = max(self.stats["max_nodes"], st["nodes"])
+        self.stats["max_arcs"] = max(self.stats["max_arcs"], st["arcs"])
         new_at = {}
         for p in paths:
-            rows = _expand(p, a, window, cells, threshold)
-            if committed >= 0:
-                if p[0][0] == 0:
-                    tid = at[p[0][1]][0]
-                    rows = [r for r in rows if r[0] > committed]
-                else:
-                    tid = None
-            else:
-                tid = None
+            rows = _expand(p, a, window, cells, self.threshold)
+            tid = None
+            if committed >= 0 and p[0][0] == 0:
+                tid = self.at[p[0][1]][0]
+                rows = [r for r in rows if r[0] > committed]
             rows = [r for r in rows if r[0] <= c]
             if not rows:
                 continue
             if tid is None:
-                next_id += 1
-                tid = next_id
-                ids[tid] = []
-            ids[tid] += rows
+                self.next_id += 1
+                tid = self.next_id
+                self.ids[tid] = []
+            self.ids[tid] += rows
             last = rows[-1]
             if last[0] == c:
                 new_at.setdefault(cells.nearest(last[1]), (tid, last[1]))
-        at, committed = new_at, c
-    return _tracks_from({k: v for k, v in ids.items() if v}), stats
+        self.at, self.committed = new_at, c
+        self.window = self.window[c - a:]  # frame c is the next window's first
+
+
+def track_online(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
+                 threshold: float = 0.5) -> tuple[list[Track], dict]:
+    """OnlineTracker over `maps` frame by frame (what a live run does as frames arrive)."""
+    tracker = OnlineTracker(cells, shape, opt, dt, threshold)
+    for t in range(len(maps)):
+        tracker.push(maps[t])
+    return tracker.finish()
 
 
 def link_naive(positions: list[np.ndarray], gate: float) -> list[list[int]]:

@@ -89,8 +89,12 @@ def is_recording(spec: str | os.PathLike) -> bool:
 
 
 def open_source(spec: str | os.PathLike, topic: str | None = None, key: str = "input.frames") -> Source:
-    """The source input.frames names: a recording (its reader needs the [sensors] extra) or a
-    glob of frame files."""
+    """The source input.frames names: a live camera (`realsense[:SERIAL]`), a recording (their
+    readers need the [sensors] extra) or a glob of frame files."""
+    from .realsense import RealSenseLive, is_live
+
+    if is_live(spec):
+        return RealSenseLive(str(spec), key)
     p = Path(os.path.expanduser(str(spec)))
     if not is_recording(p):
         from .files import FileFrames

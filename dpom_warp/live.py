@@ -1,0 +1,164 @@
+"""A run on a live camera (`input.frames: realsense[:SERIAL]`): it goes on until Ctrl-C or
+`--max-frames N`, always infers the newest frame and drops those it cannot keep up with
+(counted), tracks online, writes the usual outputs (a picture of every
+`output.images_every`-th frame) and prints a live line with the rate, the drops and the
+latency (a frame's arrival to its record written).
+
+The camera's frames arrive on the driver's thread into a one-frame slot; the loop here takes
+the newest, infers it with the run's engine and FrameWorker (the plain run's code), writes its
+map and record, and feeds its map to the online tracker. Stopping writes detections.csv,
+tracks.csv, track_table.csv and summary.json (with a `live` block) as a plain run does.
+"""
+
+from __future__ import annotations
+
+import statistics
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .config import ConfigError, RunConfig
+from .io import write_json_atomic, write_text_atomic
+
+
+class NewestFrame:
+    """A one-frame slot: `put` replaces what is there (counting the frame dropped), `take`
+    waits for a frame and empties the slot."""
+
+    def __init__(self):
+        self.cond = threading.Condition()
+        self.frame, self.received, self.dropped = None, 0, 0
+
+    def put(self, frame) -> None:
+        with self.cond:
+            if self.frame is not None:
+                self.dropped += 1
+            self.frame = frame
+            self.received += 1
+            self.cond.notify()
+
+    def take(self, timeout: float):
+        with self.cond:
+            if self.frame is None:
+                self.cond.wait(timeout)
+            frame, self.frame = self.frame, None
+            return frame
+
+
+def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None = None, log=print,
+             max_frames: int | None = None, overwrite: bool = False, first_frame_timeout: float = 10.0) -> dict:
+    """Infer a live camera's frames until Ctrl-C or `max_frames`; returns the summary."""
+    import dataclasses
+
+    from .engine import resolve_device
+    from .geometry import build_geometry
+    from .pipeline import (_jsonable, prepare_output, summarise, track_table_files)
+    from .sources.realsense import RealSenseLive
+    from .tracking import Cells, OnlineTracker
+    from .worker import FrameItem, FrameWorker, WorkerSpec, make_engine, read_frame, write_output
+
+    if cfg.inputs.auto_background:
+        raise ConfigError("input.background: auto estimates the background from the run's frames; a live "
+                          "run has none in advance; expected background frames or null")
+    if cfg.pose_auto:
+        raise ConfigError("camera.extrinsics: auto fits the floor on frames read before the run; expected "
+                          "the live camera's pose ({height, pitch_deg, ...}; `dpom-warp fit-ground` on a "
+                          "few saved frames gives it)")
+    t_start = time.perf_counter()
+    source = RealSenseLive(cfg.inputs.frames)
+    info = source.info()
+    try:
+        dev = resolve_device(device or cfg.device)
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
+    out = Path(output_dir or cfg.output.dir)
+    camera = cfg.camera
+    engine = make_engine(cfg, camera, dev, 1)
+    if cfg.inputs.background:
+        from .pipeline import expand
+
+        bg = [read_frame(cfg, f) for f in expand(cfg.inputs.background, "input.background", cfg.inputs.topic, log)]
+        engine.set_background_frames(engine.resolution.frames(np.stack(bg)))
+        background = f"{len(bg)} background frames"
+    else:
+        background = "floor plane only"
+    spec = WorkerSpec(cfg, camera, dev, None, pictures=cfg.output.images)
+    worker = FrameWorker(spec, engine=engine)
+    geometry = worker.geometry
+    cells = Cells.of(geometry, cfg.grid, (camera.width, camera.height), cfg.tracking.regions,
+                     cfg.detection.nms_radius)
+    method = cfg.tracking.method
+    tracking_on = method != "off"
+    if method == "ksp":
+        log("tracking.method ksp needs the whole run; a live run tracks online")
+    fps = info.rate_hz or cfg.inputs.fps
+    tracker = OnlineTracker(cells, cfg.grid.shape, cfg.tracking, 1.0 / fps, cfg.detection.threshold)
+    prepare_output(out, cfg.resolved, overwrite, resume=False)
+    log(f"live: {info.kind}, {info.width}x{info.height} at {fps:g} frames/s; device {dev}; background: "
+        f"{background}; until Ctrl-C{f' or {max_frames} frames' if max_frames else ''}")
+    slot = NewestFrame()
+    records, names, latencies, infer_s = {}, [], [], []
+    done, t_first, last_line, track_s = 0, None, time.perf_counter(), 0.0
+    source.start(slot.put)
+    stopped_by = "max_frames"
+    try:
+        while max_frames is None or done < max_frames:
+            fr = slot.take(first_frame_timeout if done == 0 else 5.0)
+            if fr is None:
+                if done == 0:
+                    raise ConfigError(f"input.frames: {cfg.inputs.frames}: no frame within "
+                                      f"{first_frame_timeout:g} s of starting the camera")
+                stopped_by = "camera stopped sending"
+                break
+            t_first = t_first or fr.arrived
+            depth = (fr.depth.astype(np.float64) * cfg.inputs.depth_scale).astype(np.float32)
+            t0 = time.perf_counter()
+            res = engine.infer(engine.resolution.frames(depth))
+            infer = time.perf_counter() - t0
+            worker.pictures = cfg.output.images and done % cfg.output.images_every == 0
+            name = f"{fr.index:06d}"
+            _, output, _ = worker._finish(FrameItem(name), depth, res, 0.0, infer, [])
+            output.record["timestamp"] = output.record["stats"]["timestamp"] = fr.timestamp
+            records[name] = write_output(out, output)
+            names.append(name)
+            if tracking_on:
+                t1 = time.perf_counter()
+                tracker.push(res.rho_star)
+                track_s += time.perf_counter() - t1
+            latencies.append(time.perf_counter() - fr.arrived)
+            infer_s.append(infer)
+            done += 1
+            if time.perf_counter() - last_line >= 1.0:
+                last_line = time.perf_counter()
+                rate = done / max(1e-9, last_line - t_first)
+                log(f"live: {done} frames, {rate:.1f} frames/s, {slot.dropped} dropped, latency "
+                    f"{1000 * statistics.median(latencies[-30:]):.0f} ms")
+    except KeyboardInterrupt:
+        stopped_by = "Ctrl-C"
+    finally:
+        source.stop()
+    wall = time.perf_counter() - (t_first or time.perf_counter())
+    done_paths = [Path(n) for n in names]
+    summary = summarise(cfg, out, done_paths, records, [], None, geometry, dev, background, None, [])
+    if tracking_on and names:
+        t1 = time.perf_counter()
+        tracks, report = tracker.finish()
+        track_s += time.perf_counter() - t1
+        report = {"method": "online", "tracks": len(tracks), "time_s": track_s,
+                  "ms_per_frame": 1000 * track_s / len(names), "fps": fps, "fps_from": "camera", **report}
+        track_table_files(out, tracks, names, fps)
+    else:
+        report = {"method": "off"}
+    summary["tracking"] = report
+    summary["live"] = {"source": info.kind, "frames": done, "received": slot.received,
+                       "dropped": slot.dropped, "dropped_share": slot.dropped / max(1, slot.received),
+                       "frames_per_s": done / wall if wall > 0 else None,
+                       "camera_fps": fps, "stopped_by": stopped_by,
+                       "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
+                       "latency_ms_p95": 1000 * float(np.percentile(latencies, 95)) if latencies else None,
+                       "infer_ms_median": 1000 * statistics.median(infer_s) if infer_s else None}
+    summary["timings"]["total_s"] = time.perf_counter() - t_start
+    write_json_atomic(out / "summary.json", _jsonable(summary))
+    return summary
