@@ -206,7 +206,9 @@ def _info(args) -> int:
                                    else "float metres" if info["encoding"] == "32FC1" else "-"),
              f"  duration: " + (f"{info['duration_s']:.3f} s, {info['rate_hz']:.2f} frames/s"
                                 if info["duration_s"] else "-"),
-             f"  IMU: {'yes' if info['imu'] else 'no'}"]
+             f"  IMU: {'yes' if info['imu'] else 'no'}" + (
+                 f" (up in the depth camera's frame: [{', '.join(f'{x:.4f}' for x in info['gravity_up'])}])"
+                 if info.get("gravity_up") else "")]
     if len(info["streams"]) > 1:
         lines.append("  streams: " + "; ".join(f"{s['topic']} ({s['type']}"
                                                + (f", {s['messages']}" if s.get("messages") else "") + ")"

@@ -759,8 +759,9 @@ def _fill(cls, section: BaseModel, **changes):
 
 def camera_from_recording(raw: dict) -> dict:
     """A config whose input.frames is a recording or a live camera, with the camera keys it leaves out
-    (camera.width, height, intrinsics, distortion, input.depth_scale) taken from the
-    recording (the keys it gives win: the run says where they differ)."""
+    (camera.width, height, intrinsics, distortion, input.depth_scale, and with extrinsics:
+    auto camera.ground.up from its accelerometer) taken from the recording (the keys it gives
+    win: the run says where they differ)."""
     from .io import InputError
     from .sources import is_recording, open_source
     from .sources.realsense import is_live
@@ -770,7 +771,9 @@ def camera_from_recording(raw: dict) -> dict:
             or not (is_recording(inp["frames"]) or is_live(inp["frames"]))):
         return raw
     missing = [k for k in ("width", "height", "intrinsics", "distortion") if k not in cam]
-    if not missing and "depth_scale" in inp:
+    ground = cam.get("ground") if isinstance(cam.get("ground"), dict) else {}
+    wants_up = cam.get("extrinsics") == "auto" and "up" not in ground
+    if not missing and "depth_scale" in inp and not wants_up:
         return raw
     try:
         info = open_source(inp["frames"], inp.get("topic")).info()
@@ -791,6 +794,10 @@ def camera_from_recording(raw: dict) -> dict:
         cam["distortion"] = list(info.distortion)
     if "depth_scale" not in inp:
         out["input"]["depth_scale"] = float(f"{info.depth_scale:.7g}") if info.depth_scale else 0.001
+    if wants_up and info.gravity_up:  # the accelerometer says where up is: the floor fit's prior
+        if not isinstance(cam.get("ground"), dict):
+            cam["ground"] = {}
+        cam["ground"]["up"] = [round(float(x), 6) for x in info.gravity_up]
     return out
 
 

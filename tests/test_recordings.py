@@ -360,3 +360,40 @@ def test_azure_kinect_recording_reads_right_and_runs(tmp_path):
     assert main(["run", str(path), "--no-progress"]) == 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["frames"] == 1 and len(summary["config"]["camera"]["distortion"]) == 8
+
+
+def test_azure_kinect_accelerometer_gives_up(tmp_path):
+    """The IMU's gravity, turned into the depth camera's frame, is perpendicular to the
+    recording's walls (its largest planes, found by Open3D in the depth frame), and becomes
+    the floor fit's camera.ground.up when extrinsics are auto and the config gives no up."""
+    import open3d as o3d
+
+    from dpom_warp.config import load_config
+    from dpom_warp.geometry import Camera
+    from dpom_warp.sources import open_source
+
+    src = open_source(AZURE)
+    info = src.info()
+    up = np.array(info.gravity_up)
+    assert abs(np.linalg.norm(up) - 1) < 1e-9 and up[1] < -0.9  # the camera stands upright
+    depth = next(src.frames()).depth.astype(float) / 1000
+    i = info.intrinsics
+    cam = Camera(info.width, info.height, i["fx"], i["fy"], i["cx"], i["cy"], distortion=tuple(info.distortion))
+    x, y = cam.normalised(*np.meshgrid(np.arange(cam.width), np.arange(cam.height)))
+    ok = depth > 0
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(
+        np.stack([x[ok] * depth[ok], y[ok] * depth[ok], depth[ok]], 1))).voxel_down_sample(0.02)
+    o3d.utility.random.seed(0)
+    for _ in range(2):
+        plane, inliers = cloud.segment_plane(0.02, 3, 1000)
+        n = np.asarray(plane[:3]) / np.linalg.norm(plane[:3])
+        assert len(inliers) > 2000 and abs(np.degrees(np.arccos(abs(n @ up))) - 90) < 1.0
+        cloud = cloud.select_by_index(inliers, invert=True)
+    cfg = {"device": "cpu", "input": {"frames": str(AZURE)}, "camera": {"extrinsics": "auto"},
+           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]}}
+    path = tmp_path / "az.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert np.allclose(load_config(path).ground.up, up, atol=1e-6)
+    cfg["camera"]["ground"] = {"up": [0, -1, 0]}  # the config's own up wins
+    path.write_text(yaml.safe_dump(cfg))
+    assert tuple(load_config(path).ground.up) == (0, -1, 0)

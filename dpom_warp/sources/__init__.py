@@ -39,7 +39,9 @@ class SourceInfo:
     """What a source holds. `depth_scale`: metres per unit of its depth values (None: float
     metres); `intrinsics`: fx, fy, cx, cy in pixels (None when the source has no camera
     information); `distortion`: OpenCV's k1, k2, p1, p2, k3 (and k4, k5, k6 for the rational
-    model), or None."""
+    model), or None; `gravity_up`: the accelerometer's mean reading at rest (it measures +g
+    upwards) turned into the depth camera's frame (OpenCV: x right, y down, z forward), when
+    the source has one and says how it sits relative to the depth camera."""
 
     kind: str
     path: str
@@ -55,6 +57,7 @@ class SourceInfo:
     duration_s: float | None = None
     rate_hz: float | None = None
     imu: bool = False
+    gravity_up: list | None = None  # unit "up" in the depth camera's frame, from the accelerometer
 
     def as_json(self) -> dict:
         return dataclasses.asdict(self)

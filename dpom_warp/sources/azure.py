@@ -29,6 +29,38 @@ MODES = {  # depth mode: (binned sensor size, crop offset, output size)
 }
 
 
+def gravity_up(calibration: dict, samples: list[tuple[float, float, float]]) -> list | None:
+    """The mean accelerometer reading (m/s^2, +g upwards at rest) in the depth camera's frame:
+    calibration.json's accelerometer rotation R maps depth-camera coordinates to the
+    accelerometer's, so a reading a becomes R^T a there."""
+    sensors = calibration["CalibrationInformation"].get("InertialSensors", [])
+    acc = next((x for x in sensors if x.get("SensorType") == "CALIBRATION_InertialSensorType_Accelerometer"), None)
+    if acc is None or not samples:
+        return None
+    r = np.asarray(acc["Rt"]["Rotation"], float).reshape(3, 3)
+    up = r.T @ np.mean(np.asarray(samples, float), axis=0)
+    n = np.linalg.norm(up)
+    return (up / n).tolist() if n > 1.0 else None
+
+
+def imu_samples(c, limit: int = 200) -> list[tuple[float, float, float]]:
+    """Accelerometer readings of the IMU track: 40-byte samples (accelerometer timestamp ns,
+    3 float32 m/s^2, gyroscope timestamp ns, 3 float32 rad/s), little-endian."""
+    import struct
+
+    tracks = [s for s in c.streams if s.metadata.get("title") == "IMU"]
+    out = []
+    if not tracks:
+        return out
+    for pkt in c.demux(tracks[0]):
+        data = bytes(pkt)
+        for i in range(0, len(data) - 39, 40):
+            out.append(struct.unpack_from("<3f", data, i + 8))
+        if len(out) >= limit:
+            break
+    return out
+
+
 def depth_camera(calibration: dict, mode: str) -> tuple[dict, list]:
     """The depth camera's intrinsics (fx, fy, cx, cy, pixels, centres at integers) and its
     distortion (k1, k2, p1, p2, k3, k4, k5, k6) in `mode`, from calibration.json."""
@@ -72,24 +104,32 @@ class AzureKinect(Source):
             if mode not in MODES:
                 raise InputError(f"{self.key}: {self.path}: depth mode {mode!r}; expected one of {', '.join(MODES)}")
             att = [a for a in c.streams if a.type == "attachment" and a.metadata.get("filename") == "calibration.json"]
-            intr = dist = None
+            intr = dist = up = None
             if att:
                 try:
-                    intr, dist = depth_camera(json.loads(bytes(att[0].data)), mode)
+                    calibration = json.loads(bytes(att[0].data))
+                    intr, dist = depth_camera(calibration, mode)
                 except (KeyError, StopIteration, ValueError, TypeError) as e:
                     raise InputError(f"{self.key}: {self.path}: calibration.json has no usable depth camera "
                                      f"({type(e).__name__}: {e})") from None
             times = [p.pts for p in c.demux(s) if p.size > 0 and p.pts is not None]
+            tb = float(s.time_base)
+        with self._open() as c:  # the IMU track, from the start again
+            if att:
+                try:
+                    up = gravity_up(calibration, imu_samples(c))
+                except (KeyError, ValueError, TypeError):
+                    up = None
             streams = [{"topic": a.metadata.get("title", a.type), "type": a.type,
                         "messages": None} for a in c.streams]
             imu = any(a.metadata.get("title") == "IMU" for a in c.streams)
-            tb = float(s.time_base)
             dur = (times[-1] - times[0]) * tb if len(times) > 1 else None
             w, h = MODES[mode][2]
             self._info = SourceInfo(kind="Azure Kinect recording", path=str(self.path), frames=len(times),
                                     width=w, height=h, intrinsics=intr, distortion=dist, depth_scale=0.001,
                                     encoding=f"16-bit big-endian ({mode})", topic="DEPTH", streams=streams,
-                                    duration_s=dur, rate_hz=(len(times) - 1) / dur if dur else None, imu=imu)
+                                    duration_s=dur, rate_hz=(len(times) - 1) / dur if dur else None, imu=imu,
+                                    gravity_up=up)
         return self._info
 
     def frames(self) -> Iterator[Frame]:

@@ -145,12 +145,37 @@ class Bag(Source):
         topic = conns[0].topic
         intrinsics, distortion, iw, ih = self._camera_info(r, topic)
         scale = None if encoding == "32FC1" else self._depth_units(r, topic)
-        imu = any(c.msgtype == "sensor_msgs/msg/Imu" for c in r.connections)
+        imu_conns = [c for c in r.connections if c.msgtype == "sensor_msgs/msg/Imu"]
+        imu = bool(imu_conns)
+        up = self._gravity(r, imu_conns, getattr(getattr(first, "header", None), "frame_id", None))
         dur = (r.end_time - r.start_time) * 1e-9 if r.end_time > r.start_time else None
         return SourceInfo(kind=kind, path=str(self.path), frames=count, width=iw or w, height=ih or h,
                           intrinsics=intrinsics, distortion=distortion, depth_scale=scale, encoding=encoding,
                           topic=topic, streams=streams, duration_s=dur,
-                          rate_hz=(count - 1) / dur if dur and count > 1 else None, imu=imu)
+                          rate_hz=(count - 1) / dur if dur and count > 1 else None, imu=imu, gravity_up=up)
+
+    def _gravity(self, r, conns, frame_id, limit: int = 100):
+        """The mean linear acceleration of a sensor_msgs/Imu topic in the depth image's own
+        frame (an IMU in another frame needs the bag's transforms, which are not read)."""
+        for c in conns:
+            acc = []
+            for _, _, raw in r.messages(connections=[c]):
+                try:
+                    m = r.deserialize(raw, c.msgtype)
+                except Exception:  # noqa: BLE001
+                    continue
+                if frame_id is None or m.header.frame_id != frame_id:
+                    break
+                a = m.linear_acceleration
+                acc.append((a.x, a.y, a.z))
+                if len(acc) >= limit:
+                    break
+            if acc:
+                up = np.mean(np.asarray(acc, float), axis=0)
+                n = np.linalg.norm(up)
+                if n > 1.0:
+                    return (up / n).tolist()
+        return None
 
     def _camera_info(self, r, topic: str):
         infos = [c for c in r.connections if c.msgtype == INFO]
