@@ -41,6 +41,12 @@ def _run(args) -> int:
         import_ray()  # not installed: say so before any work
     cfgs = [load_config(c, args.set) for c in args.config]
     outputs = output_dirs(args.config, cfgs, args.output)
+    if args.view:
+        from .pipeline import VIEW
+        from .view import _rerun
+
+        _rerun()  # not installed: say so before any work
+        VIEW.append(True)
     many = len(cfgs) > 1
     if args.ray is None:
         for source, cfg, out in zip(args.config, cfgs, outputs):
@@ -284,6 +290,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty output folder")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run in its output folder, skipping finished frames")
+    p.add_argument("--view", action="store_true",
+                   help="show the run in a Rerun viewer, spawned (the [view] extra; output.rerun writes a .rrd)")
     p.add_argument("--max-frames", type=int, metavar="N",
                    help="a live camera (input.frames: realsense): stop after N frames (default: at Ctrl-C)")
     g = command("fit-ground", "find the floor and the camera pose from depth frames",

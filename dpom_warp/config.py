@@ -519,6 +519,8 @@ class OutputSection(Node):
     dir: FilePath = Field("runs/out", description="output folder (--output overrides)")
     images: Bool = Field(True, description="a picture per frame")
     images_every: Int = Field(1, ge=1, description="live runs: a picture of every Nth frame")
+    rerun: FilePath | None = Field(None, description="also write a Rerun recording (.rrd) here: depth, "
+                                                     "boxes, map and tracks per frame (the view extra)")
     ply: Bool = Field(False, description="the frame's points and the detected boxes as .ply files")
 
 
@@ -711,6 +713,7 @@ class Output:
     dir: str = "runs/out"
     images: bool = True
     images_every: int = 1
+    rerun: str | None = None
     ply: bool = False
 
 

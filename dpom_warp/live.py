@@ -98,6 +98,14 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     prepare_output(out, cfg.resolved, overwrite, resume=False)
     log(f"live: {info.kind}, {info.width}x{info.height} at {fps:g} frames/s; device {dev}; background: "
         f"{background}; until Ctrl-C{f' or {max_frames} frames' if max_frames else ''}")
+    from .pipeline import VIEW
+
+    view = None
+    if cfg.output.rerun or VIEW:
+        from .view import RerunLog
+
+        view = RerunLog(cfg.output.rerun, spawn=bool(VIEW))
+        view.camera(camera)
     slot = NewestFrame()
     records, names, latencies, infer_s = {}, [], [], []
     done, t_first, last_line, track_s = 0, None, time.perf_counter(), 0.0
@@ -123,6 +131,9 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             output.record["timestamp"] = output.record["stats"]["timestamp"] = fr.timestamp
             records[name] = write_output(out, output)
             names.append(name)
+            if view is not None:
+                rho_map, dets = worker.detections(res)
+                view.frame(done, fr.timestamp, depth, dets, rho_map)
             if tracking_on:
                 t1 = time.perf_counter()
                 tracker.push(res.rho_star)
@@ -139,6 +150,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         stopped_by = "Ctrl-C"
     finally:
         source.stop()
+        if view is not None:
+            view.close()
     wall = time.perf_counter() - (t_first or time.perf_counter())
     done_paths = [Path(n) for n in names]
     summary = summarise(cfg, out, done_paths, records, [], None, geometry, dev, background, None, [])

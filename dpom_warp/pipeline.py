@@ -437,8 +437,10 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     summary["inference"] = plan.inference
     summary["runner"] = {**runner, "frames_resumed": len(done) - sum(plan.by_worker.values()),
                          "frames_per_worker": dict(sorted(plan.by_worker.items()))}
+    stamps = {f.name: plan.records[f.name].get("timestamp") for f in done}
     summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth, log=lambda *_: None,
-                                    fps=fps_of([plan.records[f.name].get("timestamp") for f in done]))
+                                    fps=fps_of(list(stamps.values())), camera=plan.spec.camera,
+                                    timestamps=stamps)
     summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))
@@ -469,6 +471,50 @@ def pictures_deferred(cfg: RunConfig, frames: int) -> bool:
     return cfg.output.images and cfg.tracking.resolved_method(frames) != "off"
 
 
+VIEW: list = []  # --view: a Rerun viewer is spawned for the runs of this process
+
+
+def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, truth, tracks,
+               pictures: bool, timestamps: dict | None = None, camera=None) -> None:
+    """After the frames: each frame's picture (with `tracks`, their identities and trails)
+    when `pictures`, and its Rerun log with output.rerun or --view (depth, boxes, map, tracks)."""
+    from .detect import detect
+    from .render import frame_picture
+    from .tracking import per_frame
+
+    log = None
+    if cfg.output.rerun or VIEW:
+        from .view import RerunLog
+
+        log = RerunLog(cfg.output.rerun, spawn=bool(VIEW))
+        log.camera(camera or cfg.camera)
+    now = per_frame(tracks, len(done)) if tracks is not None else [[] for _ in done]
+    trail = cfg.tracking.trail
+    history: dict[int, list] = {}
+    for i, f in enumerate(done):
+        rho_map = maps[i].reshape(cfg.grid.shape)
+        dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
+                      cfg.detection.nms_radius)
+        shown = []
+        for tid, xyz, bridged in now[i]:
+            history.setdefault(tid, []).append((i, xyz))
+            past = [p for j, p in history[tid] if j > i - max(1, trail)]
+            k = int(np.argmin(np.linalg.norm(geometry.locations - xyz, axis=1)))
+            shown.append({"id": tid, "box": geometry.rect[k], "bridged": bridged, "trail": past, "xyz": xyz})
+        depth = read_frame(cfg, f)
+        if pictures:
+            png = frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2],
+                                truth.get(f.name) if truth else None, f.name,
+                                in_view=geometry.rect_area > 0, tracks=shown if tracks is not None else None,
+                                trail=trail)
+            write_bytes_atomic(out / "images" / f"{f.stem}.png", png)
+        if log is not None:
+            log.frame(i, (timestamps or {}).get(f.name), depth, dets, rho_map,
+                      shown if tracks is not None else None)
+    if log is not None:
+        log.close()
+
+
 def track_table_files(out: Path, tracks, names: list[str], fps: float) -> None:
     """tracks.csv and track_table.csv of `tracks` over the frames `names`."""
     from .tracking import track_table, tracks_csv
@@ -478,21 +524,22 @@ def track_table_files(out: Path, tracks, names: list[str], fps: float) -> None:
 
 
 def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None, log=print,
-              fps: float | None = None) -> dict:
+              fps: float | None = None, camera=None, timestamps: dict | None = None) -> dict:
     """Tracks of a run whose maps are written (maps/<stem>.npy of the `done` frames, in
     order): tracks.csv and track_table.csv, then, when the run has pictures, every frame's
     picture with the tracks (deferred until now: pictures_deferred). `fps`: the frames' rate
     from their timestamps (default input.fps). Returns the `tracking` block of summary.json.
     tracking.method off (or a single frame): no track files."""
-    from .render import frame_picture
-    from .tracking import Cells, FrameMaps, per_frame, run_tracker
+    from .tracking import Cells, FrameMaps, run_tracker
 
     method = cfg.tracking.resolved_method(len(done))
+    maps = FrameMaps([out / "maps" / f"{f.stem}.npy" for f in done], keep=2 * cfg.tracking.window)
     if method == "off":
         for name in TRACK_FILES:
             (out / name).unlink(missing_ok=True)
+        if cfg.output.rerun or VIEW:  # the pictures are the workers'; the Rerun log is drawn here
+            frames_out(cfg, out, done, geometry, maps, truth, None, False, timestamps, camera)
         return {"method": "off"}
-    maps = FrameMaps([out / "maps" / f"{f.stem}.npy" for f in done], keep=2 * cfg.tracking.window)
     cells = Cells.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
                      cfg.detection.nms_radius)
     rate = fps or cfg.inputs.fps
@@ -503,32 +550,14 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
     track_table_files(out, tracks, names, rate)
     log(f"{len(tracks)} tracks ({method}) in {report['time_s']:.2f} s "
         f"({report['ms_per_frame']:.1f} ms per frame)")
-    if cfg.output.images:
+    if cfg.output.images or cfg.output.rerun or VIEW:
         t = time.perf_counter()
-        from .detect import detect
-
-        now = per_frame(tracks, len(done))
-        trail = cfg.tracking.trail
-        history: dict[int, list] = {}
-        for i, f in enumerate(done):
-            rho_map = maps[i].reshape(cfg.grid.shape)
-            dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
-                          cfg.detection.nms_radius)
-            shown = []
-            for tid, xyz, bridged in now[i]:
-                history.setdefault(tid, []).append((i, xyz))
-                past = [p for j, p in history[tid] if j > i - max(1, trail)]
-                k = int(np.argmin(np.linalg.norm(geometry.locations - xyz, axis=1)))
-                shown.append({"id": tid, "box": geometry.rect[k], "bridged": bridged, "trail": past})
-            png = frame_picture(read_frame(cfg, f), rho_map, cfg.grid, dets, geometry.centre[:2],
-                                truth.get(f.name) if truth else None, f.name,
-                                in_view=geometry.rect_area > 0, tracks=shown, trail=trail)
-            write_bytes_atomic(out / "images" / f"{f.stem}.png", png)
+        frames_out(cfg, out, done, geometry, maps, truth, tracks, cfg.output.images, timestamps, camera)
         report["pictures_s"] = time.perf_counter() - t
     return report
 
 
-RETRACK_KEYS = ("tracking.", "input.fps", "output.images")
+RETRACK_KEYS = ("tracking.", "input.fps", "output.images", "output.rerun")
 
 
 def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
@@ -547,7 +576,7 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     for o in overrides:
         key = o.split("=", 1)[0].strip()
         if not any(key.startswith(k) for k in RETRACK_KEYS):
-            raise ConfigError(f"--set {key}: expected a tracking.* key, input.fps or output.images "
+            raise ConfigError(f"--set {key}: expected a tracking.* key, input.fps, output.images or output.rerun "
                               f"(the rest of a run changes only by inferring again)")
     cfg = parse_config(apply_overrides(raw, overrides))
     camera = cfg.camera
@@ -571,7 +600,8 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
     report = track_run(cfg, run_dir, done, geometry, truth, log,
-                       fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]))
+                       fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]), camera=camera,
+                       timestamps={p["frame"]: p.get("timestamp") for p in summary["per_frame"]})
     summary["config"], summary["tracking"] = cfg.resolved, report
     write_json_atomic(run_dir / "summary.json", _jsonable(summary))
     write_json_atomic(run_dir / RUN_STATE, {"config": _jsonable(cfg.resolved)})

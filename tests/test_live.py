@@ -37,7 +37,7 @@ def camera_config(tmp_path):
     for k in ("width", "height", "intrinsics"):
         cfg["camera"].pop(k)
     cfg["evaluation"]["ground_truth"] = None
-    cfg["output"].update(images_every=5)
+    cfg["output"].update(images_every=5, rerun=str(tmp_path / "live.rrd"))
     path.write_text(yaml.safe_dump(cfg))
     yield path, cam, tmp_path
     cam.unregister()
@@ -64,6 +64,12 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     assert summary["tracking"]["method"] == "online"
     assert (out / "tracks.csv").read_text().startswith("frame,track,x,y,z,rho")
     assert "live: 12 frames inferred of" in capsys.readouterr().out
+    from rerun.chunk import RrdReader  # the live view's recording: every inferred frame
+
+    rows = {}
+    for chunk in RrdReader(str(tmp / "live.rrd")).stream():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    assert rows["/world/camera/depth"] == rows["/world/camera/depth/detections"] == 12
 
 
 def test_no_camera_is_one_line(camera_config, capsys):

@@ -362,3 +362,24 @@ def test_voxel_run_gives_3d_tracks(tmp_path):
     rows = read_tracks_csv(tmp_path / "out" / "tracks.csv")
     zs = [r[3] for rs in rows.values() for r in rs]
     assert zs and all(0.4 <= z <= 2.4 for z in zs) and len(set(zs)) > 1
+
+
+def test_rerun_recording_holds_every_frame(tracked_run, tmp_path):
+    """output.rerun: a .rrd with the depth, boxes, map and tracks of every frame (read back)."""
+    import shutil
+
+    from rerun.chunk import RrdReader
+
+    from dpom_warp.cli import main
+
+    run = tmp_path / "run"
+    shutil.copytree(tracked_run[0], run)
+    rrd = tmp_path / "view" / "run.rrd"
+    assert main(["track", str(run), "--set", f"output.rerun={rrd}"]) == 0
+    rows = {}
+    for chunk in RrdReader(str(rrd)).stream():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    for entity in ("/world/camera/depth", "/world/camera/depth/detections", "/world/occupancy",
+                   "/world/tracks", "/world/trails"):
+        assert rows.get(entity) == 8, (entity, rows)
+    assert "/world/camera" in rows
