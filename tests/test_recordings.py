@@ -397,3 +397,20 @@ def test_azure_kinect_accelerometer_gives_up(tmp_path):
     cfg["camera"]["ground"] = {"up": [0, -1, 0]}  # the config's own up wins
     path.write_text(yaml.safe_dump(cfg))
     assert tuple(load_config(path).ground.up) == (0, -1, 0)
+
+
+def test_realsense_sdk_db3_gives_the_png_run(tmp_path, scene):
+    """A RealSense SDK recording (.db3, compressedDepth) made by the SDK's own recorder from a
+    SoftwareCamera playing the rendered frames: the PNG run's detections."""
+    from dpom_warp.sources.realsense import SoftwareCamera
+
+    tmp, cfg = scene
+    frames = [np.asarray(Image.open(f)).astype(np.uint16) for f in sorted((tmp / "scene" / "frames").glob("*.png"))]
+    i = cfg["camera"]["intrinsics"]
+    db3 = tmp_path / "sdk.db3"
+    assert SoftwareCamera(frames, i["fx"], i["fy"], i["cx"], i["cy"]).record(db3) == len(frames)
+    path = recording_config(tmp_path, cfg, db3)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    same_as_png(tmp_path, scene, tmp_path / "out")
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["config"]["camera"]["intrinsics"] == pytest.approx(camera_of(cfg))

@@ -78,8 +78,11 @@ class Bag(Source):
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
 
+        # messages whose definitions the bag does not carry (RealSense SDK .db3 files) are
+        # read with the standard definitions of the bag's ROS version
+        store = Stores.ROS1_NOETIC if self.path.suffix.lower() == ".bag" else Stores.ROS2_HUMBLE
         try:
-            return AnyReader([self.path], default_typestore=get_typestore(Stores.ROS1_NOETIC))
+            return AnyReader([self.path], default_typestore=get_typestore(store))
         except Exception as e:  # noqa: BLE001 - rosbags raises its own kinds
             raise InputError(f"{self.key}: {self.path}: not a readable ROS bag ({type(e).__name__}: {e})") from None
 
@@ -217,10 +220,14 @@ class Bag(Source):
         REP 118's millimetres."""
         sensor = "/".join(topic.strip("/").split("/")[:2])
         for c in r.connections:
-            if c.topic.strip("/").startswith(sensor) and c.topic.endswith("Depth Units/value"):
+            if c.topic.strip("/").startswith(sensor) and c.topic.replace("_", " ").endswith("Depth Units/value"):
                 m = self._first(r, c)
-                if m is not None and float(m.data) > 0:
-                    return float(np.float32(m.data))
+                try:
+                    units = float(m.data) if m is not None else 0.0  # Float32, or a String in .db3
+                except ValueError:
+                    units = 0.0
+                if units > 0:
+                    return float(np.float32(units))
         return 0.001
 
     def frames(self) -> Iterator[Frame]:

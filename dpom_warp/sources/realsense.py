@@ -80,16 +80,40 @@ class SoftwareCamera:
         if self.thread is not None:
             self.thread.join(5)
 
+    def record(self, path) -> int:
+        """Write the frames once, in order, as a RealSense SDK recording at `path` (the SDK's
+        own recorder: a ROS 2 .db3 with compressedDepth images); returns the frames written."""
+        import gc
+
+        rs = self.rs_module()
+        recorder = rs.recorder(str(path), self.device)
+        sensor = recorder.query_sensors()[0]
+        got = []
+        sensor.open(sensor.get_stream_profiles()[0])
+        sensor.start(lambda f: got.append(f.get_frame_number()))
+        for i, img in enumerate(self.frames):
+            self._send(rs, img, i)
+            deadline = time.perf_counter() + 5.0
+            while len(got) <= i and time.perf_counter() < deadline:
+                time.sleep(0.002)
+        sensor.stop()
+        sensor.close()
+        del sensor, recorder
+        gc.collect()  # the recorder writes the file out when it goes
+        return len(got)
+
+    def _send(self, rs, img, number: int) -> None:
+        f = rs.software_video_frame()
+        f.pixels, f.stride, f.bpp = img.tobytes(), img.shape[1] * 2, 2
+        f.timestamp, f.domain = 1000.0 * number / self.fps, rs.timestamp_domain.hardware_clock
+        f.frame_number, f.profile = number, self.profile
+        self.sensor.on_video_frame(f)
+
     def _feed(self):
         rs = self.rs_module()
         t0 = time.perf_counter()
         while not self.stopped.is_set():
-            img = self.frames[self.sent % len(self.frames)]
-            f = rs.software_video_frame()
-            f.pixels, f.stride, f.bpp = img.tobytes(), img.shape[1] * 2, 2
-            f.timestamp, f.domain = 1000.0 * self.sent / self.fps, rs.timestamp_domain.hardware_clock
-            f.frame_number, f.profile = self.sent, self.profile
-            self.sensor.on_video_frame(f)
+            self._send(rs, self.frames[self.sent % len(self.frames)], self.sent)
             self.sent += 1
             time.sleep(max(0.0, t0 + self.sent / self.fps - time.perf_counter()))
 
