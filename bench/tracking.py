@@ -130,8 +130,8 @@ def table(results: dict, gate: str = "0.5") -> list[str]:
     """Per scene and pooled: the detections' MODA (hidden people ignored, as the tracks'
     scores), the KSP tracks' own MODA (their positions, identities aside), then MOTA, IDF1,
     HOTA and identity switches of KSP, online and the naive linking."""
-    lines = [f"| scene | person-frames | detections MODA | tracks MODA | KSP MOTA | IDF1 | HOTA | ID sw. "
-             f"| online MOTA | IDF1 | ID sw. | naive MOTA | IDF1 | ID sw. |",
+    lines = ["| scene | person-frames | detections MODA | tracks MODA | KSP MOTA | IDF1 | HOTA | ID sw. "
+             "| online MOTA | IDF1 | ID sw. | naive MOTA | IDF1 | ID sw. |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     scenes = {n: r for n, r in results.items() if n != "long"}
 

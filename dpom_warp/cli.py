@@ -205,12 +205,12 @@ def _info(args) -> int:
     lines = [f"{info['path']}: {info['kind']}",
              f"  depth stream: {info['topic'] or '-'} ({info['encoding'] or '-'}), {info['frames']} frames "
              f"of {info['width']}x{info['height']}",
-             f"  intrinsics: " + (f"fx {i['fx']:.3f}, fy {i['fy']:.3f}, cx {i['cx']:.3f}, cy {i['cy']:.3f}"
+             "  intrinsics: " + (f"fx {i['fx']:.3f}, fy {i['fy']:.3f}, cx {i['cx']:.3f}, cy {i['cy']:.3f}"
                                   if i else "none (give camera.intrinsics in the config)"),
              f"  distortion: {info['distortion'] or 'none'}",
-             f"  depth scale: " + (f"{info['depth_scale']:.7g} m per unit" if info["depth_scale"]
+             "  depth scale: " + (f"{info['depth_scale']:.7g} m per unit" if info["depth_scale"]
                                    else "float metres" if info["encoding"] == "32FC1" else "-"),
-             f"  duration: " + (f"{info['duration_s']:.3f} s, {info['rate_hz']:.2f} frames/s"
+             "  duration: " + (f"{info['duration_s']:.3f} s, {info['rate_hz']:.2f} frames/s"
                                 if info["duration_s"] else "-"),
              f"  IMU: {'yes' if info['imu'] else 'no'}" + (
                  f" (up in the depth camera's frame: [{', '.join(f'{x:.4f}' for x in info['gravity_up'])}])"

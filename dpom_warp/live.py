@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import ConfigError, RunConfig
-from .io import write_json_atomic, write_text_atomic
+from .io import write_json_atomic
 
 
 class NewestFrame:
@@ -50,10 +50,7 @@ class NewestFrame:
 def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None = None, log=print,
              max_frames: int | None = None, overwrite: bool = False, first_frame_timeout: float = 10.0) -> dict:
     """Infer a live camera's frames until Ctrl-C or `max_frames`; returns the summary."""
-    import dataclasses
-
     from .engine import resolve_device
-    from .geometry import build_geometry
     from .pipeline import (_jsonable, prepare_output, summarise, track_table_files)
     from .sources.realsense import RealSenseLive
     from .tracking import Cells, OnlineTracker

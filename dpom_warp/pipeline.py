@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-import glob
 import json
-import os
 import platform
 import shutil
 import statistics
@@ -21,66 +19,14 @@ from .engine import Engine, MemoryBudgetError, resolve_device
 from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
 from .ground import fit_ground_files
-from .io import (TEMP_MARK, InputError, read_depth, write_bytes_atomic, write_json_atomic,
-                 write_text_atomic)
+from .io import TEMP_MARK, InputError, write_bytes_atomic, write_json_atomic, write_text_atomic
 from .resolution import Resolution
-from .synthetic import generate
+from .sources.run import expand, render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
 from .worker import (FrameItem, FrameOutput, FrameWorker, WorkerSpec, kernel_cache, make_engine,
                      pool_outcomes, read_frame, write_output)
 
 CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
 
-
-
-FRAME_SUFFIXES = (".png", ".npy")
-
-
-def expand(pattern: str, key: str, topic: str | None = None, log=print) -> list[Path]:
-    """The frame files input.frames (or input.background) names: a glob's files in sorted
-    order, or a recording's frames read into its cache (sources.materialise)."""
-    return source_frames(pattern, key, topic, log)[0]
-
-
-def source_frames(pattern: str, key: str, topic: str | None = None, log=print) -> tuple[list[Path], dict | None]:
-    """(frame files, the recording's source.json or None for a glob)."""
-    from .sources import RECORDING_SUFFIXES, is_recording, materialise
-
-    if is_recording(pattern):
-        meta = materialise(pattern, topic, key, log)
-        files = [Path(meta["folder"]) / f["frame"] for f in meta["frames"]]
-        if not files:
-            reason = meta["skipped"][0]["reason"] if meta["skipped"] else "no depth frames"
-            raise InputError(f"{key}: {pattern}: no readable depth frame ({reason})")
-        return files, meta
-    files = sorted(Path(p) for p in glob.glob(os.path.expanduser(pattern)))
-    files = [f for f in files if f.is_file()]
-    if not files:
-        where = os.path.abspath(os.path.expanduser(pattern))
-        raise InputError(f"{key}: no files match {pattern!r} (looked for {where}; relative paths in a "
-                         f"config file are relative to its folder)")
-    if len(files) == 1 and files[0].suffix.lower() not in FRAME_SUFFIXES and files[0].suffix:
-        raise InputError(f"{key}: {files[0]}: unknown format {files[0].suffix!r}; expected a glob of 16-bit "
-                         f"PNG or .npy frames, or a recording ({', '.join(RECORDING_SUFFIXES)}, a ROS 2 "
-                         f"bag's folder)")
-    return files, None
-
-
-def recording_notes(cfg: RunConfig, meta: dict) -> list[str]:
-    """Where the config's camera differs from the recording's (the config's is used)."""
-    info, cam, notes = meta["info"], cfg.camera, []
-    mine = {"width": cam.width, "height": cam.height}
-    for key in ("width", "height"):
-        if info.get(key) and info[key] != mine[key]:
-            notes.append(f"camera.{key}: the config's {mine[key]} differs from the recording's {info[key]}")
-    if info.get("intrinsics"):
-        for k, v in info["intrinsics"].items():
-            given = getattr(cam, k)
-            if abs(given - v) > 1e-6 * max(1.0, abs(v)):
-                notes.append(f"camera.intrinsics.{k}: the config's {given:g} differs from the recording's {v:g}")
-    if abs(cfg.inputs.depth_scale - meta["depth_scale"]) > 1e-9 * meta["depth_scale"]:
-        notes.append(f"input.depth_scale: the config's {cfg.inputs.depth_scale:g} differs from the "
-                     f"recording's {meta['depth_scale']:g}")
-    return [n + " (the config's is used)" for n in notes]
 
 
 def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
@@ -146,30 +92,6 @@ def _first_difference(a, b, path=""):
             if a.get(k) != b.get(k):
                 return _first_difference(a.get(k), b.get(k), f"{path}.{k}" if path else k)
     return f"{path}: {a!r} then, {b!r} now"
-
-
-def check_frames(frames: list[Path], scale: float, shape, strict: bool) -> tuple[list[Path], list[dict]]:
-    """Read every frame once before any output is written. Returns the good frames and the
-    skipped ones with reasons; with `strict`, or when no frame is good, the first error."""
-    good, skipped = [], []
-    for f in frames:
-        try:
-            depth = read_depth(f, scale, shape)
-            if not np.any(depth > 0):
-                raise InputError(f"{f}: no depth readings (every pixel is 0)")
-            good.append(f)
-        except InputError as e:
-            if strict:
-                raise
-            skipped.append({"frame": f.name, "reason": str(e)})
-    if not good:
-        raise InputError(skipped[0]["reason"] + (f" (none of the {len(frames)} frames is usable)"
-                                                 if len(frames) > 1 else ""))
-    dup = next((s for s, n in Counter(f.stem for f in good).items() if n > 1), None)
-    if dup:
-        raise ConfigError(f"input.frames: two frames share the name {dup!r} (outputs are named "
-                          f"by it); expected distinct names")
-    return good, skipped
 
 
 @dataclasses.dataclass
@@ -260,23 +182,8 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     engine here only compiles the kernels (into the cache they are given) and is dropped."""
     t_start = time.perf_counter()
     out = Path(output_dir or cfg.output.dir)
-    render_synthetic(cfg, log)
-    if cfg.inputs.frames is None:
-        raise ConfigError("input.frames: required key is missing (the frames to run on)")
-    shape = (cfg.camera.height, cfg.camera.width)
-    files, meta = source_frames(cfg.inputs.frames, "input.frames", cfg.inputs.topic, log)
-    unread, timestamps = [], {}
-    if meta is not None:
-        for note in recording_notes(cfg, meta):
-            log(note)
-        unread = list(meta["skipped"])
-        if unread and strict:
-            raise InputError(unread[0]["reason"])
-        timestamps = {f["frame"]: f["timestamp"] for f in meta["frames"]}
-    frames, skipped = check_frames(files, cfg.inputs.depth_scale, shape, strict)
-    skipped = unread + skipped
-    for item in skipped:
-        log(f"skipping {item['reason']}")
+    source = run_frames(cfg, strict, log)  # every frame read and checked once
+    frames, skipped, timestamps = source.frames, source.skipped, source.timestamps
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
     if truth is not None:
         missing = [f.name for f in frames if f.name not in truth]
@@ -287,19 +194,6 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     return RunPlan(**{f.name: getattr(s, f.name) for f in dataclasses.fields(Setup)}, cfg=cfg,
                    out=out, frames=frames, skipped=skipped, truth=truth, t_start=t_start,
                    timestamps=timestamps)
-
-
-def render_synthetic(cfg: RunConfig, log=print) -> None:
-    """A config with a `synthetic` section: render its sequence (once: later calls check it)."""
-    if cfg.synthetic is None:
-        return
-    t = time.perf_counter()
-    cached = (Path(cfg.synthetic_cache) / "scene.json").exists()
-    if not cached:
-        log(f"rendering the synthetic scene ({cfg.synthetic.frames} frames) into {cfg.synthetic_cache} ...")
-    generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
-    log(f"synthetic scene: {cfg.synthetic.frames} frames in {cfg.synthetic_cache} "
-        f"({'checked' if cached else 'generated'} in {time.perf_counter() - t:.1f} s)")
 
 
 def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=print,

@@ -4,7 +4,6 @@ tracker's causality, the scores against py-motmetrics' and TrackEval's, and the 
 files (resume, --workers, dpom-warp track)."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
