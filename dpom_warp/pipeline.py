@@ -283,9 +283,18 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
 
 
 def _outcomes_here(plan: RunPlan):
+    """The frames' outcomes in this process; the next chunk's frames are read on a thread
+    while this chunk infers (Warp's CPU kernels release the GIL)."""
+    from concurrent.futures import ThreadPoolExecutor
+
     worker = FrameWorker(plan.spec, engine=plan.engine)
-    for chunk in plan.chunks():
-        yield from worker.process(chunk)
+    chunks = plan.chunks()
+    with ThreadPoolExecutor(1) as pool:
+        ahead = pool.submit(worker.read, chunks[0]) if chunks else None
+        for i, chunk in enumerate(chunks):
+            got = ahead.result()
+            ahead = pool.submit(worker.read, chunks[i + 1]) if i + 1 < len(chunks) else None
+            yield from worker.process(chunk, got)
 
 
 def progress_bar(outcomes, frames: int, desc: str, progress: bool):
@@ -297,17 +306,45 @@ def progress_bar(outcomes, frames: int, desc: str, progress: bool):
 
 
 def collect(plan: RunPlan, outcomes, strict: bool, log=print) -> None:
-    """Write each frame's outputs as its outcome arrives; a frame that could not be processed
-    is skipped with its reason (fatal with `strict`)."""
-    for name, output, error in outcomes:
-        accept(plan, name, output, error, strict, log)
+    """Write each frame's outputs as its outcome arrives, on a thread (while the next frame
+    infers), in order; a frame that could not be processed is skipped with its reason (fatal
+    with `strict`). Every write started is finished before this returns or raises."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as writer:
+        pending = []
+        try:
+            for name, output, error in outcomes:
+                if error is None:
+                    stamp(plan, name, output)
+                    pending.append((name, output, writer.submit(write_output, plan.out, output)))
+                else:
+                    accept(plan, name, output, error, strict, log)
+                while pending and pending[0][2].done():
+                    _written(plan, *pending.pop(0))
+        finally:
+            for item in pending:
+                item[2].exception()  # wait for it; an error is raised below, in order
+        for item in pending:
+            _written(plan, *item)
+
+
+def stamp(plan: RunPlan, name: str, output: FrameOutput) -> None:
+    """A recording's frame record carries its timestamp."""
+    if name in plan.timestamps:
+        output.record["timestamp"] = output.record["stats"]["timestamp"] = plan.timestamps[name]
+
+
+def _written(plan: RunPlan, name: str, output: FrameOutput, future) -> None:
+    plan.records[name] = future.result()
+    plan.grown += output.grown
+    plan.by_worker[output.record["stats"]["worker"]] += 1
 
 
 def accept(plan: RunPlan, name: str, output: FrameOutput | None, error: str | None, strict: bool,
            log=print) -> None:
     if error is None:
-        if name in plan.timestamps:
-            output.record["timestamp"] = output.record["stats"]["timestamp"] = plan.timestamps[name]
+        stamp(plan, name, output)
         plan.records[name] = write_output(plan.out, output)
         plan.grown += output.grown
         plan.by_worker[output.record["stats"]["worker"]] += 1
@@ -385,26 +422,42 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
     now = per_frame(tracks, len(done)) if tracks is not None else [[] for _ in done]
     trail = cfg.tracking.trail
     history: dict[int, list] = {}
-    for i, f in enumerate(done):
-        rho_map = maps[i].reshape(cfg.grid.shape)
-        dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
-                      cfg.detection.nms_radius)
+    shown_all = []
+    for i in range(len(done)):
         shown = []
         for tid, xyz, bridged in now[i]:
             history.setdefault(tid, []).append((i, xyz))
             past = [p for j, p in history[tid] if j > i - max(1, trail)]
             k = int(np.argmin(np.linalg.norm(geometry.locations - xyz, axis=1)))
             shown.append({"id": tid, "box": geometry.rect[k], "bridged": bridged, "trail": past, "xyz": xyz})
+        shown_all.append(shown)
+
+    def one(i):
+        """Frame i's detections, depth and (with `pictures`) picture file."""
+        f = done[i]
+        rho_map = maps[i].reshape(cfg.grid.shape)
+        dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
+                      cfg.detection.nms_radius)
         depth = read_frame(cfg, f)
         if pictures:
             png = frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2],
-                                truth.get(f.name) if truth else None, f.name,
-                                in_view=geometry.rect_area > 0, tracks=shown if tracks is not None else None,
-                                trail=trail)
+                                truth.get(f.name) if truth else None, f.name, in_view=geometry.rect_area > 0,
+                                tracks=shown_all[i] if tracks is not None else None, trail=trail)
             write_bytes_atomic(out / "images" / f"{f.stem}.png", png)
-        if log is not None:
-            log.frame(i, (timestamps or {}).get(f.name), depth, dets, rho_map,
-                      shown if tracks is not None else None)
+        return (rho_map, dets, depth) if log is not None else None
+
+    # two threads: PNG encoding and Pillow's drawing release the GIL, so on two cores one
+    # picture is drawn while the other is encoded; 64 frames in flight at most
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(2) as pool:
+        for start in range(0, len(done), 64):
+            span = range(start, min(len(done), start + 64))
+            for i, got in zip(span, pool.map(one, span)):
+                if log is not None:
+                    rho_map, dets, depth = got
+                    log.frame(i, (timestamps or {}).get(done[i].name), depth, dets, rho_map,
+                              shown_all[i] if tracks is not None else None)
     if log is not None:
         log.close()
 

@@ -56,11 +56,17 @@ def dashed_rectangle(draw: ImageDraw.ImageDraw, box, fill, dash: int = 5, width:
                       width=width)
 
 
-def colour_bar(draw: ImageDraw.ImageDraw, x: int, y: int, h: int, cmap: str, vmin: float,
-               vmax: float, label: str):
+@lru_cache(maxsize=None)
+def bar_image(cmap: str, h: int) -> Image.Image:
+    """The colour bar's gradient, `h` rows from the top colour down (drawn once per size)."""
     table = colour_table(cmap)
-    for i in range(h):
-        draw.line((x, y + h - 1 - i, x + BAR_W, y + h - 1 - i), fill=tuple(int(c) for c in table[i * 255 // max(h - 1, 1)]))
+    rows = table[(np.arange(h)[::-1] * 255) // max(h - 1, 1)]
+    return Image.fromarray(np.repeat(rows[:, None, :], BAR_W + 1, axis=1))
+
+
+def colour_bar(canvas: Image.Image, draw: ImageDraw.ImageDraw, x: int, y: int, h: int, cmap: str,
+               vmin: float, vmax: float, label: str):
+    canvas.paste(bar_image(cmap, h), (x, y))
     draw.rectangle((x, y, x + BAR_W, y + h - 1), outline=INK)
     f = font(11)
     for frac in (0.0, 0.5, 1.0):
@@ -244,7 +250,7 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     draw.rectangle((ox - 1, oy - 1, ox + depth_img.width, oy + PANEL_H), outline=INK)
     draw.text((ox + depth_img.width / 2, oy - 8), f"{title}  ({len(detections)} detections)",
               fill=INK, font=font(13), anchor="md")
-    colour_bar(draw, ox + depth_img.width + 8, oy + 16, PANEL_H - 32, "turbo", 0.0, vmax, "depth (m)")
+    colour_bar(canvas, draw, ox + depth_img.width + 8, oy + 16, PANEL_H - 32, "turbo", 0.0, vmax, "depth (m)")
 
     ox += depth_img.width + bar_space + PAD + 10
     top.draw(canvas, draw, ox, oy, "occupancy map (top view" + (", max over z)" if voxel else ")"), "y (m)")
@@ -263,7 +269,7 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
         ox += side.w
     else:
         ox += top.w
-    colour_bar(draw, ox + 10, oy + 16, PANEL_H - 32, "magma", 0.0, 1.0, "rho*")
+    colour_bar(canvas, draw, ox + 10, oy + 16, PANEL_H - 32, "magma", 0.0, 1.0, "rho*")
     legend = ([((0, 255, 0), "x ground truth")] if has_truth else []) + [
         ((0, 255, 255), "o detections"), ((255, 255, 255), "^ camera")] + (
         [((180, 120, 40), "#n track (dashed: bridged)")] if tracks is not None else [])

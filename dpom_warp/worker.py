@@ -111,10 +111,8 @@ class FrameWorker:
                 engine.set_background(*spec.background)
         self.engine = engine
 
-    def process(self, items: list[FrameItem]) -> list[tuple[str, FrameOutput | None, str | None]]:
-        """(frame name, output, None), or (frame name, None, reason) for a frame that cannot be
-        read or whose lists overflow, for up to engine.batch frames; a batch whose lists
-        overflow is retried frame by frame."""
+    def read(self, items: list[FrameItem]) -> tuple[list, list]:
+        """The frames of `items` read: (outcomes of those that cannot be, [(item, depth, read_s)])."""
         outcomes, read = [], []
         for item in items:
             t = time.perf_counter()
@@ -124,6 +122,15 @@ class FrameWorker:
                 outcomes.append((Path(item.path).name, None, str(e)))
                 continue
             read.append((item, depth, time.perf_counter() - t))
+        return outcomes, read
+
+    def process(self, items: list[FrameItem], read: tuple | None = None
+                ) -> list[tuple[str, FrameOutput | None, str | None]]:
+        """(frame name, output, None), or (frame name, None, reason) for a frame that cannot be
+        read or whose lists overflow, for up to engine.batch frames; a batch whose lists
+        overflow is retried frame by frame. `read`: what `read(items)` gave, done already
+        (the one-process run reads the next frames while these infer)."""
+        outcomes, read = self.read(items) if read is None else (list(read[0]), read[1])
         engine = self.engine
         if len(read) > 1:
             grown, t0 = len(engine.grown), time.perf_counter()

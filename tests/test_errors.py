@@ -224,11 +224,11 @@ def test_interrupted_run_resumes_to_the_same_files(tmp_path, scene, monkeypatch,
     real = FrameWorker.process
     calls = []
 
-    def interrupted(self, items):  # Ctrl-C while the fourth frame is inferred
+    def interrupted(self, items, *read):  # Ctrl-C while the fourth frame is inferred
         if len(calls) == 3:
             raise KeyboardInterrupt
         calls.append(1)
-        return real(self, items)
+        return real(self, items, *read)
 
     monkeypatch.setattr(FrameWorker, "process", interrupted)
     assert main(["run", str(path), "--no-progress"]) == 130
