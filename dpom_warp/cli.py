@@ -37,8 +37,13 @@ def _run(args) -> int:
     if args.device:
         check_device(args.device, "--device")
     if args.ray is not None:
-        from .cluster import import_ray
+        import os
+
+        from .cluster import import_ray, reachable
         import_ray()  # not installed: say so before any work
+        address = args.ray or os.environ.get("RAY_ADDRESS")
+        if address and address not in ("auto", "local"):
+            reachable(address)  # nothing there: say so at once
     cfgs = [load_config(c, args.set) for c in args.config]
     outputs = output_dirs(args.config, cfgs, args.output)
     if args.view:

@@ -29,7 +29,7 @@ import signal
 import time
 
 from .config import ConfigError
-from .io import WorkerError
+from .io import InputError, WorkerError
 from .worker import FrameWorker, install_kernel_cache, kernel_cache
 
 INSTALL = "pip install 'dpom-warp[ray]'"
@@ -57,6 +57,8 @@ def connect(address: str | None):
         yield "the running Ray instance"
         return
     address = address or os.environ.get("RAY_ADDRESS") or None
+    if address and address not in ("auto", "local"):
+        reachable(address)
     handler = signal.getsignal(signal.SIGTERM)
     import logging
 
@@ -73,6 +75,25 @@ def connect(address: str | None):
                if address == "auto" else f"the Ray cluster at {address}")
     finally:
         ray.shutdown()
+
+
+def reachable(address: str, timeout: float = 3.0) -> None:
+    """A cluster address (HOST:PORT, or ray://HOST:PORT for Ray Client) that answers a TCP
+    connection; else a one-line error at once (Ray itself retries for minutes)."""
+    import socket
+
+    hostport = address.split("://", 1)[-1]
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        raise ConfigError(f"--ray: expected HOST:PORT (the address `ray start --head` prints), auto, "
+                          f"or nothing for a local instance; found {address!r}")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+            pass
+    except OSError as e:
+        why = e.strerror or type(e).__name__
+        raise ConfigError(f"--ray: cannot join a Ray cluster at {address}: nothing answers there ({why}); "
+                          f"expected the head's address, e.g. HOST:6379 from `ray start --head`") from None
 
 
 def package_version() -> str:
@@ -162,7 +183,7 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
     `sources` names each run's config and `devices` gives its device setting (for errors);
     `workers`: the number of actors (None: one per CPU, or per GPU, of the cluster).
     Nothing is written before the first actor has started."""
-    from .pipeline import accept, finish_run, open_output, progress_bar
+    from .pipeline import abandon_if_empty, accept, finish_run, open_output, progress_bar
 
     with connect(address) as where:
         ray = import_ray()
@@ -185,8 +206,13 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
             t0 = time.perf_counter()
             frames = sum(len(c) for _, c in jobs)
             outcomes = progress_bar(pool.outcomes(refs, jobs, log), frames, "dpom ray", progress)
-            for run, name, output, error in outcomes:
-                accept(plans[run], name, output, error, strict, log)
+            try:
+                for run, name, output, error in outcomes:
+                    accept(plans[run], name, output, error, strict, log)
+            except (InputError, ConfigError):
+                for p in plans:
+                    abandon_if_empty(p)  # --strict before any frame: nothing left behind
+                raise
             wall = time.perf_counter() - t0
         finally:
             pool.kill()

@@ -167,6 +167,9 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     t = time.perf_counter()
     try:
         collect(plan, progress_bar(outcomes, len(plan.todo), desc, progress), strict, log)
+    except (InputError, ConfigError):
+        abandon_if_empty(plan)  # --strict: a bad frame before any good one leaves nothing
+        raise
     finally:
         outcomes.close()  # stops the worker pool at once on an error or Ctrl-C
     wall = time.perf_counter() - t
@@ -355,12 +358,31 @@ def accept(plan: RunPlan, name: str, output: FrameOutput | None, error: str | No
     log(f"skipping {error}")
 
 
+def abandon_if_empty(plan: RunPlan) -> None:
+    """A run that wrote no frame leaves nothing behind: its run.json and the folders it made
+    go (a resumed run's earlier frames, and anything else in the folder, stay)."""
+    out = plan.out
+    if any((out / "frames").glob("*.json")):
+        return
+    (out / RUN_STATE).unlink(missing_ok=True)
+    for name in ("frames", "maps", "images", "ply", ""):
+        try:
+            (out / name).rmdir()  # only when empty
+        except OSError:
+            pass
+
+
 def finish_run(plan: RunPlan, runner: dict) -> dict:
     """detections.csv, summary.json and (with ground truth) eval.json of a run whose frames
     are all done or skipped; `runner` says what inferred them (written in the summary with
     the frames each worker did)."""
     cfg, out, truth = plan.cfg, plan.out, plan.truth
     done = [f for f in plan.frames if f.name in plan.records]
+    if not done:  # every frame skipped while inferring (lists over engine.max_entries, ...)
+        abandon_if_empty(plan)
+        first = plan.skipped[0]["reason"] if plan.skipped else "no frame"
+        raise InputError(f"{first} (none of the {len(plan.frames)} readable frames could be inferred; "
+                         f"nothing written)")
     summary = summarise(cfg, out, done, plan.records, plan.skipped, truth, plan.geometry,
                         plan.device, plan.background, plan.ground, plan.grown)
     if plan.auto_report is not None:

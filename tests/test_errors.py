@@ -302,3 +302,32 @@ def test_batches_give_the_same_files_and_skip_bad_frames(tmp_path, scene, graph)
     summary = json.load(open(b / "summary.json"))
     assert [s["frame"] for s in summary["skipped"]] == ["0002.png"]
     assert summary["scores"] == json.load(open(a / "summary.json"))["scores"]
+
+
+def test_every_frame_over_max_entries_fails_and_leaves_nothing(tmp_path, scene, capsys):
+    """A run whose every frame is refused while inferring (lists over engine.max_entries) is a
+    failure, not "0 frames": one line, exit 2, no output folder; the same with --strict."""
+    path = write_config(tmp_path, scene[1], engine__max_entries=50)
+    for extra in ([], ["--strict"]):
+        assert main(["run", str(path), "--no-progress", *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("dpom-warp: error: ") and "\n" not in err and "engine.max_entries" in err
+        assert not (tmp_path / "out").exists(), extra
+
+
+def test_unreachable_ray_address_is_one_line_at_once(tmp_path, scene):
+    """--ray at an address nothing listens on: one line and exit 2 within seconds (Ray alone
+    retries for minutes), nothing written."""
+    import socket
+
+    with socket.socket() as s:  # a port nothing listens on once this closes
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    path = write_config(tmp_path, scene[1])
+    t = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "dpom_warp.cli", "run", str(path), "--no-progress", "--ray",
+                           f"127.0.0.1:{port}"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and time.perf_counter() - t < 60
+    err = proc.stderr.strip()
+    assert "\n" not in err and f"--ray: cannot join a Ray cluster at 127.0.0.1:{port}: nothing answers" in err
+    assert not (tmp_path / "out").exists()
