@@ -3,6 +3,13 @@ import os
 import numpy as np
 import pytest
 import warp as wp
+from hypothesis import settings
+
+# hypothesis: the same examples on every run in CI (a failure there reproduces here with
+# CI=true), and the failing example's blob printed everywhere
+settings.register_profile("ci", derandomize=True, print_blob=True)
+settings.register_profile("dev", print_blob=True)
+settings.load_profile("ci" if os.environ.get("CI") else os.environ.get("HYPOTHESIS_PROFILE", "dev"))
 
 from dpom_warp.warp_setup import init_warp
 

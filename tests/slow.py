@@ -1,0 +1,49 @@
+"""Slowing a subprocess's frames down, so that a signal sent after its first frame is written
+arrives while it still runs (the signal tests then never depend on the machine's speed).
+
+`slow_env(tmp_path, seconds)` returns an environment whose Python processes (the run, and
+Ray's workers, which inherit it) sleep `seconds` before each FrameWorker.process call: a
+sitecustomize on PYTHONPATH patches dpom_warp.worker when it is first imported."""
+
+import os
+from pathlib import Path
+
+HOOK = '''
+import importlib.abc, importlib.machinery, sys, time
+
+DELAY = {delay!r}
+
+
+class _SlowFrames(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name != "dpom_warp.worker":
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.machinery.PathFinder.find_spec(name, path)
+        run_module = spec.loader.exec_module
+
+        def exec_module(module):
+            run_module(module)
+            real = module.FrameWorker.process
+
+            def process(self, *args, **kwargs):
+                time.sleep(DELAY)
+                return real(self, *args, **kwargs)
+
+            module.FrameWorker.process = process
+
+        spec.loader.exec_module = exec_module
+        return spec
+
+
+sys.meta_path.insert(0, _SlowFrames())
+'''
+
+
+def slow_env(tmp_path: Path, seconds: float) -> dict:
+    folder = tmp_path / "slow-frames"
+    folder.mkdir(exist_ok=True)
+    (folder / "sitecustomize.py").write_text(HOOK.format(delay=seconds))
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env["PYTHONPATH"] = os.pathsep.join([str(folder)] + [p for p in [env.get("PYTHONPATH")] if p])
+    return env
