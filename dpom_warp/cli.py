@@ -362,6 +362,11 @@ def main(argv: list[str] | None = None) -> int:
     except WorkerError as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 1
+    except OSError as e:  # a write that failed (disk full, permissions): finished frames are kept
+        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        print(f"dpom-warp: error: {where}{e.strerror or e}; finished frames are kept, continue with --resume",
+              file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("dpom-warp: interrupted; finished frames are kept, continue with --resume",
               file=sys.stderr)

@@ -314,13 +314,24 @@ def collect(plan: RunPlan, outcomes, strict: bool, log=print) -> None:
     with `strict`). Every write started is finished before this returns or raises."""
     from concurrent.futures import ThreadPoolExecutor
 
+    failed = []
+
+    def write(output):  # after a failed write no later frame is written: frames stay in order
+        if failed:
+            raise RuntimeError("not written: an earlier frame's write failed")
+        try:
+            return write_output(plan.out, output)
+        except BaseException as e:
+            failed.append(e)
+            raise
+
     with ThreadPoolExecutor(1) as writer:
         pending = []
         try:
             for name, output, error in outcomes:
                 if error is None:
                     stamp(plan, name, output)
-                    pending.append((name, output, writer.submit(write_output, plan.out, output)))
+                    pending.append((name, output, writer.submit(write, output)))
                 else:
                     accept(plan, name, output, error, strict, log)
                 while pending and pending[0][2].done():
