@@ -381,3 +381,70 @@ def test_a_record_is_written_only_after_its_map_and_picture(tmp_path, scene, mon
         assert (out / name).read_bytes() == (tmp_path / "whole" / name).read_bytes()
     for p in (tmp_path / "whole" / "images").iterdir():
         assert (out / "images" / p.name).read_bytes() == p.read_bytes()
+
+
+def csv_rows(path: Path) -> list:
+    import csv
+
+    return [r for r in csv.reader(open(path))][1:]
+
+
+def entries_of(run: Path) -> dict:
+    return {p["frame"]: p["entries"] for p in json.loads((run / "summary.json").read_text())["per_frame"]}
+
+
+def test_frames_over_max_entries_inside_a_run_are_skipped_with_their_reason(tmp_path, scene, capsys):
+    """A cap between the frames' list sizes: the frames above it are skipped, listed with
+    their reason, the others inferred as without the cap; --strict stops at the first."""
+    first = tmp_path / "first"
+    path = write_config(tmp_path, scene[1], tracking__method="off", output__images=False)
+    assert main(["run", str(path), "--no-progress", "--output", str(first)]) == 0
+    entries = entries_of(first)
+    cap = sorted(entries.values())[len(entries) // 2]  # the larger half cannot fit
+    over = sorted(f for f, n in entries.items() if n > cap)
+    assert 0 < len(over) < len(entries)
+    path = write_config(tmp_path, scene[1], tracking__method="off", output__images=False,
+                        engine__max_entries=cap)
+    capsys.readouterr()
+    assert main(["run", str(path), "--no-progress"]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert sorted(s["frame"] for s in summary["skipped"]) == over
+    assert all("engine.max_entries" in s["reason"] for s in summary["skipped"])
+    kept = [r for r in csv_rows(first / "detections.csv") if r[0] not in over]
+    assert csv_rows(tmp_path / "out" / "detections.csv") == kept
+    assert main(["run", str(path), "--no-progress", "--overwrite", "--strict"]) == 2
+    assert "engine.max_entries" in capsys.readouterr().err
+
+
+def test_a_batch_over_max_entries_is_retried_frame_by_frame(tmp_path, scene):
+    """Batches of 3 whose lists together outgrow the cap while each frame fits: every frame is
+    inferred alone instead, to the files of a run without batches."""
+    first = tmp_path / "first"
+    path = write_config(tmp_path, scene[1], tracking__method="off", output__images=False)
+    assert main(["run", str(path), "--no-progress", "--output", str(first)]) == 0
+    cap = max(entries_of(first).values()) + 1  # every frame fits, no batch of 3 does
+    path = write_config(tmp_path, scene[1], tracking__method="off", output__images=False,
+                        engine__max_entries=cap, engine__batch=3)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    assert (tmp_path / "out" / "detections.csv").read_bytes() == (first / "detections.csv").read_bytes()
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["skipped"] == []
+
+
+def test_a_frame_unreadable_inside_a_batch_is_skipped_alone(tmp_path, scene):
+    """A frame that cannot be read when its batch comes (its file replaced after the run's
+    checks): its outcome is the reason, the batch's other frames are inferred."""
+    from dpom_warp.config import load_config
+    from dpom_warp.pipeline import plan_run
+    from dpom_warp.worker import FrameItem, FrameWorker
+
+    path = write_config(tmp_path, scene[1], tracking__method="off", output__images=False, engine__batch=3)
+    cfg = load_config(path)
+    plan = plan_run(cfg, str(tmp_path / "out"), "cpu", log=lambda *_: None)
+    worker = FrameWorker(plan.spec, engine=plan.engine)
+    items = [FrameItem(str(f)) for f in plan.frames[:3]]
+    items[1] = FrameItem(items[1].path, b"not a png")  # what a worker would get for a damaged file
+    outcomes = worker.process(items)
+    assert [o[0] for o in outcomes][0] == Path(items[1].path).name and outcomes[0][2] is not None
+    assert "not a readable image" in outcomes[0][2]
+    assert sorted(o[0] for o in outcomes[1:]) == sorted(Path(items[i].path).name for i in (0, 2))
+    assert all(o[1] is not None and o[2] is None for o in outcomes[1:])
