@@ -184,3 +184,47 @@ def test_auto_background_with_workers_and_fitted_pose(tmp_path):
     fit = json.load(open(tmp_path / "fit" / "summary.json"))["ground_fit"]
     assert fit["frames"] == "estimated background of 6 frames"
     assert abs(fit["camera_height"] - 2.2) < 0.03 and abs(fit["pitch_deg"] - 20.0) < 0.5
+
+
+def test_auto_background_samples_max_frames_in_chunks_of_16(tmp_path, monkeypatch):
+    """At most max_frames frames, evenly spread, are read for the estimate, 16 at a time;
+    summary.json states the share of fallback pixels and the estimate's time."""
+    path = small_config(tmp_path)
+    batches = []
+    real = BackgroundEstimator.add
+
+    def add(self, depths):
+        batches.append(len(depths))
+        return real(self, depths)
+
+    monkeypatch.setattr(BackgroundEstimator, "add", add)
+    sets = ["--set", "input.background=auto", "--set", "input.background_auto.min_frames=3",
+            "--set", "input.background_auto.max_frames=18", "--set", "synthetic.frames=24",
+            "--set", "output.images=false", "--set", "tracking.method=off"]
+    assert main(["run", str(path), "--no-progress"] + sets) == 0
+    auto = json.load(open(tmp_path / "out" / "summary.json"))["background_auto"]
+    assert auto["frames"] == 18 and batches == [16, 2]
+    assert auto["fallback_share"] == pytest.approx(auto["fallback_pixels"] / auto["pixels"])
+    assert auto["estimate_s"] > 0
+    assert sample_frames(24, 18) == sorted(set(sample_frames(24, 18))) and len(sample_frames(24, 18)) == 18
+
+
+def test_fitted_pose_with_too_few_frames_for_an_estimate(tmp_path):
+    """extrinsics: auto with background: auto but fewer frames than min_frames: every pixel
+    falls back to the floor-only model and the floor is fitted on the first frames."""
+    path = small_config(tmp_path)
+    sets = ["--set", "input.background=auto", "--set", "input.background_auto.min_frames=10",
+            "--set", "synthetic.frames=4", "--set", "output.images=false", "--set", "camera.extrinsics=auto",
+            "--set", "synthetic=null"]
+    import yaml
+
+    cfg = yaml.safe_load(path.read_text())
+    from dpom_warp.config import load_config
+    from dpom_warp.pipeline import render_synthetic
+
+    render_synthetic(load_config(path, ["synthetic.frames=4"]), lambda *_: None)  # the frames first
+    assert main(["run", str(path), "--no-progress"] + sets) == 0
+    s = json.load(open(tmp_path / "out" / "summary.json"))
+    assert s["background_auto"]["fallback_pixels"] == s["background_auto"]["pixels"]
+    assert len(s["ground_fit"]["frames"]) == 4 and abs(s["ground_fit"]["camera_height"] - 2.2) < 0.1
+    assert cfg["camera"]["extrinsics"]["height"] == 2.2
