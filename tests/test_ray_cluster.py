@@ -1,0 +1,93 @@
+"""`--ray` against a Ray cluster started as users start it (`ray start --head` in a subprocess
+on a free port, stopped at the end): `--ray ADDRESS`, `$RAY_ADDRESS` and `--ray auto` join it
+and give a plain run's files; a bad later config stops the call before any frame is sent."""
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from dpom_warp.cli import main
+
+from test_cli import small_config
+from test_ray import assert_same_files
+
+RAY = Path(sys.executable).parent / "ray"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    """A head node with 2 CPUs on a free port and localhost, its own temporary folder, no token
+    authentication (a token a user made for their own cluster must not leak in); stopped afterwards."""
+    import tempfile
+
+    tmp = Path(tempfile.mkdtemp(prefix="rc", dir="/tmp"))  # Ray's socket paths must stay short
+    port = free_port()
+    env = {**os.environ, "RAY_TMPDIR": str(tmp / "ray"), "RAY_AUTH_MODE": "disabled"}
+    env.pop("RAY_ADDRESS", None)
+    start = subprocess.run([str(RAY), "start", "--head", f"--port={port}", "--node-ip-address=127.0.0.1",
+                            "--num-cpus=2", "--num-gpus=0",
+                            "--include-dashboard=false", "--disable-usage-stats"],
+                           capture_output=True, text=True, timeout=180, env=env)
+    assert start.returncode == 0, start.stderr[-2000:]
+    try:
+        yield f"127.0.0.1:{port}", env
+    finally:
+        subprocess.run([str(RAY), "stop", "--force"], capture_output=True, timeout=120, env=env)
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("rayscene")
+    path = small_config(tmp)
+    cfg = yaml.safe_load(path.read_text())
+    cfg["synthetic"]["frames"] = 6
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp / "plain")]) == 0
+    return tmp, path
+
+
+def dpom(args, env, timeout=600):
+    return subprocess.run([sys.executable, "-m", "dpom_warp.cli", *args], capture_output=True, text=True,
+                          timeout=timeout, env=env)
+
+
+def test_ray_address_env_and_auto_join_the_cluster(cluster, scene, tmp_path):
+    address, env = cluster
+    tmp, path = scene
+    for name, args, extra_env in (("address", ["--ray", address], {}),
+                                  ("env", ["--ray"], {"RAY_ADDRESS": address}),
+                                  ("auto", ["--ray", "auto"], {})):
+        out = tmp_path / name
+        proc = dpom(["run", str(path), "--no-progress", *args, "--output", str(out)], {**env, **extra_env})
+        assert proc.returncode == 0, (name, proc.stderr[-2000:])
+        assert_same_files(tmp / "plain", out, 6)
+        runner = json.loads((out / "summary.json").read_text())["runner"]
+        assert runner["kind"] == "ray" and runner["actors"] == 2, name
+        assert runner["cluster"] != "a local Ray instance", name  # it joined the cluster
+
+
+def test_a_bad_later_config_stops_the_call_before_any_frame(cluster, scene, tmp_path, capsys):
+    address, env = cluster
+    tmp, path = scene
+    bad = tmp_path / "bad.yaml"
+    cfg = yaml.safe_load(path.read_text())
+    cfg["model"]["prior"] = 2.0
+    bad.write_text(yaml.safe_dump(cfg))
+    proc = dpom(["run", str(path), str(bad), "--no-progress", "--ray", address, "--output", str(tmp_path / "o")],
+                env)
+    assert proc.returncode == 2 and "model.prior" in proc.stderr and "\n" not in proc.stderr.strip()
+    assert not (tmp_path / "o").exists()  # not even the first config's run started
