@@ -231,3 +231,40 @@ def test_actor_that_cannot_start_is_one_line_and_writes_nothing(tmp_path, local_
     err = capsys.readouterr().err
     assert "--ray: actor" in err and "could not start" in err and "0.0.0 on the driver" in err
     assert err.count("\n") == 1 and not out.exists()
+
+
+def test_every_actor_dead_is_one_line_and_keeps_finished_frames(tmp_path, local_ray, scene, monkeypatch,
+                                                                capsys):
+    """No restarts and every actor process killed as soon as it infers: the call ends with one
+    line (exit 1), the frames finished before are whole, and --resume (with actors that live)
+    finishes the run to the plain run's files."""
+    tmp, path = scene
+    monkeypatch.setattr(cluster, "ACTOR_RESTARTS", 0)
+    stop, killed = threading.Event(), []
+
+    def kill_every_busy_actor():
+        while not stop.is_set():
+            for pid in actor_processes():
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                    killed.append(pid)
+                except ProcessLookupError:
+                    pass
+            time.sleep(0.002)
+
+    killer = threading.Thread(target=kill_every_busy_actor)
+    killer.start()
+    out = tmp_path / "ray"
+    try:
+        code = main(["run", str(path), "--no-progress", "--ray", "--output", str(out)])
+    finally:
+        stop.set()
+        killer.join()
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and len(set(killed)) >= 2
+    assert err.splitlines()[-1] == ("dpom-warp: error: --ray: every actor has died; finished frames are kept, "
+                                    "continue with --resume")
+    assert not (out / "detections.csv").exists()
+    monkeypatch.setattr(cluster, "ACTOR_RESTARTS", 3)
+    assert main(["run", str(path), "--no-progress", "--ray", "--resume", "--output", str(out)]) == 0
+    assert_same_files(tmp / "plain", out, 12)

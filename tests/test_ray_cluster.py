@@ -30,12 +30,17 @@ def free_port() -> int:
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
     """A head node with 2 CPUs on a free port and localhost, its own temporary folder, no token
-    authentication (a token a user made for their own cluster must not leak in); stopped afterwards."""
+    authentication (a token a user made for their own cluster must not leak in), frames slowed
+    by half a second (tests/slow.py); stopped afterwards."""
     import tempfile
 
     tmp = Path(tempfile.mkdtemp(prefix="rc", dir="/tmp"))  # Ray's socket paths must stay short
     port = free_port()
-    env = {**os.environ, "RAY_TMPDIR": str(tmp / "ray"), "RAY_AUTH_MODE": "disabled"}
+    from slow import slow_env
+
+    # the cluster's workers infer each chunk half a second slower: a signal sent after the
+    # first frame is written always lands while the run goes on
+    env = {**slow_env(tmp, 0.5), "RAY_TMPDIR": str(tmp / "ray"), "RAY_AUTH_MODE": "disabled"}
     env.pop("RAY_ADDRESS", None)
     start = subprocess.run([str(RAY), "start", "--head", f"--port={port}", "--node-ip-address=127.0.0.1",
                             "--num-cpus=2", "--num-gpus=0",
@@ -91,3 +96,36 @@ def test_a_bad_later_config_stops_the_call_before_any_frame(cluster, scene, tmp_
                 env)
     assert proc.returncode == 2 and "model.prior" in proc.stderr and "\n" not in proc.stderr.strip()
     assert not (tmp_path / "o").exists()  # not even the first config's run started
+
+
+def test_sigterm_on_a_ray_run_stops_it_and_its_actors(cluster, scene, tmp_path):
+    """SIGTERM on a --ray run: exit 130 (its own handler, not Ray's), whole files, its actors
+    gone from the cluster; --resume finishes it to the plain run's files."""
+    import signal
+    import time
+
+    from test_ray import actor_processes
+
+    address, env = cluster
+    tmp, path = scene
+    out = tmp_path / "ray"
+    driver_env = {k: v for k, v in env.items() if k != "PYTHONPATH"}  # the driver is not slowed
+    proc = subprocess.Popen([sys.executable, "-m", "dpom_warp.cli", "run", str(path), "--no-progress", "--ray",
+                             address, "--output", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=driver_env)
+    deadline = time.time() + 180
+    while not list((out / "frames").glob("*.json")) and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-2000:]
+    assert "continue with --resume" in err
+    assert not [p for p in out.rglob(".*") if p.is_file()]
+    assert 1 <= len(list((out / "frames").glob("*.json"))) < 6
+    deadline = time.time() + 30
+    while actor_processes(busy=False) + actor_processes() and time.time() < deadline:
+        time.sleep(0.2)
+    assert not actor_processes(busy=False) + actor_processes()  # the actors went with the run
+    proc = dpom(["run", str(path), "--no-progress", "--ray", address, "--resume", "--output", str(out)], env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert_same_files(tmp / "plain", out, 6)
