@@ -3,7 +3,9 @@ arrives while it still runs (the signal tests then never depend on the machine's
 
 `slow_env(tmp_path, seconds)` returns an environment whose Python processes (the run, and
 Ray's workers, which inherit it) sleep `seconds` before each FrameWorker.process call: a
-sitecustomize on PYTHONPATH patches dpom_warp.worker when it is first imported."""
+sitecustomize on PYTHONPATH patches dpom_warp.worker when it is first imported. With
+DPOM_TEST_NO_READ=FOLDER in the environment too, those processes cannot open files under
+FOLDER (a cluster node without the frames: they must come as bytes)."""
 
 import os
 from pathlib import Path
@@ -37,6 +39,19 @@ class _SlowFrames(importlib.abc.MetaPathFinder):
 
 
 sys.meta_path.insert(0, _SlowFrames())
+
+import builtins, os  # noqa: E401
+
+_NO_READ = os.environ.get("DPOM_TEST_NO_READ")
+if _NO_READ:  # this process may not open files under that folder (a node without the frames)
+    _open = builtins.open
+
+    def _guarded(file, *args, **kwargs):
+        if isinstance(file, (str, os.PathLike)) and os.path.abspath(os.fspath(file)).startswith(_NO_READ):
+            raise PermissionError(13, "this node has no access to the frames", os.fspath(file))
+        return _open(file, *args, **kwargs)
+
+    builtins.open = _guarded
 '''
 
 

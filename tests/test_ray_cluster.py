@@ -1,6 +1,7 @@
 """`--ray` against a Ray cluster started as users start it (`ray start --head` in a subprocess
-on a free port, stopped at the end): `--ray ADDRESS`, `$RAY_ADDRESS` and `--ray auto` join it
-and give a plain run's files; a bad later config stops the call before any frame is sent."""
+on a free port, stopped at the end), whose workers cannot open the frame files (so the frames
+must travel as bytes): `--ray ADDRESS`, `$RAY_ADDRESS` and `--ray auto` join it and give a
+plain run's files; a bad later config stops the call before any frame is sent; SIGTERM."""
 
 import json
 import os
@@ -28,7 +29,7 @@ def free_port() -> int:
 
 
 @pytest.fixture(scope="module")
-def cluster(tmp_path_factory):
+def cluster(tmp_path_factory, scene):
     """A head node with 2 CPUs on a free port and localhost, its own temporary folder, no token
     authentication (a token a user made for their own cluster must not leak in), frames slowed
     by half a second (tests/slow.py); stopped afterwards."""
@@ -40,7 +41,8 @@ def cluster(tmp_path_factory):
 
     # the cluster's workers infer each chunk half a second slower: a signal sent after the
     # first frame is written always lands while the run goes on
-    env = {**slow_env(tmp, 0.5), "RAY_TMPDIR": str(tmp / "ray"), "RAY_AUTH_MODE": "disabled"}
+    env = {**slow_env(tmp, 0.5), "RAY_TMPDIR": str(tmp / "ray"), "RAY_AUTH_MODE": "disabled",
+           "DPOM_TEST_NO_READ": str(scene[0] / "scene")}  # its workers cannot read the frames
     env.pop("RAY_ADDRESS", None)
     start = subprocess.run([str(RAY), "start", "--head", f"--port={port}", "--node-ip-address=127.0.0.1",
                             "--num-cpus=2", "--num-gpus=0",
@@ -66,8 +68,33 @@ def scene(tmp_path_factory):
 
 
 def dpom(args, env, timeout=600):
+    """dpom-warp in a subprocess as a driver: it reads the frames (the cluster's workers cannot)."""
+    env = {k: v for k, v in env.items() if k != "DPOM_TEST_NO_READ"}
     return subprocess.run([sys.executable, "-m", "dpom_warp.cli", *args], capture_output=True, text=True,
                           timeout=timeout, env=env)
+
+
+def test_the_cluster_workers_cannot_read_the_frames(cluster, scene):
+    """What makes the runs here prove that frames travel as bytes: a task on the cluster that
+    opens a frame file is refused."""
+    import ray
+
+    address, env = cluster
+    frame = sorted((scene[0] / "scene" / "frames").glob("*.png"))[0]
+    assert not ray.is_initialized()
+    ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    try:
+        @ray.remote
+        def read(path):
+            try:
+                with open(path, "rb") as f:
+                    return len(f.read())
+            except PermissionError as e:
+                return str(e)
+
+        assert "this node has no access to the frames" in ray.get(read.remote(str(frame)), timeout=120)
+    finally:
+        ray.shutdown()
 
 
 def test_ray_address_env_and_auto_join_the_cluster(cluster, scene, tmp_path):
@@ -109,7 +136,7 @@ def test_sigterm_on_a_ray_run_stops_it_and_its_actors(cluster, scene, tmp_path):
     address, env = cluster
     tmp, path = scene
     out = tmp_path / "ray"
-    driver_env = {k: v for k, v in env.items() if k != "PYTHONPATH"}  # the driver is not slowed
+    driver_env = {k: v for k, v in env.items() if k not in ("PYTHONPATH", "DPOM_TEST_NO_READ")}
     proc = subprocess.Popen([sys.executable, "-m", "dpom_warp.cli", "run", str(path), "--no-progress", "--ray",
                              address, "--output", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=driver_env)
