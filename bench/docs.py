@@ -288,13 +288,19 @@ def eval_block(out: Path) -> str:
     return "\n".join([table, "", stamp("fast path (defaults)")])
 
 
-def speed_block(out: Path) -> str:
-    code = subprocess.run([sys.executable, "-m", "bench", "--scenes", "kinect_v2", "drones", "--repeats", "3",
-                           "--batch", "1", "--moda-frames", "0", "--reference", "--output", str(out / "bench")],
+def bench_markdown(module: str, folder: Path, md_name: str, *args: str) -> str:
+    """Run `python -m MODULE ARGS --output FOLDER` (a benchmark) and return the Markdown it
+    wrote to FOLDER/MD_NAME; its error output ends the docs run if it fails."""
+    code = subprocess.run([sys.executable, "-m", module, *args, "--output", str(folder)],
                           capture_output=True, text=True, cwd=ROOT)
     if code.returncode:
         raise SystemExit(code.stderr[-2000:])
-    md = (out / "bench" / "bench_cpu.md").read_text().strip().splitlines()
+    return (folder / md_name).read_text().strip()
+
+
+def speed_block(out: Path) -> str:
+    md = bench_markdown("bench", out / "bench", "bench_cpu.md", "--scenes", "kinect_v2", "drones", "--repeats",
+                        "3", "--batch", "1", "--moda-frames", "0", "--reference").splitlines()
     table = [line for line in md if line.startswith("|")]
     table = [re.sub(r"\| - \| - \|$", "|", re.sub(r"\| - \| - \| - \|$", "|", line)) for line in table]
     notes = [line for line in md if line and not line.startswith("|") and not line.startswith("Machine")]
@@ -310,20 +316,12 @@ def _drop_empty_columns(table: list[str]) -> list[str]:
 
 
 def scaleout_block(out: Path) -> str:
-    code = subprocess.run([sys.executable, "-m", "bench.scaleout", "--repeats", "3", "--output",
-                           str(out / "scaleout")], capture_output=True, text=True, cwd=ROOT)
-    if code.returncode:
-        raise SystemExit(code.stderr[-2000:])
-    md = (out / "scaleout" / "scaleout.md").read_text().strip()
+    md = bench_markdown("bench.scaleout", out / "scaleout", "scaleout.md", "--repeats", "3")
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.scaleout`")])
 
 
 def tracking_block(out: Path) -> str:
-    code = subprocess.run([sys.executable, "-m", "bench.tracking", "--output", str(out / "tracking"),
-                           "--long", "10000"], capture_output=True, text=True, cwd=ROOT)
-    if code.returncode:
-        raise SystemExit(code.stderr[-2000:])
-    md = (out / "tracking" / "tracking.md").read_text().strip()
+    md = bench_markdown("bench.tracking", out / "tracking", "tracking.md", "--long", "10000")
     from dpom_warp.pipeline import retrack
 
     scene = out / "tracking" / "6_people_crossing"
@@ -334,20 +332,12 @@ def tracking_block(out: Path) -> str:
 
 
 def recordings_block(out: Path) -> str:
-    code = subprocess.run([sys.executable, "-m", "bench.recordings", "--output", str(out / "recordings")],
-                          capture_output=True, text=True, cwd=ROOT)
-    if code.returncode:
-        raise SystemExit(code.stderr[-2000:])
-    md = (out / "recordings" / "recordings.md").read_text().strip()
+    md = bench_markdown("bench.recordings", out / "recordings", "recordings.md")
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.recordings`")])
 
 
 def live_block(out: Path) -> str:
-    code = subprocess.run([sys.executable, "-m", "bench.live", "--output", str(out / "live")],
-                          capture_output=True, text=True, cwd=ROOT)
-    if code.returncode:
-        raise SystemExit(code.stderr[-2000:])
-    md = (out / "live" / "live.md").read_text().strip()
+    md = bench_markdown("bench.live", out / "live", "live.md")
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.live`")])
 
 
