@@ -248,8 +248,6 @@ def ros1_image_messages(path: Path, topic: str):
     """Depth images of a ROS 1 bag read without rosbags: the bag format's records walked by
     hand (chunks, connections 0x07, message data 0x02; ROS 1 serialisation of sensor_msgs/Image)."""
     data = path.read_bytes()
-    pos = data.index(b"\n") + 1  # "#ROSBAG V2.0\n"
-    conns, images = {}, []
 
     def fields(header):
         out, i = {}, 0
@@ -260,47 +258,44 @@ def ros1_image_messages(path: Path, topic: str):
             i += 4 + n
         return out
 
-    while pos < len(data):
-        (hl,) = struct.unpack_from("<i", data, pos)
-        h = fields(data[pos + 4:pos + 4 + hl])
-        pos += 4 + hl
-        (dl,) = struct.unpack_from("<i", data, pos)
-        body = data[pos + 4:pos + 4 + dl]
-        pos += 4 + dl
+    def records(buf, pos=0):
+        """(header fields, body) of each record in `buf`, the records of chunks included."""
+        while pos < len(buf):
+            (hl,) = struct.unpack_from("<i", buf, pos)
+            h = fields(buf[pos + 4:pos + 4 + hl])
+            pos += 4 + hl
+            (dl,) = struct.unpack_from("<i", buf, pos)
+            body = buf[pos + 4:pos + 4 + dl]
+            pos += 4 + dl
+            if h.get("op", b"\x00")[0] == 0x05:  # a chunk (lz4 frames in RealSense recordings)
+                if h["compression"] == b"lz4":
+                    import lz4.frame
+
+                    body = lz4.frame.decompress(body)
+                elif h["compression"] == b"bz2":
+                    import bz2
+
+                    body = bz2.decompress(body)
+                yield from records(body)
+            else:
+                yield h, body
+
+    conns, images = {}, []
+    for h, b2 in records(data, data.index(b"\n") + 1):  # after "#ROSBAG V2.0\n"
         op = h.get("op", b"\x00")[0]
-        if op == 0x05:  # a chunk: records inside (lz4 frames in RealSense recordings)
-            if h["compression"] == b"lz4":
-                import lz4.frame
-
-                body = lz4.frame.decompress(body)
-            elif h["compression"] == b"bz2":
-                import bz2
-
-                body = bz2.decompress(body)
-            i = 0
-            while i < len(body):
-                (hl2,) = struct.unpack_from("<i", body, i)
-                h2 = fields(body[i + 4:i + 4 + hl2])
-                i += 4 + hl2
-                (dl2,) = struct.unpack_from("<i", body, i)
-                b2 = body[i + 4:i + 4 + dl2]
-                i += 4 + dl2
-                op2 = h2["op"][0]
-                if op2 == 0x07:
-                    conns[struct.unpack("<i", h2["conn"])[0]] = h2["topic"].decode()
-                elif op2 == 0x02 and conns.get(struct.unpack("<i", h2["conn"])[0]) == topic:
-                    j = 12
-                    (n,) = struct.unpack_from("<i", b2, j)
-                    j += 4 + n  # frame_id
-                    height, width = struct.unpack_from("<II", b2, j)
-                    j += 8
-                    (n,) = struct.unpack_from("<i", b2, j)
-                    enc = b2[j + 4:j + 4 + n].decode()
-                    j += 4 + n + 1
-                    (step,) = struct.unpack_from("<I", b2, j)
-                    (n,) = struct.unpack_from("<i", b2, j + 4)
-                    raw = np.frombuffer(b2[j + 8:j + 8 + n], "<u2").reshape(height, width)
-                    images.append((enc, raw))
+        if op == 0x07:
+            conns[struct.unpack("<i", h["conn"])[0]] = h["topic"].decode()
+        elif op == 0x02 and conns.get(struct.unpack("<i", h["conn"])[0]) == topic:
+            j = 12
+            (n,) = struct.unpack_from("<i", b2, j)
+            j += 4 + n  # frame_id
+            height, width = struct.unpack_from("<II", b2, j)
+            j += 8
+            (n,) = struct.unpack_from("<i", b2, j)
+            enc = b2[j + 4:j + 4 + n].decode()
+            j += 4 + n + 1
+            (n,) = struct.unpack_from("<i", b2, j + 4)  # after the row step
+            images.append((enc, np.frombuffer(b2[j + 8:j + 8 + n], "<u2").reshape(height, width)))
     return images
 
 
