@@ -50,11 +50,10 @@ class NewestFrame:
 def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None = None, log=print,
              max_frames: int | None = None, overwrite: bool = False, first_frame_timeout: float = 10.0) -> dict:
     """Infer a live camera's frames until Ctrl-C or `max_frames`; returns the summary."""
-    from .engine import resolve_device
-    from .pipeline import (_jsonable, prepare_output, summarise, track_table_files)
+    from .pipeline import _jsonable, prepare_output, set_up, summarise, track_table_files
     from .sources.realsense import RealSenseLive
     from .tracking import Cells, OnlineTracker
-    from .worker import FrameItem, FrameWorker, WorkerSpec, make_engine, read_frame, write_output
+    from .worker import FrameItem, FrameWorker, write_output
 
     if cfg.inputs.auto_background:
         raise ConfigError("input.background: auto estimates the background from the run's frames; a live "
@@ -66,24 +65,11 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     t_start = time.perf_counter()
     source = RealSenseLive(cfg.inputs.frames)
     info = source.info()
-    try:
-        dev = resolve_device(device or cfg.device)
-    except ValueError as e:
-        raise ConfigError(str(e)) from None
     out = Path(output_dir or cfg.output.dir)
-    camera = cfg.camera
-    engine = make_engine(cfg, camera, dev, 1)
-    if cfg.inputs.background:
-        from .pipeline import expand
-
-        bg = [read_frame(cfg, f) for f in expand(cfg.inputs.background, "input.background", cfg.inputs.topic, log)]
-        engine.set_background_frames(engine.resolution.frames(np.stack(bg)))
-        background = f"{len(bg)} background frames"
-    else:
-        background = "floor plane only"
-    spec = WorkerSpec(cfg, camera, dev, None, pictures=cfg.output.images)
-    worker = FrameWorker(spec, engine=engine)
-    geometry = worker.geometry
+    setup = set_up(cfg, [], device, log)  # the plain run's setup: device, engine, background frames
+    dev, camera, engine, background = setup.device, setup.spec.camera, setup.engine, setup.background
+    worker = FrameWorker(setup.spec, engine=engine)
+    geometry = setup.geometry
     cells = Cells.of(geometry, cfg.grid, (camera.width, camera.height), cfg.tracking.regions,
                      cfg.detection.nms_radius)
     method = cfg.tracking.method
