@@ -13,6 +13,9 @@ from ..io import InputError
 from . import Frame, Source, SourceInfo
 
 
+FRAME_SUFFIXES = (".png", ".npy")
+
+
 class FileFrames(Source):
     def __init__(self, pattern: str, key: str = "input.frames"):
         self.pattern, self.key = pattern, key
@@ -21,6 +24,13 @@ class FileFrames(Source):
             where = os.path.abspath(os.path.expanduser(pattern))
             raise InputError(f"{key}: no files match {pattern!r} (looked for {where}; relative paths in a "
                              f"config file are relative to its folder)")
+        first = self.files[0]
+        if len(self.files) == 1 and first.suffix and first.suffix.lower() not in FRAME_SUFFIXES:
+            from . import RECORDING_SUFFIXES
+
+            raise InputError(f"{key}: {first}: unknown format {first.suffix!r}; expected a glob of 16-bit "
+                             f"PNG or .npy frames, or a recording ({', '.join(RECORDING_SUFFIXES)}, a ROS 2 "
+                             f"bag's folder)")
 
     def _raw(self, f: Path) -> np.ndarray:
         from ..io import read_depth

@@ -7,8 +7,6 @@ the config's camera differs from the recording's."""
 from __future__ import annotations
 
 import dataclasses
-import glob
-import os
 import time
 from collections import Counter
 from pathlib import Path
@@ -66,7 +64,6 @@ def render_synthetic(cfg: RunConfig, log=print) -> None:
         f"({'checked' if cached else 'generated'} in {time.perf_counter() - t:.1f} s)")
 
 
-FRAME_SUFFIXES = (".png", ".npy")
 
 
 def expand(pattern: str, key: str, topic: str | None = None, log=print) -> list[Path]:
@@ -77,7 +74,7 @@ def expand(pattern: str, key: str, topic: str | None = None, log=print) -> list[
 
 def source_frames(pattern: str, key: str, topic: str | None = None, log=print) -> tuple[list[Path], dict | None]:
     """(frame files, the recording's source.json or None for a glob)."""
-    from . import RECORDING_SUFFIXES, is_recording, materialise
+    from . import is_recording, materialise
 
     if is_recording(pattern):
         meta = materialise(pattern, topic, key, log)
@@ -86,17 +83,9 @@ def source_frames(pattern: str, key: str, topic: str | None = None, log=print) -
             reason = meta["skipped"][0]["reason"] if meta["skipped"] else "no depth frames"
             raise InputError(f"{key}: {pattern}: no readable depth frame ({reason})")
         return files, meta
-    files = sorted(Path(p) for p in glob.glob(os.path.expanduser(pattern)))
-    files = [f for f in files if f.is_file()]
-    if not files:
-        where = os.path.abspath(os.path.expanduser(pattern))
-        raise InputError(f"{key}: no files match {pattern!r} (looked for {where}; relative paths in a "
-                         f"config file are relative to its folder)")
-    if len(files) == 1 and files[0].suffix.lower() not in FRAME_SUFFIXES and files[0].suffix:
-        raise InputError(f"{key}: {files[0]}: unknown format {files[0].suffix!r}; expected a glob of 16-bit "
-                         f"PNG or .npy frames, or a recording ({', '.join(RECORDING_SUFFIXES)}, a ROS 2 "
-                         f"bag's folder)")
-    return files, None
+    from .files import FileFrames
+
+    return FileFrames(pattern, key).files, None
 
 
 def recording_notes(cfg: RunConfig, meta: dict) -> list[str]:
