@@ -162,6 +162,20 @@ def fade(colour, age: float, towards=(32, 32, 32)) -> tuple:
     return tuple(int(round(c + (b - c) * age)) for c, b in zip(colour, towards))
 
 
+def track_identities(detections, tracks) -> dict:
+    """Detection index -> the identity of the track at it: a track not bridged in this frame
+    whose position is within 0.25 m of its nearest detection (on the ground plane)."""
+    ident = {}
+    for tr in tracks:
+        if tr["bridged"] or not detections:
+            continue
+        x, y = tr["trail"][-1][0], tr["trail"][-1][1]  # where it is now
+        k = min(range(len(detections)), key=lambda i: np.hypot(detections[i].x - x, detections[i].y - y))
+        if np.hypot(detections[k].x - x, detections[k].y - y) < 0.25:
+            ident[k] = tr["id"]
+    return ident
+
+
 def draw_tracks(draw, panel: MapPanel, ox, oy, tracks, trail: int, side: bool = False):
     """Each track's trail (the last `trail` frames, fading with age) and its identity on a
     map panel; `side`: the panel shows (x, z)."""
@@ -228,15 +242,9 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     boxes = [(np.asarray(d.box, float) + [-0.5, -0.5, 0.5, 0.5]) * zoom for d in detections]
     for u0, v0, u1, v1 in boxes:
         draw.rectangle((ox + u0, oy + v0, ox + u1, oy + v1), outline=(255, 255, 255), width=2)
-    ident = {}
+    ident = track_identities(detections, tracks or [])
     for tr in tracks or []:
-        k = min(range(len(detections)), default=None,
-                key=lambda i: np.hypot(detections[i].x - tr["trail"][-1][0], detections[i].y - tr["trail"][-1][1]))
-        near = k is not None and np.hypot(detections[k].x - tr["trail"][-1][0],
-                                          detections[k].y - tr["trail"][-1][1]) < 0.25
-        if near and not tr["bridged"]:
-            ident[k] = tr["id"]
-        else:  # bridged: where the tracker holds the person, hidden or missed
+        if tr["id"] not in ident.values():  # bridged: where the tracker holds the person, hidden or missed
             u0, v0, u1, v1 = (np.asarray(tr["box"], float) + [-0.5, -0.5, 0.5, 0.5]) * zoom
             dashed_rectangle(draw, (ox + u0, oy + v0, ox + u1, oy + v1), track_colour(tr["id"]), width=2)
             draw.text((ox + u0 + 2, oy + v0 + 2), f"#{tr['id']}", fill=track_colour(tr["id"]),

@@ -54,18 +54,14 @@ class RerunLog:
     def frame(self, index: int, timestamp: float | None, depth_m: np.ndarray, dets: list, rho_map: np.ndarray,
               tracks: list | None = None) -> None:
         """One frame: `dets` (detect.Detected), `tracks` dicts of id, xyz, trail (positions)."""
-        from .render import colourise, track_colour
+        from .render import colourise, track_colour, track_identities
 
         rr, rec = self.rr, self.rec
         rec.set_time("frame", sequence=index)
         if timestamp is not None:
             rec.set_time("time", duration=float(timestamp))
         rec.log("world/camera/depth", rr.DepthImage(np.asarray(depth_m, np.float32), meter=1.0))
-        ident = {}
-        for tr in tracks or []:
-            for i, d in enumerate(dets):
-                if np.hypot(d.x - tr["xyz"][0], d.y - tr["xyz"][1]) < 0.25 and not tr.get("bridged"):
-                    ident[i] = tr["id"]
+        ident = track_identities(dets, tracks or [])
         boxes = np.array([d.box for d in dets], float).reshape(-1, 4)
         labels = [(f"#{ident[i]} " if i in ident else "") + f"{d.rho:.2f}" for i, d in enumerate(dets)]
         rec.log("world/camera/depth/detections",
