@@ -15,8 +15,8 @@ bytes (drawn on the actor: the driver only writes files) and the frame's record.
 Faults: an actor whose process dies (killed, out of memory, its node lost) is restarted by
 Ray, which retries its unfinished calls on the new process (max_restarts, max_task_retries);
 an actor that is gone for good has its frames sent to the others. A frame is written once,
-when its result arrives; a frame that has taken down its actor 3 times is skipped with that
-reason. Ctrl-C or SIGTERM kills the actors; finished frames are kept for --resume.
+when its result arrives; a frame that has taken down its actor for good MAX_LOSSES (2) times is
+skipped with that reason. Ctrl-C or SIGTERM kills the actors; finished frames are kept for --resume.
 """
 
 from __future__ import annotations

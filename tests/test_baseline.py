@@ -6,6 +6,7 @@ import numpy as np
 from bench.baseline import ClusterParams, detect_people, heads, score_config
 
 from test_cli import small_config
+from paths import CONFIGS
 
 RNG = np.random.default_rng(0)
 
@@ -55,7 +56,7 @@ def test_baseline_scores_a_rendered_scene(tmp_path):
 
     import yaml
 
-    demo = yaml.safe_load(open("configs/demo_people.yaml"))  # full resolution, as the bench runs it
+    demo = yaml.safe_load(open(CONFIGS / "demo_people.yaml"))  # full resolution, as the bench runs it
     cfg = load_config(small_config(tmp_path, camera=demo["camera"]))
     render_synthetic(cfg, log=lambda *_: None)
     s = score_config(cfg)

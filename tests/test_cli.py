@@ -8,10 +8,11 @@ import pytest
 import yaml
 
 from dpom_warp.cli import main
+from paths import CONFIGS
 
 
 def small_config(tmp_path, **changes):
-    cfg = yaml.safe_load(open("configs/demo_people.yaml"))
+    cfg = yaml.safe_load(open(CONFIGS / "demo_people.yaml"))
     cache = tmp_path / "scene"
     cfg["device"] = "cpu"
     cfg["input"]["frames"] = f"{cache}/frames/*.png"

@@ -12,6 +12,9 @@ from bench.robustness import PLANE
 from dpom_warp.config import load_config
 from dpom_warp.pipeline import run
 from dpom_warp.synthetic import generate
+from paths import CONFIGS
+
+DEMO = CONFIGS / "demo_people.yaml"
 
 CROWD = ["synthetic.people=10", "synthetic.min_gap=0.45", "synthetic.area=[-1.6, 1.6, 2.5, 5.5]"]
 CEILING = ["camera.extrinsics.height=3.5", "camera.extrinsics.pitch_deg=90", "camera.extrinsics.yaw_deg=30",
@@ -22,7 +25,7 @@ CEILING = ["camera.extrinsics.height=3.5", "camera.extrinsics.pitch_deg=90", "ca
 
 def scene(tmp_path, sets, frames, seed=5):
     cache = tmp_path / "scene"
-    return load_config("configs/demo_people.yaml", sets + [
+    return load_config(str(DEMO), sets + [
         f"synthetic.seed={seed}", f"synthetic.frames={frames}", "synthetic.background_frames=5",
         f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
         f"input.background={cache}/background/*.png", f"evaluation.ground_truth={cache}/ground_truth.json",

@@ -2,11 +2,10 @@
 `python -m bench.docs` writes, each stamped; the config reference is the models'."""
 
 import re
-from pathlib import Path
 
 from bench.docs import BUILDERS, blocks, config_block, replace_block
 
-ROOT = Path(__file__).resolve().parents[1]
+from paths import ROOT
 TEXT = (ROOT / "README.md").read_text()
 BLOCK = re.compile(r"<!-- docs:([a-z_]+) -->\n(.*?)\n<!-- /docs:\1 -->", re.S)
 

@@ -18,8 +18,9 @@ from dpom_warp.cli import main
 from dpom_warp.io import write_depth_png
 
 from test_cli import small_config
+import paths
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "five_people"
+REAL = paths.REAL / "five_people"
 
 
 @pytest.fixture(scope="module")

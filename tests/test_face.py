@@ -3,7 +3,6 @@ errors users hit first, --version, help, unconverged frames, pictures and eval -
 
 import csv
 import json
-from pathlib import Path
 
 import jsonschema
 import numpy as np
@@ -18,7 +17,7 @@ from dpom_warp.io import InputError, read_depth
 
 from test_cli import small_config
 
-ROOT = Path(__file__).resolve().parents[1]
+from paths import ROOT
 CONFIGS = sorted((ROOT / "configs").glob("*.yaml"))
 SCHEMA = ROOT / "configs" / "dpom-warp.schema.json"
 

@@ -14,6 +14,9 @@ from dpom_warp.resolution import (AUTO_MIN_PIXELS, REDUCERS, auto_stride, farthe
                                   reduce_depth, strided_camera)
 
 from scenes import random_scene
+from paths import CONFIGS
+
+DEMO = CONFIGS / "demo_people.yaml"
 
 # The stated bound of the sparse path (model.sparse_epsilon = eps): rho* moves by at most eps
 # from the exact path's on the random test scenes (measured: 0.41 eps at most over 20 scenes,
@@ -70,7 +73,7 @@ def test_strided_camera_rays_pass_through_block_centres(stride):
 
 
 def test_auto_stride_keeps_enough_pixels_on_the_farthest_object():
-    cfg = load_config("configs/demo_people.yaml")
+    cfg = load_config(str(DEMO))
     px = farthest_object_pixels(cfg.camera, cfg.grid, cfg.obj)
     assert 20 < px < 23  # the 0.4 m solid at ~7 m with fx = 365
     s = auto_stride(cfg.camera, cfg.grid, cfg.obj)
@@ -84,20 +87,20 @@ def test_auto_stride_keeps_enough_pixels_on_the_farthest_object():
 
 
 def test_config_stride_reduce_and_exact(tmp_path):
-    cfg = load_config("configs/demo_people.yaml")
+    cfg = load_config(str(DEMO))
     assert cfg.inputs.stride == "auto" and cfg.inputs.reduce == "median"
     assert cfg.model.sparse_epsilon == 1e-4 and not cfg.model.warm_start
-    exact = load_config("configs/demo_people.yaml", ["engine.exact=true", "input.stride=3",
+    exact = load_config(str(DEMO), ["engine.exact=true", "input.stride=3",
                                                      "model.warm_start=true"])
     assert exact.inputs.stride == 1 and exact.model.sparse_epsilon == 0 and not exact.model.warm_start
-    assert load_config("configs/demo_people.yaml", ["model.sparse_epsilon=1e-6"]).model.sparse_epsilon == 1e-6
+    assert load_config(str(DEMO), ["model.sparse_epsilon=1e-6"]).model.sparse_epsilon == 1e-6
     for sets, message in [(["input.stride=fast"], "input.stride: expected auto or an integer >= 1, found 'fast'"),
                           (["input.stride=0"], "input.stride: expected a value >= 1, found 0"),
                           (["input.reduce=mean"], "input.reduce: expected one of median, nearest, min, found 'mean'"),
                           (["model.sparse_epsilon=-1"], "model.sparse_epsilon: expected a value >= 0, found -1")]:
         with pytest.raises(ConfigError) as e:
-            load_config("configs/demo_people.yaml", sets)
-        assert str(e.value) == f"configs/demo_people.yaml: {message}"
+            load_config(str(DEMO), sets)
+        assert str(e.value) == f"{DEMO}: {message}"
 
 
 @pytest.mark.parametrize("seed", range(4))

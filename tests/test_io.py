@@ -1,14 +1,14 @@
 """Reading depth frames: good files come back in metres, bad ones give one-line errors."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
 from dpom_warp.io import InputError, read_depth, write_depth_png
+import paths
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "five_people" / "depth_mm.png"
+REAL = paths.REAL / "five_people" / "depth_mm.png"
 
 
 def test_png_roundtrip_in_metres(tmp_path):

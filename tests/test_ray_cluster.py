@@ -4,7 +4,6 @@ must travel as bytes): `--ray ADDRESS`, `$RAY_ADDRESS` and `--ray auto` join it 
 plain run's files; a bad later config stops the call before any frame is sent; SIGTERM."""
 
 import json
-import os
 import shutil
 import socket
 import subprocess

@@ -15,7 +15,7 @@ from PIL import Image
 
 from dpom_warp.cli import main
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+from paths import REAL
 RS_BAG = REAL / "realsense_d435" / "single_depth_color_640x480.bag"
 AZURE = REAL / "azure_kinect" / "recording.mkv"
 

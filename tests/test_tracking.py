@@ -11,6 +11,7 @@ import pytest
 from dpom_warp.tracking import (TABLE_HEADER, TRACKS_HEADER, Cells, TrackingOptions, link_naive,
                                 read_tracks_csv, run_tracker, track_offline, track_online,
                                 tracks_csv)
+from paths import CONFIGS
 
 NX, NY, STEP = 40, 30, 0.1
 
@@ -346,7 +347,7 @@ def test_voxel_run_gives_3d_tracks(tmp_path):
 
     from dpom_warp.cli import main
 
-    cfg = yaml.safe_load(open("configs/demo_drones.yaml"))
+    cfg = yaml.safe_load(open(CONFIGS / "demo_drones.yaml"))
     cache = tmp_path / "scene"
     cfg.update(device="cpu")
     cfg["input"].update(frames=f"{cache}/frames/*.png", background=f"{cache}/background/*.png")

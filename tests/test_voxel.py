@@ -15,6 +15,7 @@ from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_fro
 from dpom_warp.model import ModelParams
 
 from test_model_cases import H, W, run_both, toy_geometry, wall_background
+from paths import CONFIGS
 
 
 def cupboard_background():
@@ -99,7 +100,7 @@ def test_background_occlusion_matches_reference_on_random_scenes(device):
 
 
 def small_drone_config(tmp_path):
-    cfg = yaml.safe_load(open("configs/demo_drones.yaml"))
+    cfg = yaml.safe_load(open(CONFIGS / "demo_drones.yaml"))
     cache = tmp_path / "scene"
     cfg["device"] = "cpu"
     cfg["input"].update(frames=f"{cache}/frames/*.png", background=f"{cache}/background/*.png")
