@@ -14,9 +14,10 @@ bytes (drawn on the actor: the driver only writes files) and the frame's record.
 
 Faults: an actor whose process dies (killed, out of memory, its node lost) is restarted by
 Ray, which retries its unfinished calls on the new process (max_restarts, max_task_retries);
-an actor that is gone for good has its frames sent to the others. A frame is written once,
-when its result arrives; a frame that has taken down its actor for good MAX_LOSSES (2) times is
-skipped with that reason. Ctrl-C or SIGTERM kills the actors; finished frames are kept for --resume.
+an actor that is gone for good has its frames sent to the others, each alone to an actor with
+nothing else in flight. A frame is written once, when its result arrives; a frame that has
+taken down its actor for good MAX_LOSSES (2) times, the second time alone, is skipped with
+that reason. Ctrl-C or SIGTERM kills the actors; finished frames are kept for --resume.
 """
 
 from __future__ import annotations
@@ -267,16 +268,28 @@ class ActorPool:
     def outcomes(self, refs: list, jobs: list, log=print):
         """Yield (run, frame name, output, error) for every frame of `jobs` ((run, chunk of
         FrameItems), sent in order), keeping IN_FLIGHT calls on every actor that has started.
-        `refs[run]`: what FrameActor.process takes for that run."""
-        ray, queue, in_flight = self.ray, collections.deque((r, c, 0) for r, c in jobs), {}
-        while queue or in_flight:
-            for i in sorted(self.live, key=lambda i: self.load[i]):
+        `refs[run]`: what FrameActor.process takes for that run.
+
+        The frames of a call whose actor died for good are suspects: each is sent again alone,
+        to an actor with nothing else in flight, so that a second loss is that frame's own
+        (one that kills every actor it reaches is skipped, the others are kept)."""
+        ray = self.ray
+        queue, suspects = collections.deque((r, c, 0) for r, c in jobs), collections.deque()
+        in_flight, alone = {}, set()  # alone: the actors inferring a suspect, and nothing else
+
+        def send(i, run, chunk, losses):
+            sent = [dataclasses.replace(item, data=_read(item.path)) for item in chunk]
+            in_flight[self.actors[i].process.remote(run, refs[run], sent)] = (i, run, chunk, losses)
+            self.load[i] += 1
+
+        while queue or suspects or in_flight:
+            for i in sorted(self.live - alone, key=lambda i: self.load[i]):
+                if suspects and not self.load[i]:
+                    send(i, *suspects.popleft())
+                    alone.add(i)
+                    continue
                 while queue and self.load[i] < IN_FLIGHT:
-                    run, chunk, losses = queue.popleft()
-                    sent = [dataclasses.replace(item, data=_read(item.path)) for item in chunk]
-                    call = self.actors[i].process.remote(run, refs[run], sent)
-                    in_flight[call] = (i, run, chunk, losses)
-                    self.load[i] += 1
+                    send(i, *queue.popleft())
             if not self.live and not self.starting:
                 raise WorkerError("--ray: every actor has died; finished frames are kept, "
                                   "continue with --resume")
@@ -288,19 +301,21 @@ class ActorPool:
                 continue
             i, run, chunk, losses = in_flight.pop(done[0])
             self.load[i] -= 1
+            alone.discard(i)
             try:
                 info, outcomes = ray.get(done[0])
             except self.lost as e:  # the actor is gone for good: its frames go elsewhere
+                if i in self.live:
+                    log(f"ray: actor {i} died ({_cause(e)}); its frames go to the other actors")
                 self.live.discard(i)
-                log(f"ray: actor {i} died ({_cause(e)}); its frames go to the other actors")
-                if losses + 1 >= MAX_LOSSES:
-                    for item in chunk:
+                for item in chunk:
+                    if losses + 1 >= MAX_LOSSES:
                         yield run, os.path.basename(item.path), None, (
                             f"{item.path}: the actor inferring it died {MAX_LOSSES} times "
                             f"(killed, or out of memory)")
-                else:
-                    self.resent += len(chunk)
-                    queue.appendleft((run, chunk, losses + 1))
+                    else:
+                        self.resent += 1
+                        suspects.append((run, [item], losses + 1))
                 continue
             if info["pid"] not in self.pids[i]:  # Ray restarted it and retried its calls
                 self.pids[i].add(info["pid"])

@@ -8,6 +8,10 @@ The camera's frames arrive on the driver's thread into a one-frame slot; the loo
 the newest, infers it with the run's engine and FrameWorker (the plain run's code), writes its
 map and record, and feeds its map to the online tracker. Stopping writes detections.csv,
 tracks.csv, track_table.csv and summary.json (with a `live` block) as a plain run does.
+
+A camera that stops sending (unplugged, or its stream stalled: no frame for STALL_S seconds)
+ends the run with every output of the frames inferred so far written, then one line and exit
+code 1; its SDK failing to stop (as an unplugged camera does) loses nothing either.
 """
 
 from __future__ import annotations
@@ -20,7 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from .config import ConfigError, RunConfig
-from .io import write_json_atomic
+from .io import WorkerError, write_json_atomic
+
+STALL_S = 5.0  # seconds without a frame after which a streaming camera has stopped sending
 
 
 class NewestFrame:
@@ -93,10 +99,10 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     records, names, latencies, infer_s = {}, [], [], []
     done, t_first, last_line, track_s = 0, None, time.perf_counter(), 0.0
     source.start(slot.put)
-    stopped_by = "max_frames"
+    stopped_by, stop_error = "max_frames", None
     try:
         while max_frames is None or done < max_frames:
-            fr = slot.take(first_frame_timeout if done == 0 else 5.0)
+            fr = slot.take(first_frame_timeout if done == 0 else STALL_S)
             if fr is None:
                 if done == 0:
                     raise ConfigError(f"input.frames: {cfg.inputs.frames}: no frame within "
@@ -132,7 +138,11 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     except KeyboardInterrupt:
         stopped_by = "Ctrl-C"
     finally:
-        source.stop()
+        try:
+            source.stop()
+        except RuntimeError as e:  # an unplugged camera's SDK may fail to stop it: keep the frames
+            stop_error = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            log(f"live: the camera did not stop cleanly ({stop_error})")
         if view is not None:
             view.close()
     wall = time.perf_counter() - (t_first or time.perf_counter())
@@ -151,10 +161,15 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     summary["live"] = {"source": info.kind, "frames": done, "received": slot.received,
                        "dropped": slot.dropped, "dropped_share": slot.dropped / max(1, slot.received),
                        "frames_per_s": done / wall if wall > 0 else None,
-                       "camera_fps": fps, "stopped_by": stopped_by,
+                       "camera_fps": fps, "stopped_by": stopped_by, "stop_error": stop_error,
                        "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
                        "latency_ms_p95": 1000 * float(np.percentile(latencies, 95)) if latencies else None,
                        "infer_ms_median": 1000 * statistics.median(infer_s) if infer_s else None}
     summary["timings"]["total_s"] = time.perf_counter() - t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))
+    if stopped_by == "camera stopped sending":
+        raise WorkerError(f"input.frames: {cfg.inputs.frames}: the camera stopped sending (no frame for "
+                          f"{STALL_S:g} s after {done} frames: unplugged?); expected frames until Ctrl-C"
+                          f"{' or --max-frames' if max_frames else ''}; the {done} frames inferred are "
+                          f"written to {out}")
     return summary

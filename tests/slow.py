@@ -5,15 +5,18 @@ arrives while it still runs (the signal tests then never depend on the machine's
 Ray's workers, which inherit it) sleep `seconds` before each FrameWorker.process call: a
 sitecustomize on PYTHONPATH patches dpom_warp.worker when it is first imported. With
 DPOM_TEST_NO_READ=FOLDER in the environment too, those processes cannot open files under
-FOLDER (a cluster node without the frames: they must come as bytes)."""
+FOLDER (a cluster node without the frames: they must come as bytes); with DPOM_TEST_CRASH=END,
+a FrameWorker.process call given a frame whose path ends with END ends its process at once
+(os._exit: a frame that takes down its actor)."""
 
 import os
 from pathlib import Path
 
 HOOK = '''
-import importlib.abc, importlib.machinery, sys, time
+import importlib.abc, importlib.machinery, os, sys, time
 
 DELAY = {delay!r}
+CRASH = os.environ.get("DPOM_TEST_CRASH")
 
 
 class _SlowFrames(importlib.abc.MetaPathFinder):
@@ -28,9 +31,11 @@ class _SlowFrames(importlib.abc.MetaPathFinder):
             run_module(module)
             real = module.FrameWorker.process
 
-            def process(self, *args, **kwargs):
+            def process(self, items, *args, **kwargs):
+                if CRASH and any(item.path.endswith(CRASH) for item in items):
+                    os._exit(3)
                 time.sleep(DELAY)
-                return real(self, *args, **kwargs)
+                return real(self, items, *args, **kwargs)
 
             module.FrameWorker.process = process
 
@@ -40,7 +45,7 @@ class _SlowFrames(importlib.abc.MetaPathFinder):
 
 sys.meta_path.insert(0, _SlowFrames())
 
-import builtins, os  # noqa: E401
+import builtins  # noqa: E402
 
 _NO_READ = os.environ.get("DPOM_TEST_NO_READ")
 if _NO_READ:  # this process may not open files under that folder (a node without the frames)

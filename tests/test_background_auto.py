@@ -84,6 +84,32 @@ def test_background_found_behind_moving_people():
     np.testing.assert_allclose(bg.mu[-4:, -4:], 1.5, atol=0.01)
 
 
+@pytest.mark.parametrize("still", [0.70, 0.85])
+def test_someone_still_in_more_than_1_minus_min_share_of_the_frames_is_background(device, still):
+    """The README's limit, on both sides of it: a wall at 4 m with someone standing still at
+    1.5 m in front of it in a share `still` of 40 frames (spread over the sequence). With the
+    wall in at least min_share (0.2) of the frames (still = 0.70) the wall is the background;
+    with it in less (still = 0.85, more than 1 - min_share) the person is."""
+    rng = np.random.default_rng(7)
+    n, shape = 40, (6, 8)
+    auto = AutoBackground()
+    assert auto.min_share == 0.2
+    here = rng.permutation(n) < round(still * n)  # the frames the person is in
+    wall = 4.0 + rng.normal(size=(n,) + shape) * PARAMS.sensor_sigma(4.0)
+    person = 1.5 + rng.normal(size=(n,) + shape) * PARAMS.sensor_sigma(1.5)
+    frames = np.where(here[:, None, None], person, wall).astype(np.float32)
+    est = BackgroundEstimator(*shape, PARAMS, auto, device)
+    est.add(frames[:16])
+    est.add(frames[16:])
+    got, fallback = est.result()
+    want, _ = ref.background_clusters(frames, PARAMS, auto)
+    np.testing.assert_allclose(got.mu, want.mu, rtol=1e-12, atol=1e-12)
+    assert not fallback.any() and np.all(got.outlier < 1)
+    surface = 4.0 if still < 1 - auto.min_share else 1.5  # the wall, or the person standing still
+    shown = min(here.sum(), n - here.sum())  # readings of that surface, at least
+    np.testing.assert_allclose(got.mu, surface, atol=4 * PARAMS.sensor_sigma(surface) / np.sqrt(shown))
+
+
 def test_pixels_without_a_stable_surface_fall_back():
     """Readings scattered over depths with no surface in min_share of the frames, or fewer
     frames than min_frames: the floor-only model's pixels."""

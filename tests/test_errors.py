@@ -203,18 +203,34 @@ def test_non_empty_output_needs_overwrite_or_resume(tmp_path, capsys, scene):
     assert "holds a run of another config (detection.threshold: 0.5 then, 0.7 now)" in capsys.readouterr().err
 
 
-def test_identical_runs_give_identical_bytes(tmp_path, scene):
-    path = write_config(tmp_path, scene[1])
-    outs = []
-    for name in ("a", "b"):
-        assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / name)]) == 0
-        outs.append(tmp_path / name)
-    a, b = outs
-    assert (a / "detections.csv").read_bytes() == (b / "detections.csv").read_bytes()
-    maps = sorted(p.name for p in (a / "maps").iterdir())
-    assert len(maps) == 6
-    for m in maps:
-        assert (a / "maps" / m).read_bytes() == (b / "maps" / m).read_bytes()
+@pytest.mark.parametrize("pose", ["given", "auto"])
+def test_identical_runs_give_identical_bytes(tmp_path, scene, pose):
+    """Two runs of one config through the CLI write the same bytes in every file (the summary
+    but its timings), the pose given or fitted on the background frames (extrinsics: auto)."""
+    sets = {"camera__extrinsics": "auto"} if pose == "auto" else {}
+    path = write_config(tmp_path, scene[1], **sets)
+    a, b = tmp_path / "first", tmp_path / "out"  # the same folder, run twice (its name is in files)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    b.rename(a)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    files = sorted(str(p.relative_to(a)) for p in a.rglob("*") if p.is_file())
+    assert files == sorted(str(p.relative_to(b)) for p in b.rglob("*") if p.is_file())
+    assert len([f for f in files if f.startswith("maps/")]) == 6 and "tracks.csv" in files
+    for name in files:
+        if name != "summary.json" and not name.startswith("frames/"):
+            assert (a / name).read_bytes() == (b / name).read_bytes(), name
+
+    def untimed(record):
+        if isinstance(record, dict):
+            return {k: untimed(v) for k, v in record.items() if not k.endswith("_s") and k not in (
+                "timings", "runner", "stats", "started", "created", "frames_per_s", "ms_per_frame", "time_ms")}
+        return [untimed(v) for v in record] if isinstance(record, list) else record
+
+    for name in ["summary.json"] + [f for f in files if f.startswith("frames/")]:
+        assert untimed(json.loads((a / name).read_text())) == untimed(json.loads((b / name).read_text())), name
+    if pose == "auto":
+        fit = json.loads((a / "summary.json").read_text())["ground_fit"]
+        assert fit["camera_height"] == pytest.approx(2.2, abs=0.02)  # the rendered camera's
 
 
 def test_interrupted_run_resumes_to_the_same_files(tmp_path, scene, monkeypatch, capsys):

@@ -78,3 +78,55 @@ def test_no_camera_is_one_line(camera_config, capsys):
     assert main(["run", str(path), "--no-progress", "--max-frames", "2"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "input.frames: realsense: no RealSense camera connected" in err
+
+
+def test_camera_unplugged_mid_run_is_one_line_and_loses_nothing(camera_config, capsys, monkeypatch):
+    """The camera goes after a few frames, as an unplugged one does: its frames stop and its SDK
+    fails to stop the sensor. Every output of the frames inferred is written (maps, records,
+    detections, tracks, the summary saying why it stopped), then one line and exit code 1."""
+    import threading
+    import time
+
+    from dpom_warp import live
+    from dpom_warp.sources.realsense import RealSenseLive
+
+    path, cam, tmp = camera_config
+    out = tmp / "out"
+    monkeypatch.setattr(live, "STALL_S", 1.0)
+    real_stop = RealSenseLive.stop
+
+    def unplugged_stop(self):
+        real_stop(self)
+        raise RuntimeError("failed to set power state\n(usb)")
+
+    monkeypatch.setattr(RealSenseLive, "stop", unplugged_stop)
+
+    def unplug():
+        deadline = time.time() + 120
+        while len(list((out / "frames").glob("*.json"))) < 3 and time.time() < deadline:
+            time.sleep(0.01)
+        cam.stop()
+
+    cam.start()
+    unplugger = threading.Thread(target=unplug)
+    unplugger.start()
+    try:
+        code = main(["run", str(path), "--no-progress"])
+    finally:
+        unplugger.join()
+        cam.stop()
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    summary = json.loads((out / "summary.json").read_text())
+    n = summary["live"]["frames"]
+    assert code == 1 and "\n" not in err and n >= 3
+    assert (f"input.frames: realsense: the camera stopped sending (no frame for 1 s after {n} frames: "
+            f"unplugged?)") in err and f"the {n} frames inferred are written to {out}" in err
+    assert summary["live"]["stopped_by"] == "camera stopped sending"
+    assert summary["live"]["stop_error"] == "failed to set power state"
+    assert "the camera did not stop cleanly (failed to set power state)" in captured.out
+    names = sorted(p.stem for p in (out / "maps").glob("*.npy"))
+    assert len(names) == n == len(list((out / "frames").glob("*.json"))) == summary["frames"]
+    rows = (out / "tracks.csv").read_text().splitlines()
+    assert rows[0].startswith("frame,track") and {r.split(",")[0] for r in rows[1:]} <= set(names)
+    assert (out / "detections.csv").exists() and not [p for p in out.rglob(".*") if p.is_file()]

@@ -1,7 +1,6 @@
 """`dpom-warp run ... --ray` on a real local Ray instance (ray.init(num_cpus=2)): the same files
 as a plain run, actors killed mid-run, several configs in one call, Ctrl-C and --resume."""
 
-import glob
 import json
 import os
 import signal
@@ -66,16 +65,48 @@ def assert_same_files(a: Path, b: Path, frames: int):
     assert json.load(open(a / "summary.json"))["scores"] == json.load(open(b / "summary.json"))["scores"]
 
 
-def actor_processes(busy=True) -> list[int]:
-    """PIDs of this machine's FrameActor processes (Ray titles them ray::FrameActor, and
-    ray::FrameActor.process while they infer)."""
-    title = b"ray::FrameActor.process" if busy else b"ray::FrameActor"
+@pytest.fixture
+def actor_pids(monkeypatch):
+    """A function giving the PIDs of this test's FrameActor processes that are inferring now:
+    the PIDs Ray reported for the run's actors (cluster.ActorPool, recorded as it learns them),
+    busy when Ray titles the process ray::FrameActor.process. No other process is touched."""
+    pools = []
+    real = cluster.ActorPool.__init__
+
+    def recorded(self, *args, **kwargs):
+        real(self, *args, **kwargs)
+        pools.append(self)
+
+    monkeypatch.setattr(cluster.ActorPool, "__init__", recorded)
+
+    def busy() -> list[int]:
+        pids = []
+        for pool in list(pools):
+            try:
+                known = [pid for group in list(pool.pids.values()) for pid in group]
+            except RuntimeError:  # the driver added an actor meanwhile: the next look sees it
+                continue
+            for pid in known:
+                try:
+                    with open(f"/proc/{pid}/cmdline", "rb") as f:
+                        if f.read().startswith(b"ray::FrameActor.process"):
+                            pids.append(pid)
+                except OSError:
+                    pass
+        return pids
+
+    return busy
+
+
+def instance_processes(folder: str) -> list[int]:
+    """PIDs of the processes of the Ray instance whose temporary folder is `folder` (its GCS
+    server, raylet and workers name their session folder under it on their command line)."""
     pids = []
-    for path in glob.glob("/proc/[0-9]*/cmdline"):
+    for pid in filter(str.isdigit, os.listdir("/proc")):
         try:
-            with open(path, "rb") as f:
-                if f.read().startswith(title):
-                    pids.append(int(path.split("/")[2]))
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                if folder.encode() in f.read():
+                    pids.append(int(pid))
         except OSError:
             pass
     return pids
@@ -96,7 +127,7 @@ def test_ray_gives_the_plain_run_files(tmp_path, local_ray, scene):
 
 
 @pytest.mark.parametrize("restarts", [cluster.ACTOR_RESTARTS, 0])
-def test_killed_actor_loses_no_frame(tmp_path, local_ray, scene, monkeypatch, capsys, restarts):
+def test_killed_actor_loses_no_frame(tmp_path, local_ray, scene, monkeypatch, capsys, restarts, actor_pids):
     """An actor process killed while it infers: Ray restarts it and retries its calls, or
     (no restarts left) its frames go to the other actor; every frame is written once."""
     tmp, path = scene
@@ -114,7 +145,7 @@ def test_killed_actor_loses_no_frame(tmp_path, local_ray, scene, monkeypatch, ca
     def kill_first_busy_actor():
         deadline = time.time() + 120
         while not killed and time.time() < deadline:
-            for pid in actor_processes():
+            for pid in actor_pids():
                 os.kill(pid, signal.SIGKILL)
                 killed.append(pid)
                 break
@@ -161,19 +192,26 @@ def test_two_configs_in_one_call(tmp_path, local_ray, scene):
 
 def test_ctrl_c_then_resume_on_ray(tmp_path, local_ray, scene):
     """Ctrl-C stops a --ray run (its own local Ray instance) with exit code 130 and whole
-    files; --resume on Ray finishes it to the plain run's files."""
+    files, and that instance is stopped (no process of it left); --resume on Ray finishes it
+    to the plain run's files."""
+    import shutil
+    import tempfile
+
     tmp, path = scene
     out = tmp_path / "ray"
     from slow import slow_env
 
     env = slow_env(tmp_path, 1.0)  # each frame a second longer: the signal comes before the end
     env.pop("RAY_ADDRESS", None)
+    ray_tmp = tempfile.mkdtemp(prefix="rl", dir="/tmp")  # the instance's own folder (short: socket paths)
+    env["RAY_TMPDIR"] = ray_tmp
     proc = subprocess.Popen([sys.executable, "-m", "dpom_warp.cli", "run", str(path), "--no-progress",
                              "--ray", "--output", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
     deadline = time.time() + 180
     while not list((out / "frames").glob("*.json")) and time.time() < deadline and proc.poll() is None:
         time.sleep(0.01)
+    assert instance_processes(ray_tmp)  # what the check below looks for is there while it runs
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     done = len(list((out / "frames").glob("*.json")))
@@ -181,6 +219,11 @@ def test_ctrl_c_then_resume_on_ray(tmp_path, local_ray, scene):
     assert "continue with --resume" in err
     assert not [p for p in out.rglob(".*") if p.is_file()]  # no temporary files left
     assert 1 <= done < 12 and not (out / "detections.csv").exists()
+    deadline = time.time() + 30
+    while instance_processes(ray_tmp) and time.time() < deadline:
+        time.sleep(0.2)
+    assert not instance_processes(ray_tmp)  # the local instance went with the run
+    shutil.rmtree(ray_tmp, ignore_errors=True)
     assert main(["run", str(path), "--no-progress", "--ray", "--resume", "--output", str(out)]) == 0
     assert_same_files(tmp / "plain", out, 12)
     runner = json.load(open(out / "summary.json"))["runner"]
@@ -234,7 +277,7 @@ def test_actor_that_cannot_start_is_one_line_and_writes_nothing(tmp_path, local_
 
 
 def test_every_actor_dead_is_one_line_and_keeps_finished_frames(tmp_path, local_ray, scene, monkeypatch,
-                                                                capsys):
+                                                                capsys, actor_pids):
     """No restarts and every actor process killed as soon as it infers: the call ends with one
     line (exit 1), the frames finished before are whole, and --resume (with actors that live)
     finishes the run to the plain run's files."""
@@ -244,7 +287,7 @@ def test_every_actor_dead_is_one_line_and_keeps_finished_frames(tmp_path, local_
 
     def kill_every_busy_actor():
         while not stop.is_set():
-            for pid in actor_processes():
+            for pid in actor_pids():
                 try:
                     os.kill(pid, signal.SIGKILL)
                     killed.append(pid)

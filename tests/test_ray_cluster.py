@@ -1,7 +1,9 @@
 """`--ray` against a Ray cluster started as users start it (`ray start --head` in a subprocess
 on a free port, stopped at the end), whose workers cannot open the frame files (so the frames
 must travel as bytes): `--ray ADDRESS`, `$RAY_ADDRESS` and `--ray auto` join it and give a
-plain run's files; a bad later config stops the call before any frame is sent; SIGTERM."""
+plain run's files, `--workers N` sets the actor count; a bad later config stops the call before
+any frame is sent; a frame that takes down every actor it reaches is skipped (fatal with
+--strict); SIGTERM stops the run and frees the cluster."""
 
 import json
 import shutil
@@ -19,6 +21,8 @@ from test_cli import small_config
 from test_ray import assert_same_files
 
 RAY = Path(sys.executable).parent / "ray"
+CPUS = 3  # the cluster's logical CPUs: one actor each
+POISON = "/poison/0002.png"  # a frame that ends the process of any actor given it
 
 
 def free_port() -> int:
@@ -29,9 +33,10 @@ def free_port() -> int:
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory, scene):
-    """A head node with 2 CPUs on a free port and localhost, its own temporary folder, no token
+    """A head node with 3 CPUs on a free port and localhost, its own temporary folder, no token
     authentication (a token a user made for their own cluster must not leak in), frames slowed
-    by half a second (tests/slow.py); stopped afterwards."""
+    by half a second and frame poison/0002.png fatal to its actor's process (tests/slow.py);
+    stopped afterwards."""
     import tempfile
 
     tmp = Path(tempfile.mkdtemp(prefix="rc", dir="/tmp"))  # Ray's socket paths must stay short
@@ -41,10 +46,11 @@ def cluster(tmp_path_factory, scene):
     # the cluster's workers infer each chunk half a second slower: a signal sent after the
     # first frame is written always lands while the run goes on
     env = {**slow_env(tmp, 0.5), "RAY_TMPDIR": str(tmp / "ray"), "RAY_AUTH_MODE": "disabled",
-           "DPOM_TEST_NO_READ": str(scene[0] / "scene")}  # its workers cannot read the frames
+           "DPOM_TEST_NO_READ": str(scene[0] / "scene"),  # its workers cannot read the frames
+           "DPOM_TEST_CRASH": POISON}
     env.pop("RAY_ADDRESS", None)
     start = subprocess.run([str(RAY), "start", "--head", f"--port={port}", "--node-ip-address=127.0.0.1",
-                            "--num-cpus=2", "--num-gpus=0",
+                            f"--num-cpus={CPUS}", "--num-gpus=0",
                             "--include-dashboard=false", "--disable-usage-stats"],
                            capture_output=True, text=True, timeout=180, env=env)
     assert start.returncode == 0, start.stderr[-2000:]
@@ -101,13 +107,17 @@ def test_ray_address_env_and_auto_join_the_cluster(cluster, scene, tmp_path):
     tmp, path = scene
     for name, args, extra_env in (("address", ["--ray", address], {}),
                                   ("env", ["--ray"], {"RAY_ADDRESS": address}),
-                                  ("auto", ["--ray", "auto"], {})):
+                                  ("auto", ["--ray", "auto"], {}),
+                                  ("workers", ["--ray", address, "--workers", "2"], {})):
         out = tmp_path / name
         proc = dpom(["run", str(path), "--no-progress", *args, "--output", str(out)], {**env, **extra_env})
         assert proc.returncode == 0, (name, proc.stderr[-2000:])
         assert_same_files(tmp / "plain", out, 6)
         runner = json.loads((out / "summary.json").read_text())["runner"]
-        assert runner["kind"] == "ray" and runner["actors"] == 2, name
+        actors = 2 if name == "workers" else CPUS  # --workers N, else one per CPU of the cluster
+        assert runner["kind"] == "ray" and runner["actors"] == actors, name
+        assert f"ray: {actors} actors (one CPU each)" in proc.stdout, name
+        assert set(runner["frames_per_worker"]) <= {f"actor {i}" for i in range(actors)}, name
         assert runner["cluster"] != "a local Ray instance", name  # it joined the cluster
 
 
@@ -124,13 +134,51 @@ def test_a_bad_later_config_stops_the_call_before_any_frame(cluster, scene, tmp_
     assert not (tmp_path / "o").exists()  # not even the first config's run started
 
 
+def test_a_frame_that_takes_down_its_actor_twice_is_skipped(cluster, scene, tmp_path, monkeypatch, capsys):
+    """No actor restarts; frame 0002 ends the process of any actor given it (tests/slow.py). The
+    first actor's frames are sent again one by one, each alone: 0002 takes down a second actor
+    and is skipped with its reason, the frame that was in flight beside it is kept, and the
+    third actor does the rest (the plain run's detections but 0002's). With --strict that
+    frame is fatal: one line, exit code 2, the frames finished before kept for --resume."""
+    from dpom_warp import cluster as ray_cluster
+
+    address, _ = cluster
+    tmp, path = scene
+    shutil.copytree(tmp / "scene" / "frames", tmp_path / "poison")
+    cfg = yaml.safe_load(path.read_text())
+    del cfg["synthetic"]
+    cfg["input"]["frames"] = f"{tmp_path / 'poison'}/*.png"
+    config = tmp_path / "poison.yaml"
+    config.write_text(yaml.safe_dump(cfg))
+    monkeypatch.setattr(ray_cluster, "ACTOR_RESTARTS", 0)
+    out = tmp_path / "out"
+    assert main(["run", str(config), "--no-progress", "--ray", address, "--output", str(out)]) == 0
+    log = capsys.readouterr().out
+    assert log.count("died (") == 2 and "its frames go to the other actors" in log
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["skipped"] == [{"frame": "0002.png", "reason": f"{tmp_path}{POISON}: the actor inferring it "
+                                   f"died {ray_cluster.MAX_LOSSES} times (killed, or out of memory)"}]
+    assert sorted(p.name for p in (out / "maps").iterdir()) == [f"000{i}.npy" for i in (0, 1, 3, 4, 5)]
+    plain = (tmp / "plain" / "detections.csv").read_text().splitlines()
+    assert (out / "detections.csv").read_text().splitlines() == [r for r in plain if not r.startswith("0002.png,")]
+    assert summary["runner"]["frames_resent"] >= 1  # 0002 and what shared its first actor
+
+    strict = tmp_path / "strict"
+    code = main(["run", str(config), "--no-progress", "--ray", address, "--strict", "--output", str(strict)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.strip().endswith(f"{POISON}: the actor inferring it died 2 times (killed, or out of "
+                                              f"memory)") and err.count("\n") == 1
+    assert not (strict / "detections.csv").exists() and not [p for p in strict.rglob(".*") if p.is_file()]
+
+
 def test_sigterm_on_a_ray_run_stops_it_and_its_actors(cluster, scene, tmp_path):
     """SIGTERM on a --ray run: exit 130 (its own handler, not Ray's), whole files, its actors
-    gone from the cluster; --resume finishes it to the plain run's files."""
+    gone from the cluster (every CPU free again, as Ray reports it); --resume finishes it to
+    the plain run's files."""
     import signal
     import time
 
-    from test_ray import actor_processes
+    import ray
 
     address, env = cluster
     tmp, path = scene
@@ -148,10 +196,14 @@ def test_sigterm_on_a_ray_run_stops_it_and_its_actors(cluster, scene, tmp_path):
     assert "continue with --resume" in err
     assert not [p for p in out.rglob(".*") if p.is_file()]
     assert 1 <= len(list((out / "frames").glob("*.json"))) < 6
-    deadline = time.time() + 30
-    while actor_processes(busy=False) + actor_processes() and time.time() < deadline:
-        time.sleep(0.2)
-    assert not actor_processes(busy=False) + actor_processes()  # the actors went with the run
+    ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    try:
+        deadline = time.time() + 30
+        while ray.available_resources().get("CPU", 0) < CPUS and time.time() < deadline:
+            time.sleep(0.2)
+        assert ray.available_resources().get("CPU", 0) == CPUS  # the actors went with the run
+    finally:
+        ray.shutdown()
     proc = dpom(["run", str(path), "--no-progress", "--ray", address, "--resume", "--output", str(out)], env)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert_same_files(tmp / "plain", out, 6)
