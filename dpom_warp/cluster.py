@@ -15,9 +15,9 @@ bytes (drawn on the actor: the driver only writes files) and the frame's record.
 Faults: an actor whose process dies (killed, out of memory, its node lost) is restarted by
 Ray, which retries its unfinished calls on the new process (max_restarts, max_task_retries);
 an actor that is gone for good has its frames sent to the others, each alone to an actor with
-nothing else in flight. A frame is written once, when its result arrives; a frame that has
-taken down its actor for good MAX_LOSSES (2) times, the second time alone, is skipped with
-that reason. Ctrl-C or SIGTERM kills the actors; finished frames are kept for --resume.
+nothing in flight (so that it is the first that actor infers). A frame is written once, when its result arrives; a frame that has
+taken down its actor for good MAX_LOSSES (2) times, the second time as the first frame an
+idle actor was given, is skipped with that reason. Ctrl-C or SIGTERM kills the actors; finished frames are kept for --resume.
 """
 
 from __future__ import annotations
@@ -271,11 +271,13 @@ class ActorPool:
         `refs[run]`: what FrameActor.process takes for that run.
 
         The frames of a call whose actor died for good are suspects: each is sent again alone,
-        to an actor with nothing else in flight, so that a second loss is that frame's own
-        (one that kills every actor it reaches is skipped, the others are kept)."""
+        to an actor with nothing in flight, so that it is the first the actor infers and a
+        second loss is that frame's own (an actor infers its calls in order: what is sent after
+        it cannot take it down). One that kills every actor it reaches is skipped, the frames
+        that were queued behind it on its first actor are kept."""
         ray = self.ray
         queue, suspects = collections.deque((r, c, 0) for r, c in jobs), collections.deque()
-        in_flight, alone = {}, set()  # alone: the actors inferring a suspect, and nothing else
+        in_flight = {}
 
         def send(i, run, chunk, losses):
             sent = [dataclasses.replace(item, data=_read(item.path)) for item in chunk]
@@ -283,12 +285,11 @@ class ActorPool:
             self.load[i] += 1
 
         while queue or suspects or in_flight:
-            for i in sorted(self.live - alone, key=lambda i: self.load[i]):
+            for i in sorted(self.live, key=lambda i: self.load[i]):
                 if suspects and not self.load[i]:
                     send(i, *suspects.popleft())
-                    alone.add(i)
-                    continue
-                while queue and self.load[i] < IN_FLIGHT:
+                # while suspects wait, the actors are let run dry so that one soon takes them
+                while queue and self.load[i] < (1 if suspects else IN_FLIGHT):
                     send(i, *queue.popleft())
             if not self.live and not self.starting:
                 raise WorkerError("--ray: every actor has died; finished frames are kept, "
@@ -301,7 +302,6 @@ class ActorPool:
                 continue
             i, run, chunk, losses = in_flight.pop(done[0])
             self.load[i] -= 1
-            alone.discard(i)
             try:
                 info, outcomes = ray.get(done[0])
             except self.lost as e:  # the actor is gone for good: its frames go elsewhere
