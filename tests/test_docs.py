@@ -41,3 +41,12 @@ def test_pictures_exist():
 def test_replace_block_keeps_the_rest():
     text = "a\n<!-- docs:x -->\nold\n<!-- /docs:x -->\nb\n"
     assert replace_block(text, "x", "new") == "a\n<!-- docs:x -->\nnew\n<!-- /docs:x -->\nb\n"
+
+
+def test_every_test_the_readme_names_exists():
+    """The Tests section maps each promise to tests (`file::test`): each must be there."""
+    named = set(re.findall(r"`(test_[a-z_0-9]+)::(test_[a-z_0-9]+)`", TEXT))
+    assert len(named) >= 30
+    for file, test in sorted(named):
+        source = (ROOT / "tests" / f"{file}.py").read_text()
+        assert re.search(rf"^def {test}\(", source, re.M), f"README names {file}::{test}, which does not exist"
