@@ -195,7 +195,7 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
         cls = actor_class(ray, gpu)
         pool = ActorPool(ray, [cls.remote(i, device, package_version()) for i in range(n)])
         try:
-            pool.first_started()
+            pool.first_started(log)
             for p in plans:
                 p.device = f"{device} (Ray actors)"
                 open_output(p, overwrite, resume, log)
@@ -245,18 +245,30 @@ class ActorPool:
         self.pids = collections.defaultdict(set)
         self.nodes: dict[str, str] = {}
         self.resent = 0
+        self.failed: dict[int, str] = {}  # actors that could not start, with the reason
         self.waited = 0.0  # seconds the driver waited on the actors (the rest it was busy)
 
-    def first_started(self) -> None:
-        done, _ = self.ray.wait(list(self.starting), num_returns=1)
-        self._started(done[0])
+    def first_started(self, log=print) -> None:
+        """Wait until one actor has started; none could: one line (the first one's reason)."""
+        while not self.live:
+            if not self.starting:
+                i, cause = next(iter(self.failed.items()))
+                raise WorkerError(f"--ray: actor {i} could not start: {cause}")
+            done, _ = self.ray.wait(list(self.starting), num_returns=1)
+            self._started(done[0], log)
 
-    def _started(self, ref) -> None:
+    def _started(self, ref, log=print) -> None:
         i = self.starting.pop(ref)
         try:
             info = self.ray.get(ref)
-        except self.lost as e:
-            raise WorkerError(f"--ray: actor {i} could not start: {_cause(e)}") from None
+        except self.lost as e:  # the others go on without it (every actor gone: the run stops)
+            self.failed[i] = _cause(e)
+            if self.live:
+                log(f"ray: actor {i} could not start ({self.failed[i]}); going on with the others")
+            return
+        if not self.live:  # the ones that failed before: now that the run goes on, say so
+            for j, cause in self.failed.items():
+                log(f"ray: actor {j} could not start ({cause}); going on with the others")
         self.nodes[f"actor {i}"] = info["node"]
         self.pids[i].add(info["pid"])
         self.live.add(i)
@@ -298,7 +310,7 @@ class ActorPool:
             done, _ = ray.wait(list(in_flight) + list(self.starting), num_returns=1)
             self.waited += time.perf_counter() - t
             if done[0] in self.starting:
-                self._started(done[0])
+                self._started(done[0], log)
                 continue
             i, run, chunk, losses = in_flight.pop(done[0])
             self.load[i] -= 1
@@ -335,5 +347,8 @@ def _read(path: str) -> bytes | None:
 
 
 def _cause(error) -> str:
-    text = str(error).strip().splitlines()
-    return next((line.strip() for line in reversed(text) if line.strip()), type(error).__name__)
+    """The line of a Ray error that says why (its last, but Ray's "never ran" remark)."""
+    lines = [line.strip() for line in str(error).strip().splitlines() if line.strip()]
+    never = [line for line in lines if line.startswith("The actor never ran")]
+    lines = [line for line in lines if line not in never]
+    return (lines[-1] if lines else type(error).__name__) + (" (it never started)" if never else "")

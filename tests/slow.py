@@ -7,7 +7,8 @@ sitecustomize on PYTHONPATH patches dpom_warp.worker when it is first imported. 
 DPOM_TEST_NO_READ=FOLDER in the environment too, those processes cannot open files under
 FOLDER (a cluster node without the frames: they must come as bytes); with DPOM_TEST_CRASH=END,
 a FrameWorker.process call given a frame whose path ends with END ends its process at once
-(os._exit: a frame that takes down its actor)."""
+(os._exit: a frame that takes down its actor); with DPOM_TEST_RESTARTS=N, a driver gives its
+Ray actors N restarts (cluster.ACTOR_RESTARTS)."""
 
 import os
 from pathlib import Path
@@ -19,31 +20,44 @@ DELAY = {delay!r}
 CRASH = os.environ.get("DPOM_TEST_CRASH")
 
 
-class _SlowFrames(importlib.abc.MetaPathFinder):
+def _slow_frames(module):
+    real = module.FrameWorker.process
+
+    def process(self, items, *args, **kwargs):
+        if CRASH and any(item.path.endswith(CRASH) for item in items):
+            os._exit(3)
+        time.sleep(DELAY)
+        return real(self, items, *args, **kwargs)
+
+    module.FrameWorker.process = process
+
+
+def _restarts(module):
+    if os.environ.get("DPOM_TEST_RESTARTS"):
+        module.ACTOR_RESTARTS = int(os.environ["DPOM_TEST_RESTARTS"])
+
+
+class _Patches(importlib.abc.MetaPathFinder):
+    """Patches a module of dpom_warp when it is first imported."""
+
+    patches = dict([("dpom_warp.worker", _slow_frames), ("dpom_warp.cluster", _restarts)])  # no braces: .format
+
     def find_spec(self, name, path, target=None):
-        if name != "dpom_warp.worker":
+        patch = self.patches.pop(name, None)
+        if patch is None:
             return None
-        sys.meta_path.remove(self)
         spec = importlib.machinery.PathFinder.find_spec(name, path)
         run_module = spec.loader.exec_module
 
         def exec_module(module):
             run_module(module)
-            real = module.FrameWorker.process
-
-            def process(self, items, *args, **kwargs):
-                if CRASH and any(item.path.endswith(CRASH) for item in items):
-                    os._exit(3)
-                time.sleep(DELAY)
-                return real(self, items, *args, **kwargs)
-
-            module.FrameWorker.process = process
+            patch(module)
 
         spec.loader.exec_module = exec_module
         return spec
 
 
-sys.meta_path.insert(0, _SlowFrames())
+sys.meta_path.insert(0, _Patches())
 
 import builtins  # noqa: E402
 

@@ -68,7 +68,7 @@ class FakeActor:
         return self._ref((self._info(), [(os.path.basename(it.path), "output", None) for it in items]))
 
 
-def schedule(frames, poison, actors, chunk=1):
+def schedule(frames, poison, actors, chunk=1, broken=(), log=None):
     """Run ActorPool.outcomes over `frames` frames in chunks of `chunk`; returns the outcomes
     by frame name, the calls in the order sent ((actor, names, calls in flight on it before)),
     and the pool."""
@@ -76,11 +76,15 @@ def schedule(frames, poison, actors, chunk=1):
     pool = cluster.ActorPool(ray, [FakeActor(ray, i, poison, sent) for i in range(actors)])
     for actor in pool.actors:
         actor.pool = pool
-    pool.first_started()
+    for i in broken:  # these could not start: their info call fails
+        ref = next(r for r, k in pool.starting.items() if k == i)
+        ref.value, ref.error = None, RayActorError()
+    log = log if log is not None else (lambda *_: None)
+    pool.first_started(log)
     names = [f"{i:04d}.png" for i in range(frames)]
     jobs = [(0, [FrameItem(n) for n in names[k:k + chunk]]) for k in range(0, frames, chunk)]
     got = {}
-    for run, name, output, error in pool.outcomes([None], jobs, log=lambda *_: None):
+    for run, name, output, error in pool.outcomes([None], jobs, log=log):
         assert name not in got, f"{name} came back twice"
         got[name] = error or output
     assert sorted(got) == names  # every frame once
@@ -127,3 +131,14 @@ def test_many_orders_of_two_poisoned_frames():
 def test_every_actor_dead_is_the_one_line_error():
     with pytest.raises(cluster.WorkerError, match="every actor has died"):
         schedule(6, {"0001.png", "0004.png"}, 3)
+
+
+def test_actors_that_cannot_start_leave_the_work_to_the_others():
+    """Actor 0 (the first to answer) and actor 2 cannot start: the others infer every frame,
+    each failure said in a line; none can start: one line naming the first."""
+    lines = []
+    got, sent, pool = schedule(10, set(), 4, broken=(0, 2), log=lines.append)
+    assert set(got.values()) == {"output"} and {a for a, _, _ in sent} == {1, 3}
+    assert sorted(pool.failed) == [0, 2] and sum("could not start" in line for line in lines) == 2
+    with pytest.raises(cluster.WorkerError, match=r"^--ray: actor 0 could not start: "):
+        schedule(4, set(), 2, broken=(0, 1))

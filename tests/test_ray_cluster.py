@@ -134,15 +134,15 @@ def test_a_bad_later_config_stops_the_call_before_any_frame(cluster, scene, tmp_
     assert not (tmp_path / "o").exists()  # not even the first config's run started
 
 
-def test_a_frame_that_takes_down_its_actor_twice_is_skipped(cluster, scene, tmp_path, monkeypatch, capsys):
+def test_a_frame_that_takes_down_its_actor_twice_is_skipped(cluster, scene, tmp_path):
     """No actor restarts; frame 0002 ends the process of any actor given it (tests/slow.py). The
-    first actor's frames are sent again one by one, each alone: 0002 takes down a second actor
-    and is skipped with its reason, the frame that was in flight beside it is kept, and the
-    third actor does the rest (the plain run's detections but 0002's). With --strict that
-    frame is fatal: one line, exit code 2, the frames finished before kept for --resume."""
-    from dpom_warp import cluster as ray_cluster
+    first actor's frames are sent again one by one, each first on an idle actor: 0002 takes
+    down a second actor and is skipped with its reason, the frame queued behind it is kept,
+    and the third actor does the rest (the plain run's detections but 0002's). With --strict
+    that frame is fatal: one line, exit code 2, nothing but finished frames left."""
+    from dpom_warp.cluster import MAX_LOSSES
 
-    address, _ = cluster
+    address, env = cluster
     tmp, path = scene
     shutil.copytree(tmp / "scene" / "frames", tmp_path / "poison")
     cfg = yaml.safe_load(path.read_text())
@@ -150,24 +150,24 @@ def test_a_frame_that_takes_down_its_actor_twice_is_skipped(cluster, scene, tmp_
     cfg["input"]["frames"] = f"{tmp_path / 'poison'}/*.png"
     config = tmp_path / "poison.yaml"
     config.write_text(yaml.safe_dump(cfg))
-    monkeypatch.setattr(ray_cluster, "ACTOR_RESTARTS", 0)
+    env = {**env, "DPOM_TEST_RESTARTS": "0"}  # the driver's actors are not restarted
     out = tmp_path / "out"
-    assert main(["run", str(config), "--no-progress", "--ray", address, "--output", str(out)]) == 0
-    log = capsys.readouterr().out
-    assert log.count("died (") == 2 and "its frames go to the other actors" in log
+    proc = dpom(["run", str(config), "--no-progress", "--ray", address, "--output", str(out)], env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.count("died (") == 2 and "its frames go to the other actors" in proc.stdout
     summary = json.loads((out / "summary.json").read_text())
     assert summary["skipped"] == [{"frame": "0002.png", "reason": f"{tmp_path}{POISON}: the actor inferring it "
-                                   f"died {ray_cluster.MAX_LOSSES} times (killed, or out of memory)"}]
+                                   f"died {MAX_LOSSES} times (killed, or out of memory)"}]
     assert sorted(p.name for p in (out / "maps").iterdir()) == [f"000{i}.npy" for i in (0, 1, 3, 4, 5)]
     plain = (tmp / "plain" / "detections.csv").read_text().splitlines()
     assert (out / "detections.csv").read_text().splitlines() == [r for r in plain if not r.startswith("0002.png,")]
-    assert summary["runner"]["frames_resent"] >= 1  # 0002 and what shared its first actor
+    assert summary["runner"]["frames_resent"] >= 1  # 0002 and what was queued behind it
 
     strict = tmp_path / "strict"
-    code = main(["run", str(config), "--no-progress", "--ray", address, "--strict", "--output", str(strict)])
-    err = capsys.readouterr().err
-    assert code == 2 and err.strip().endswith(f"{POISON}: the actor inferring it died 2 times (killed, or out of "
-                                              f"memory)") and err.count("\n") == 1
+    proc = dpom(["run", str(config), "--no-progress", "--ray", address, "--strict", "--output", str(strict)], env)
+    err = proc.stderr.strip()
+    assert proc.returncode == 2 and err.endswith(f"{POISON}: the actor inferring it died 2 times (killed, or out "
+                                                 f"of memory)") and "\n" not in err, err[-2000:]
     assert not (strict / "detections.csv").exists() and not [p for p in strict.rglob(".*") if p.is_file()]
 
 
