@@ -15,9 +15,11 @@ bytes (drawn on the actor: the driver only writes files) and the frame's record.
 Faults: an actor whose process dies (killed, out of memory, its node lost) is restarted by
 Ray, which retries its unfinished calls on the new process (max_restarts, max_task_retries);
 an actor that is gone for good has its frames sent to the others, each alone to an actor with
-nothing in flight (so that it is the first that actor infers). A frame is written once, when its result arrives; a frame that has
-taken down its actor for good MAX_LOSSES (2) times, the second time as the first frame an
-idle actor was given, is skipped with that reason. Ctrl-C or SIGTERM kills the actors; finished frames are kept for --resume.
+nothing in flight (so that it is the first that actor infers). A frame is written once, when
+its result arrives; a frame that has taken down its actor for good MAX_LOSSES (2) times, the
+second time as the first frame an idle actor was given, is skipped with that reason. An actor
+that cannot start leaves its share to the others. Ctrl-C or SIGTERM kills the actors;
+finished frames are kept for --resume.
 """
 
 from __future__ import annotations
