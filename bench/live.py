@@ -15,7 +15,6 @@ import os
 import statistics
 from pathlib import Path
 
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -29,18 +28,12 @@ def main():
     ap.add_argument("--output", default="runs/live")
     a = ap.parse_args()
     os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
-    from PIL import Image
-
     from dpom_warp.config import load_config
-    from dpom_warp.pipeline import render_synthetic, run
+    from dpom_warp.pipeline import run
     from dpom_warp.sources.realsense import SoftwareCamera
 
     demo = ROOT / "configs" / "demo_people.yaml"
-    cfg = load_config(demo)
-    render_synthetic(cfg, lambda *_: None)
-    frames = [np.asarray(Image.open(f)).astype(np.uint16)
-              for f in sorted((ROOT / ".cache" / "demo_people" / "frames").glob("*.png"))]
-    cam = SoftwareCamera(frames, cfg.camera.fx, cfg.camera.fy, cfg.camera.cx, cfg.camera.cy, a.fps).register()
+    cam = SoftwareCamera.of_config(load_config(demo), a.fps).register()
     sets = ["input.frames=realsense", "evaluation.ground_truth=null", f"output.images_every={a.every}",
             "tracking.method=online"]
     runs = []

@@ -87,8 +87,7 @@ def long_run(run_dir: Path, frames: int, extra=()) -> dict:
     order = paths + paths[::-1]
     seq = [order[i % len(order)] for i in range(frames)]
     geometry = build_geometry(cfg.camera, cfg.grid, cfg.obj)
-    cells = Cells.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
-                     cfg.detection.nms_radius)
+    cells = Cells.for_run(geometry, cfg)
     out = {"frames": frames, "window": cfg.tracking.window, "overlap": cfg.tracking.overlap,
            "grid_cells": len(cells.positions)}
     for method, n in (("ksp", frames), ("online", min(frames, 3000))):

@@ -25,7 +25,7 @@ import numpy as np
 
 from .config import ConfigError, RunConfig, apply_overrides, parse_config, read_config
 from .detect import Detected
-from .io import InputError
+from .io import InputError, units_to_metres
 
 
 @dataclass
@@ -154,8 +154,7 @@ class Detector:
         from .tracking import Cells, run_tracker
 
         cfg, geometry = self.config, self.worker.geometry
-        cells = Cells.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
-                         cfg.detection.nms_radius)
+        cells = Cells.for_run(geometry, cfg)
         maps = np.stack([np.asarray(r.rho_star, np.float32).ravel() for r in results])
         return run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, cfg.inputs.fps,
                            cfg.detection.threshold, method)
@@ -169,7 +168,7 @@ class Detector:
         if np.issubdtype(depth.dtype, np.integer):
             if depth.min(initial=0) < 0:
                 raise InputError(f"depth (frame {index}): expected depth units >= 0, found {depth.min()}")
-            return (depth.astype(np.float64) * self.config.inputs.depth_scale).astype(np.float32)  # as read_depth
+            return units_to_metres(depth, self.config.inputs.depth_scale)  # as read_depth
         if not np.issubdtype(depth.dtype, np.floating):
             raise InputError(f"depth (frame {index}): expected an integer or float array, found {depth.dtype}")
         metres = np.where(np.isfinite(depth), depth, 0).astype(np.float32)

@@ -88,6 +88,12 @@ def _is_npy(path: Path, data: bytes | None) -> bool:
         return f.read(6) == NPY_MAGIC
 
 
+def units_to_metres(raw: np.ndarray, depth_scale: float) -> np.ndarray:
+    """Depth in the sensor's units (0 = no reading) as float32 metres, the one conversion every
+    reader uses (files, the Python API, live cameras), so that they give the same bits."""
+    return (np.asarray(raw).astype(np.float64) * depth_scale).astype(np.float32)
+
+
 def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | None = None,
                data: bytes | None = None) -> np.ndarray:
     """Read a depth frame (16-bit PNG in depth units, or .npy; a file named without a suffix is
@@ -130,8 +136,7 @@ def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | No
             raise InputError(f"{path}: not a readable image ({type(e).__name__}: {e})") from None
         if raw.ndim != 2 or raw.dtype not in (np.uint16, np.int32, np.uint32):
             raise InputError(f"{path}: expected a single-channel 16-bit depth PNG, found mode {mode}")
-    depth = raw.astype(np.float64) * depth_scale
-    if shape is not None and depth.shape != tuple(shape):
+    if shape is not None and raw.shape != tuple(shape):
         raise InputError(f"{path}: expected {shape[1]}x{shape[0]} pixels (camera.width x "
-                         f"camera.height), found {depth.shape[1]}x{depth.shape[0]}")
-    return depth.astype(np.float32)
+                         f"camera.height), found {raw.shape[1]}x{raw.shape[0]}")
+    return units_to_metres(raw, depth_scale)

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import ConfigError, RunConfig
-from .io import WorkerError, write_json_atomic
+from .io import WorkerError, units_to_metres, write_json_atomic
 
 STALL_S = 5.0  # seconds without a frame after which a streaming camera has stopped sending
 
@@ -76,8 +76,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     dev, camera, engine, background = setup.device, setup.spec.camera, setup.engine, setup.background
     worker = FrameWorker(setup.spec, engine=engine)
     geometry = setup.geometry
-    cells = Cells.of(geometry, cfg.grid, (camera.width, camera.height), cfg.tracking.regions,
-                     cfg.detection.nms_radius)
+    cells = Cells.for_run(geometry, cfg)
     method = cfg.tracking.method
     tracking_on = method != "off"
     if method == "ksp":
@@ -110,7 +109,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
                 stopped_by = "camera stopped sending"
                 break
             t_first = t_first or fr.arrived
-            depth = (fr.depth.astype(np.float64) * cfg.inputs.depth_scale).astype(np.float32)
+            depth = units_to_metres(fr.depth, cfg.inputs.depth_scale)
             t0 = time.perf_counter()
             res = engine.infer(engine.resolution.frames(depth))
             infer = time.perf_counter() - t0

@@ -520,8 +520,7 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
         if cfg.output.rerun or VIEW:  # the pictures are the workers'; the Rerun log is drawn here
             frames_out(cfg, out, done, geometry, maps, truth, None, False, timestamps, camera)
         return {"method": "off"}
-    cells = Cells.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
-                     cfg.detection.nms_radius)
+    cells = Cells.for_run(geometry, cfg)
     rate = fps or cfg.inputs.fps
     tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, rate, cfg.detection.threshold,
                                  method)

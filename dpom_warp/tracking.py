@@ -95,6 +95,12 @@ class Cells:
         steps = [grid.x[2], grid.y[2]] + ([grid.z[2]] if grid.mode == "voxel" else [])
         return cls(np.asarray(p, float), float(max(steps)), entry, nms_radius)
 
+    @classmethod
+    def for_run(cls, geometry, cfg) -> "Cells":
+        """`of` with a run config's grid, image size, tracking.regions and detection.nms_radius."""
+        return cls.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
+                      cfg.detection.nms_radius)
+
     def nearest(self, xyz) -> int:
         """The cell nearest to a point."""
         if not hasattr(self, "_tree"):

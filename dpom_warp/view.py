@@ -16,14 +16,9 @@ INSTALL = 'pip install "dpom-warp[view]"'
 
 
 def _rerun():
-    try:
-        import rerun as rr
-    except ImportError:
-        from .io import InputError
+    from .sources import need
 
-        raise InputError(f"output.rerun / --view need the optional package rerun-sdk; install it with "
-                         f"{INSTALL}") from None
-    return rr
+    return need("rerun", "output.rerun / --view", package="rerun-sdk", install=INSTALL)
 
 
 class RerunLog:
@@ -40,7 +35,6 @@ class RerunLog:
             self.rec.save(str(path))
         if spawn:
             self.rec.spawn(connect=not path)
-        self.camera_logged = False
 
     def camera(self, camera) -> None:
         rr, rec = self.rr, self.rec
@@ -49,7 +43,6 @@ class RerunLog:
         rec.log("world/camera", rr.Pinhole(resolution=[camera.width, camera.height],
                                            focal_length=[camera.fx, camera.fy],
                                            principal_point=[camera.cx, camera.cy]), static=True)
-        self.camera_logged = True
 
     def frame(self, index: int, timestamp: float | None, depth_m: np.ndarray, dets: list, rho_map: np.ndarray,
               tracks: list | None = None) -> None:

@@ -11,7 +11,9 @@ from dpom_warp.cli import main
 from paths import CONFIGS
 
 
-def small_config(tmp_path, **changes):
+def small_config(tmp_path, frames=3, **changes):
+    """The demo config shrunk to a 128x106 camera and a coarse grid, rendering `frames` frames
+    (3 people, 4 background frames) into tmp_path/scene; `changes` replace top-level sections."""
     cfg = yaml.safe_load(open(CONFIGS / "demo_people.yaml"))
     cache = tmp_path / "scene"
     cfg["device"] = "cpu"
@@ -22,7 +24,7 @@ def small_config(tmp_path, **changes):
     cfg["grid"].update(x=[-2.5, 2.5, 0.2], y=[1.0, 6.5, 0.2])
     cfg["evaluation"]["ground_truth"] = f"{cache}/ground_truth.json"
     cfg["output"]["dir"] = str(tmp_path / "out")
-    cfg["synthetic"].update(cache=str(cache), frames=3, background_frames=4, people=3, seed=3)
+    cfg["synthetic"].update(cache=str(cache), frames=frames, background_frames=4, people=3, seed=3)
     for k, v in changes.items():
         cfg[k] = v
     path = tmp_path / "config.yaml"

@@ -27,11 +27,9 @@ REAL = paths.REAL / "five_people"
 def scene(tmp_path_factory):
     """A rendered small sequence (6 frames) and its config, shared by the tests here."""
     tmp = tmp_path_factory.mktemp("scene")
-    path = small_config(tmp)
-    cfg = yaml.safe_load(path.read_text())
-    cfg["synthetic"]["frames"] = 6
-    path.write_text(yaml.safe_dump(cfg))
+    path = small_config(tmp, frames=6)
     assert main(["run", str(path), "--no-progress", "--output", str(tmp / "first")]) == 0
+    cfg = yaml.safe_load(path.read_text())
     del cfg["synthetic"]  # the frames now exist; tests copy and damage them
     return tmp, cfg
 

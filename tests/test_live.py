@@ -4,33 +4,22 @@ RealSense camera, fed rendered frames at 30 fps on a thread; the run infers the 
 
 import json
 
-import numpy as np
 import pytest
 import yaml
-from PIL import Image
 
 from dpom_warp.cli import main
-
 
 
 @pytest.fixture
 def camera_config(tmp_path):
     from test_cli import small_config
 
-    path = small_config(tmp_path)
-    cfg = yaml.safe_load(path.read_text())
-    cfg["synthetic"]["frames"] = 6
-    path.write_text(yaml.safe_dump(cfg))
     from dpom_warp.config import load_config
-    from dpom_warp.pipeline import render_synthetic
-
-    render_synthetic(load_config(path), lambda *_: None)
-    frames = [np.asarray(Image.open(f)).astype(np.uint16)
-              for f in sorted((tmp_path / "scene" / "frames").glob("*.png"))]
-    intr = cfg["camera"]["intrinsics"]
     from dpom_warp.sources.realsense import SoftwareCamera
 
-    cam = SoftwareCamera(frames, intr["fx"], intr["fy"], intr["cx"], intr["cy"]).register()
+    path = small_config(tmp_path, frames=6)
+    cam = SoftwareCamera.of_config(load_config(path)).register()  # the rendered frames at 30 fps
+    cfg = yaml.safe_load(path.read_text())
     del cfg["synthetic"]
     cfg["input"]["frames"] = "realsense"
     cfg["input"].pop("depth_scale", None)

@@ -33,10 +33,7 @@ def local_ray():
 def scene(tmp_path_factory):
     """A rendered sequence of 12 frames, its config and a plain run of it ('plain')."""
     tmp = tmp_path_factory.mktemp("ray")
-    path = small_config(tmp)
-    cfg = yaml.safe_load(path.read_text())
-    cfg["synthetic"]["frames"] = 12
-    path.write_text(yaml.safe_dump(cfg))
+    path = small_config(tmp, frames=12)
     assert main(["run", str(path), "--no-progress", "--output", str(tmp / "plain")]) == 0
     return tmp, path
 

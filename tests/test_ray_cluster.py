@@ -64,10 +64,7 @@ def cluster(tmp_path_factory, scene):
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("rayscene")
-    path = small_config(tmp)
-    cfg = yaml.safe_load(path.read_text())
-    cfg["synthetic"]["frames"] = 6
-    path.write_text(yaml.safe_dump(cfg))
+    path = small_config(tmp, frames=6)
     assert main(["run", str(path), "--no-progress", "--output", str(tmp / "plain")]) == 0
     return tmp, path
 

@@ -31,9 +31,8 @@ def scene(tmp_path_factory):
     from test_cli import small_config
 
     tmp = tmp_path_factory.mktemp("rec")
-    path = small_config(tmp)
+    path = small_config(tmp, frames=4)
     cfg = yaml.safe_load(path.read_text())
-    cfg["synthetic"]["frames"] = 4
     cfg["input"]["background"] = None
     cfg["output"]["images"] = False
     path.write_text(yaml.safe_dump(cfg))

@@ -282,16 +282,11 @@ def test_hidden_people_ignored_in_the_second_protocol():
 @pytest.fixture(scope="module")
 def tracked_run(tmp_path_factory):
     """A small rendered sequence (8 frames, 3 people) run once with tracks and pictures."""
-    import yaml
-
     from dpom_warp.cli import main
     from test_cli import small_config
 
     tmp = tmp_path_factory.mktemp("tracked")
-    path = small_config(tmp)
-    cfg = yaml.safe_load(path.read_text())
-    cfg["synthetic"]["frames"] = 8
-    path.write_text(yaml.safe_dump(cfg))
+    path = small_config(tmp, frames=8)
     assert main(["run", str(path), "--no-progress", "--output", str(tmp / "run")]) == 0
     return tmp / "run", path
 

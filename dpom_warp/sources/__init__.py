@@ -114,15 +114,27 @@ def open_source(spec: str | os.PathLike, topic: str | None = None, key: str = "i
     return Bag(p, topic, key)
 
 
-def need(module: str, what: str):
-    """Import an optional reader or say in one line how to install it."""
+def gravity_direction(readings) -> list | None:
+    """Unit "up" from accelerometer readings at rest (m/s^2; an accelerometer measures +g
+    upwards): their mean, normalised; None when there are none or they do not add up to a
+    reading of gravity (a mean under 1 m/s^2)."""
+    if not len(readings):
+        return None
+    up = np.mean(np.asarray(readings, float), axis=0)
+    n = np.linalg.norm(up)
+    return (up / n).tolist() if n > 1.0 else None
+
+
+def need(module: str, what: str, package: str | None = None, install: str = INSTALL):
+    """Import an optional package (a reader: the sensors extra) or say in one line how to
+    install it; `package`: its name on PyPI, when not the module's."""
     import importlib
 
     try:
         return importlib.import_module(module)
     except ImportError:
-        raise InputError(f"{what} needs the optional package {module.split('.')[0]}; install it with "
-                         f"{INSTALL}") from None
+        raise InputError(f"{what} needs the optional package {package or module.split('.')[0]}; install it "
+                         f"with {install}") from None
 
 
 # -- the cache a run reads a recording from ---------------------------------------------------

@@ -18,7 +18,7 @@ from typing import Iterator
 import numpy as np
 
 from ..io import InputError
-from . import Frame, Source, SourceInfo, need
+from . import Frame, Source, SourceInfo, gravity_direction, need
 
 MODES = {  # depth mode: (binned sensor size, crop offset, output size)
     "NFOV_UNBINNED": ((1024, 1024), (192, 180), (640, 576)),
@@ -38,9 +38,7 @@ def gravity_up(calibration: dict, samples: list[tuple[float, float, float]]) -> 
     if acc is None or not samples:
         return None
     r = np.asarray(acc["Rt"]["Rotation"], float).reshape(3, 3)
-    up = r.T @ np.mean(np.asarray(samples, float), axis=0)
-    n = np.linalg.norm(up)
-    return (up / n).tolist() if n > 1.0 else None
+    return gravity_direction([r.T @ np.mean(np.asarray(samples, float), axis=0)])  # the mean reading a as R^T a
 
 
 def imu_samples(c, limit: int = 200) -> list[tuple[float, float, float]]:

@@ -18,7 +18,7 @@ from typing import Iterator
 import numpy as np
 
 from ..io import InputError
-from . import Frame, Source, SourceInfo, need
+from . import Frame, Source, SourceInfo, gravity_direction, need
 
 IMAGE, COMPRESSED, INFO = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/CameraInfo"
 DEPTH_ENCODINGS = {"16UC1": np.uint16, "mono16": np.uint16, "32FC1": np.float32}
@@ -173,11 +173,9 @@ class Bag(Source):
                 acc.append((a.x, a.y, a.z))
                 if len(acc) >= limit:
                     break
-            if acc:
-                up = np.mean(np.asarray(acc, float), axis=0)
-                n = np.linalg.norm(up)
-                if n > 1.0:
-                    return (up / n).tolist()
+            up = gravity_direction(acc)
+            if up is not None:
+                return up
         return None
 
     def _camera_info(self, r, topic: str):

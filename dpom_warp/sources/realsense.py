@@ -40,7 +40,7 @@ class SoftwareCamera:
     def __init__(self, frames, fx, fy, cx, cy, fps: float = 30.0, serial: str = "000111222"):
         import threading
 
-        rs = need("pyrealsense2", "a software camera")
+        rs = self.rs_module()
         h, w = frames[0].shape
         self.frames, self.fps, self.serial = [np.asarray(f, np.uint16) for f in frames], fps, serial
         self.device = rs.software_device()
@@ -57,6 +57,20 @@ class SoftwareCamera:
         self.profile = self.sensor.add_video_stream(vs).as_video_stream_profile()
         self.sensor.add_read_only_option(rs.option.depth_units, 0.001)
         self.stopped, self.sent, self.thread = threading.Event(), 0, None
+
+    @classmethod
+    def of_config(cls, cfg, fps: float = 30.0) -> "SoftwareCamera":
+        """A software camera playing a run config's frames (rendered first when the config has
+        a `synthetic` section), in their depth units, with the config's intrinsics."""
+        from PIL import Image
+
+        from .run import expand, render_synthetic
+
+        render_synthetic(cfg, lambda *_: None)
+        frames = [np.load(f) if f.suffix.lower() == ".npy" else np.asarray(Image.open(f))
+                  for f in expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, lambda *_: None)]
+        c = cfg.camera
+        return cls([np.asarray(f, np.uint16) for f in frames], c.fx, c.fy, c.cx, c.cy, fps)
 
     def register(self) -> "SoftwareCamera":
         SOFTWARE.append(self)

@@ -64,8 +64,6 @@ def render_synthetic(cfg: RunConfig, log=print) -> None:
         f"({'checked' if cached else 'generated'} in {time.perf_counter() - t:.1f} s)")
 
 
-
-
 def expand(pattern: str, key: str, topic: str | None = None, log=print) -> list[Path]:
     """The frame files input.frames (or input.background) names: a glob's files in sorted
     order, or a recording's frames read into its cache (sources.materialise)."""
