@@ -5,6 +5,8 @@
 
 Scenes (rendered once into .cache/bench/, seeded):
 - kinect_v2: 512x424, people, 6 x 6.5 m ground grid at 0.1 m (the people demo);
+- kinect_v2_far: the same camera 2 m high, pitch 15, six people, the grid 7 x 7 m reaching
+  7.5 m (a realistic people scene: more of the room in view, more entries a frame);
 - kinect_v1: 640x480, people, the same area at 0.05 m;
 - drones: 512x424, 4 x 4.5 x 2.4 m voxel grid at 0.1 m (the drone demo's room).
 Each scene runs two ways: the fast defaults (input.stride auto, sparse iterations) and the
@@ -12,7 +14,8 @@ exact path (engine.exact: full resolution, every pass full), each scored for MOD
 first --moda-frames frames of the scene's sequence; the sparse iterations alone are measured
 against full passes at the same stride (time and max |rho* difference|). Each Warp figure is
 the median of `--repeats` runs after a warm-up run (which compiles the kernels and sizes the
-lists); the NumPy reference, with --reference, runs once on kinect_v2 (full resolution).
+lists); the NumPy reference, with --reference, runs once on kinect_v2 and kinect_v2_far (full
+resolution).
 Whole frames are timed three ways: the iteration loop driven from Python (a host check every
 check_every iterations), the loop replayed as a captured graph (no host sync), and `--batch`
 different frames of the scene in one engine call (time per frame = batch time / batch).
@@ -34,6 +37,9 @@ import numpy as np
 
 SCENES = {
     "kinect_v2": ("configs/demo_people.yaml", []),
+    "kinect_v2_far": ("configs/demo_people.yaml", [
+        "camera.extrinsics={height: 2.0, pitch_deg: 15.0, roll_deg: 0.0}", "grid.x=[-3.5, 3.5, 0.1]",
+        "grid.y=[0.5, 7.5, 0.1]", "synthetic.people=6"]),
     "kinect_v1": ("configs/demo_people.yaml", [
         "camera.width=640", "camera.height=480",
         "camera.intrinsics={fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5}",
@@ -135,6 +141,7 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     result = {"image": [engine.width, engine.height], "stride": r.stride, "reduce": r.reduce,
               "sparse_epsilon": cfg.model.sparse_epsilon, "grid": list(cfg.grid.shape),
               "locations": int(cfg.grid.size), "mask_entries": warm.entries,
+              "entries_after_bound": warm.kept_entries, "pruned_locations": warm.pruned,
               "live_locations_at_end": warm.live, "iterations": warm.iterations,
               "engine_setup_s": setup, "engine_memory_mb": engine.memory_bytes() / 2**20,
               "median_s": stages, "graph_error": graph_error}
@@ -244,6 +251,7 @@ def sweep(device, repeats, out):
 
 
 PATHS = {"fast": [], "exact": ["engine.exact=true"]}
+REFERENCE_SCENES = ("kinect_v2", "kinect_v2_far")
 
 
 def main():
@@ -254,7 +262,8 @@ def main():
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     ap.add_argument("--moda-frames", type=int, default=8,
                     help="frames of each scene's sequence scored for MODA, both paths (0: none)")
-    ap.add_argument("--reference", action="store_true", help="also time the NumPy reference on kinect_v2 (slow)")
+    ap.add_argument("--reference", action="store_true",
+                    help=f"also time the NumPy reference on {' and '.join(REFERENCE_SCENES)} (slow)")
     ap.add_argument("--whole-run", action="store_true",
                     help="marginal per-frame time of dpom-warp run on the demo, pictures on (CPU)")
     ap.add_argument("--sweep", action="store_true", help="time against locations and resolution, with a plot")
@@ -275,9 +284,9 @@ def main():
               "warp": wp.__version__, "repeats": a.repeats, "scenes": {}}
     lines = [f"Machine: {result['machine']}; device {device} ({result['device_name']}); Warp "
              f"{wp.__version__}; median of {a.repeats} runs after a warm-up", "",
-             "| scene | path | image | mask entries | iterations | live at end | masks+lists | "
+             "| scene | path | image | mask entries | after the bound | iterations | live at end | masks+lists | "
              "one full iteration | whole frame | with graph | batched, per frame | MODA | mean error |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name in a.scenes:
         seq = scene_frames(name, max(a.batch, a.moda_frames, 1), with_truth=True)
         sequence = (seq[0][:a.batch], seq[1]) if a.batch > 1 else None
@@ -289,19 +298,21 @@ def main():
             if a.moda_frames:
                 r["scores"], r["maps"] = score_scene(cfg, device, seq, a.moda_frames)
             rows[path] = r
-            if a.reference and name == "kinect_v2" and path == "exact":
+            if a.reference and name in REFERENCE_SCENES and path == "exact":
                 params = dataclasses.replace(cfg.model)
                 geom = build_geometry(cfg.camera, cfg.grid, cfg.obj)
                 t = time.perf_counter()
                 want = ref.mean_field(depth, geom, ref.background_from_frames(bg, params), params)
-                result["reference_whole_frame_s"] = time.perf_counter() - t
-                result["reference_max_rho_difference"] = float(np.abs(want["rho"] - warm.rho).max())
+                r["reference_whole_frame_s"] = time.perf_counter() - t
+                r["reference_max_rho_difference"] = float(np.abs(want["rho"] - warm.rho).max())
         fast, exact = rows["fast"], rows["exact"]
-        # the sparse path alone: the fast config with every pass full, same stride
-        cfg, depth, bg = load_scene(name, [f"input.stride={fast['stride']}", "model.sparse_epsilon=0"])
-        same_stride, full_warm = time_scene(cfg, depth, bg, device, 1)
-        fast["sparse_vs_full_max_rho_star_difference"] = float(np.abs(fast["rho_star"] - full_warm.rho_star).max())
-        fast["full_passes_same_stride_whole_frame_s"] = same_stride["median_s"]["whole frame"]
+        # what the sparse iterations and the pruning bound contribute, at the fast path's stride:
+        # every pass full, then sparse iterations without the bound
+        for key, sets in (("full_passes", ["model.sparse_epsilon=0"]), ("no_bound", ["model.bound_rounds=0"])):
+            cfg, depth, bg = load_scene(name, [f"input.stride={fast['stride']}"] + sets)
+            same_stride, warm = time_scene(cfg, depth, bg, device, a.repeats)
+            fast[f"{key}_same_stride_whole_frame_s"] = same_stride["median_s"]["whole frame"]
+            fast[f"{key}_vs_fast_max_rho_star_difference"] = float(np.abs(fast["rho_star"] - warm.rho_star).max())
         fast["fast_vs_exact_max_rho_star_difference"] = float(np.abs(fast["rho_star"] - exact["rho_star"]).max())
         if a.moda_frames:
             fast["fast_vs_exact_max_rho_star_difference_sequence"] = float(max(
@@ -311,7 +322,8 @@ def main():
             m = r["median_s"]
             sc = r.get("scores")
             lines.append(
-                f"| {name} | {path} | {r['image'][0]}x{r['image'][1]} | {r['mask_entries']} | {r['iterations']} | "
+                f"| {name} | {path} | {r['image'][0]}x{r['image'][1]} | {r['mask_entries']} | "
+                f"{r['entries_after_bound'] if r['entries_after_bound'] is not None else '-'} | {r['iterations']} | "
                 f"{r['live_locations_at_end']} | {1000 * m['masks, Delta, lists, sort']:.1f} ms | "
                 f"{1000 * m['one iteration']:.2f} ms | **{1000 * m['whole frame']:.1f} ms** | "
                 f"{1000 * m['whole frame, graph']:.1f} ms | "
@@ -324,20 +336,24 @@ def main():
         f, e = rows["fast"], rows["exact"]
         notes.append(f"{name}: fast {1000 * f['median_s']['whole frame']:.1f} ms vs exact "
                      f"{1000 * e['median_s']['whole frame']:.1f} ms ({e['median_s']['whole frame'] / f['median_s']['whole frame']:.1f}x); "
-                     f"sparse iterations alone at stride {f['stride']}: {1000 * f['full_passes_same_stride_whole_frame_s']:.1f} ms "
-                     f"-> {1000 * f['median_s']['whole frame']:.1f} ms, max |rho* difference| "
-                     f"{f['sparse_vs_full_max_rho_star_difference']:.1e} (epsilon {f['sparse_epsilon']:g}); "
+                     f"at stride {f['stride']}, every pass full {1000 * f['full_passes_same_stride_whole_frame_s']:.1f} ms, "
+                     f"sparse iterations {1000 * f['no_bound_same_stride_whole_frame_s']:.1f} ms, with the pruning bound "
+                     f"{1000 * f['median_s']['whole frame']:.1f} ms ({f['pruned_locations']} of {f['locations']} locations "
+                     f"pruned, {f['entries_after_bound']} of {f['mask_entries']} entries left); max |rho* difference| "
+                     f"against every pass full {f['full_passes_vs_fast_max_rho_star_difference']:.1e}, against no bound "
+                     f"{f['no_bound_vs_fast_max_rho_star_difference']:.1e} (epsilon {f['sparse_epsilon']:g}); "
                      f"fast vs exact max |rho* difference| {f['fast_vs_exact_max_rho_star_difference']:.2f} "
                      "(another resolution: judged by MODA)")
-    if "reference_whole_frame_s" in result:
-        v2 = result["scenes"]["kinect_v2"]
-        ref_s = result["reference_whole_frame_s"]
+    for name, rows in result["scenes"].items():
+        if "reference_whole_frame_s" not in rows["exact"]:
+            continue
+        ref_s = rows["exact"]["reference_whole_frame_s"]
         for path in PATHS:
-            v2[path]["speedup_vs_reference"] = ref_s / v2[path]["median_s"]["whole frame"]
-        notes.append(f"kinect_v2: NumPy reference {ref_s:.1f} s (full resolution, exact); fast path "
-                     f"**{v2['fast']['speedup_vs_reference']:.0f}x**, exact path "
-                     f"{v2['exact']['speedup_vs_reference']:.1f}x (exact rho vs reference: max difference "
-                     f"{result['reference_max_rho_difference']:.1e})")
+            rows[path]["speedup_vs_reference"] = ref_s / rows[path]["median_s"]["whole frame"]
+        notes.append(f"{name}: NumPy reference {ref_s:.1f} s (full resolution, exact); fast path "
+                     f"**{rows['fast']['speedup_vs_reference']:.0f}x**, exact path "
+                     f"{rows['exact']['speedup_vs_reference']:.1f}x (exact rho vs reference: max difference "
+                     f"{rows['exact']['reference_max_rho_difference']:.1e})")
     if a.whole_run:
         result["whole_run"] = w = whole_run_marginal(max(1, min(a.repeats, 3)))
         notes.append(f"dpom-warp run, people demo, pictures on: 2 frames {w['two_frames_s']:.2f} s, 12 frames "

@@ -90,6 +90,8 @@ def run_variant(args):
     result = {k: s[k] for k in ("moda", "precision", "recall", "mean_error_m", "n_gt")} | {
         "median_frame_s": summary["timings"]["median_infer_s"],
         "median_iterations": summary["timings"]["median_iterations"],
+        "median_entries": summary["timings"]["median_entries"],
+        "median_kept_entries": summary["timings"]["median_kept_entries"],
         "stride": summary["inference"]["stride"]}
     if background == "frames" and not extra:  # the same frames through the clustering baseline
         from bench.baseline import score_config
@@ -119,12 +121,15 @@ def main():
     with ProcessPoolExecutor(a.jobs) as pool:
         results = dict(pool.map(run_variant, jobs))
     lines = ["| scene | people | MODA | precision | recall | mean error (m) | stride | median s/frame "
-             "| iterations | clustering baseline MODA |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| iterations | entries | left after the bound | clustering baseline MODA |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for n, r in results.items():
         base = f"{r['baseline']['moda']:.3f}" if "baseline" in r else "-"
+        kept = r["median_kept_entries"]
+        kept = f"{kept:.0f} ({kept / r['median_entries']:.0%})" if kept is not None else "-"
         lines.append(f"| {n} | {r['n_gt']} | {r['moda']:.3f} | {r['precision']:.3f} | {r['recall']:.3f} "
                      f"| {r['mean_error_m']:.3f} | {r['stride']} | {r['median_frame_s']:.3f} "
-                     f"| {r['median_iterations']:.0f} | {base} |")
+                     f"| {r['median_iterations']:.0f} | {r['median_entries']:.0f} | {kept} | {base} |")
     modas = [r["moda"] for r in results.values()]
     lines.append(f"\nMODA over {len(modas)} variants: median {statistics.median(modas):.3f}, "
                  f"min {min(modas):.3f}, max {max(modas):.3f} "

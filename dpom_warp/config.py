@@ -432,6 +432,10 @@ class ModelSection(Node):
     sparse_epsilon: Num = Field(_d(ModelParams, "sparse_epsilon"), ge=0, le=0.5,
                                 description="sparse iterations: cells whose rho and rho_new are below "
                                             "it leave the lists until a full pass; 0: every pass full")
+    bound_rounds: Int = Field(_d(ModelParams, "bound_rounds"), ge=0,
+                              description="with sparse iterations: rounds of the pruning bound, which "
+                                          "removes before the first pass the cells whose rho_new can "
+                                          "never reach sparse_epsilon; 0: no pruning")
     warm_start: Bool = Field(_d(ModelParams, "warm_start"),
                              description="start each frame from the previous frame's rho capped at the "
                                          "prior (not with --workers or --ray)")

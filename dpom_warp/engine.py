@@ -51,8 +51,8 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 6 + 4 + 24  # rect, normal, plane, centre, area, five
-# accumulators, live, top-band and whole-silhouette counts
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 24  # rect, normal, plane, centre, area, five
+# accumulators and the pruning bound, live, top-band and whole-silhouette counts
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
@@ -97,6 +97,8 @@ class FrameResult:
     timings: dict = field(default_factory=dict)
     max_change: np.ndarray | None = None
     live: int | None = None  # live locations at the end (sparse iterations)
+    kept_entries: int | None = None  # mask entries left after the pruning bound (None: not run)
+    pruned: int = 0  # locations the pruning bound removed
     converged: bool = True  # False: stopped at max_iterations above the tolerance
 
 
@@ -194,6 +196,7 @@ class Engine:
             self.bg = wp.zeros((P, 4), dtype=wp.float64)
             self.floor_pixels = wp.ones(self.n_pixels, dtype=wp.int32)  # floor-only model here
             self.rho = wp.zeros(L, dtype=wp.float64)
+            self.upper = wp.zeros(L, dtype=wp.float64)  # the pruning bound (kernels.sparse)
             self.evidence = wp.zeros(L, dtype=wp.float64)
             self.visible = wp.zeros(L, dtype=wp.float64)
             self.share = wp.zeros(L, dtype=wp.float64)
@@ -374,6 +377,26 @@ class Engine:
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta, self.live,
                           self.live_offsets, self.live_counts, self.live_loc, self.live_delta])
 
+    def prune(self, logit_prior: float):
+        """The pruning bound from the current rho (the start): params.bound_rounds rounds,
+        then every location whose bound is below sparse_epsilon leaves the lists for the
+        frame (kernels.sparse; no host sync)."""
+        p, dim, dev = self.params, self.batch * self.n_pixels, self.device
+        self.upper.fill_(1.0)
+        self.evidence.zero_()
+        for _ in range(p.bound_rounds):
+            wp.launch(K.bound_pass, dim=dim, device=dev,
+                      inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
+                              self.delta_bg, self.rho, self.upper, self.behind, self.evidence,
+                              self.n_pixels, self.done])
+            wp.launch(K.update_bound, dim=len(self.upper), device=dev,
+                      inputs=[logit_prior, self.evidence, self.upper])
+        wp.launch(K.prune, dim=len(self.upper), device=dev,
+                  inputs=[p.sparse_epsilon, self.upper, self.rho, self.live])
+        wp.launch(K.prune_lists, dim=dim, device=dev,
+                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
+                          self.live])
+
     def _check(self, it: int):
         wp.launch(K.check_converged, dim=self.batch, device=self.device,
                   inputs=[it, self.params.tolerance, self.max_change, self.done])
@@ -419,7 +442,7 @@ class Engine:
         n = len(depths_m)
         t0 = time.perf_counter()
         self.build_lists(depths_m)
-        counts = self.counts.numpy().reshape(self.batch, self.n_pixels)
+        entries = self.counts.numpy().reshape(self.batch, self.n_pixels).sum(1)  # (a view on the CPU: summed now)
         wp.synchronize_device(dev)
         t1 = time.perf_counter()
         if start is None and p.warm_start and self._last_rho is not None:
@@ -435,41 +458,56 @@ class Engine:
         self.max_change.zero_()
         self.iterations.zero_()
         self.done.assign(np.arange(self.batch, dtype=np.int32) >= n)  # padding frames: done
-        self._run_loop(math.log(p.prior) - math.log1p(-p.prior))
+        logit_prior = math.log(p.prior) - math.log1p(-p.prior)
+        bound = p.sparse_epsilon > 0 and p.bound_rounds > 0
+        if bound:
+            self.prune(logit_prior)
+        self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()
         self.visible.zero_()
         wp.launch(K.transparency_pass, dim=self.batch * self.n_pixels, device=dev,
                   inputs=[self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
         top = p.top_support if self.geometry.height > 0 else 0.0
-        if top > 0:
-            h = self.geometry.height
-            wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
-                      inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]),
-                              p.top_band * h, h, TOP_MIN_RHO, self.rho, self.top_support,
-                              self.top_against, self.top_hidden])
         unhidden = int(p.share_of == "unhidden")
-        if unhidden:
+
+        def soft_threshold(top_share):
+            wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
+                      inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support,
+                              self.top_against, self.top_hidden, p.top_hidden, top_share, p.top_slope,
+                              p.top_min_pixels, unhidden, self.all_support, self.all_against,
+                              self.share, self.rho_star])
+
+        def top_band(lo, hi, gate, counts):
             wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
-                      inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]),
-                              -BAND_ALL, BAND_ALL, TOP_MIN_RHO, self.rho, self.all_support,
-                              self.all_against, self.all_hidden])
-        wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
-                  inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support,
-                          self.top_against, self.top_hidden, p.top_hidden, top, p.top_slope,
-                          p.top_min_pixels, unhidden, self.all_support, self.all_against,
-                          self.share, self.rho_star])
+                      inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]), lo, hi,
+                              TOP_MIN_RHO, gate, *counts])
+
+        if unhidden:
+            top_band(-BAND_ALL, BAND_ALL, self.rho, (self.all_support, self.all_against, self.all_hidden))
+        if top > 0:
+            # counted only where rho* before the test (a factor <= 1) reaches TOP_MIN_RHO: the
+            # silhouette walk is the threshold's whole cost, and most locations are far below
+            if not unhidden:
+                soft_threshold(0.0)
+            h = self.geometry.height
+            top_band(p.top_band * h, h, self.rho if unhidden else self.rho_star,
+                     (self.top_support, self.top_against, self.top_hidden))
+        soft_threshold(top)
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))
         iterations, max_change, done = self.iterations.numpy(), self.max_change.numpy(), self.done.numpy()
-        live = self.live.numpy().reshape(self.batch, self.n_locations).sum(1)
+        live = self.live.numpy().reshape(self.batch, self.n_locations)
+        pruned, live = (live == K.PRUNED).sum(1), (live == 1).sum(1)
+        kept = self.counts.numpy().reshape(self.batch, self.n_pixels).sum(1) if bound else [None] * self.batch
         self._last_rho = rho[n - 1].copy()
         t3 = time.perf_counter()
         timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2, "total_s": t3 - t0}
         if self.batch > 1:
             timings["batch"] = n
         return [FrameResult(rho=rho[f].copy(), rho_star=rho_star[f].copy(), evidence_share=share[f].copy(),
-                            iterations=int(iterations[f]), entries=int(counts[f].sum()),
+                            iterations=int(iterations[f]), entries=int(entries[f]),
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
-                            live=int(live[f]), converged=bool(done[f]))
+                            live=int(live[f]), converged=bool(done[f]),
+                            kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]))
                 for f in range(n)]

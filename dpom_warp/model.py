@@ -55,6 +55,12 @@ class ModelParams:
             move. 0: every pass is full (the exact path). Damping is the same on both paths:
             dropping a location at once, rho = rho_new, changes which competing neighbour
             wins (measured: robustness MODA down to 0.825), so it is not done.
+            With sparse iterations, before the first pass, the pruning bound
+            (reference.evidence_bound, `bound_rounds` rounds) removes from every list, for
+            the whole frame, each location whose rho_new can never reach epsilon from any
+            state the iterations can reach (rho = 0 there).
+        bound_rounds: rounds of the pruning bound (each a pass over the lists, tightening the
+            last); 0: no pruning by the bound.
         warm_start: start a frame from the previous frame's rho instead of the prior.
         top_support: the top-band test of the soft threshold, for objects standing on the
             floor (kernels.mean_field.top_band). In the band of the box from top_band x its
@@ -92,6 +98,7 @@ class ModelParams:
     background_occludes: bool = False
     occlusion_margin: float = 0.1
     sparse_epsilon: float = 1e-4
+    bound_rounds: int = 3
     warm_start: bool = False
     top_support: float = 0.12
     top_band: float = 0.75

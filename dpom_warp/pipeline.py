@@ -257,8 +257,8 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
     del bg_frames
     r = engine.resolution
     inference = {"stride": r.stride, "reduce": r.reduce, "image": [engine.width, engine.height],
-                 "sparse_epsilon": cfg.model.sparse_epsilon, "warm_start": cfg.model.warm_start,
-                 "exact": cfg.engine.exact}
+                 "sparse_epsilon": cfg.model.sparse_epsilon, "bound_rounds": cfg.model.bound_rounds,
+                 "warm_start": cfg.model.warm_start, "exact": cfg.engine.exact}
     if parallel:  # an empty frame compiles every kernel into the cache the workers are given
         engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))
         engine = None
@@ -649,7 +649,10 @@ def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background
                     "median_lists_s": median("engine_lists_s"),
                     "median_iterations_s": median("engine_iterations_s"),
                     "median_detect_s": median("detect_s"), "median_write_s": median("write_s"),
-                    "median_iterations": median("iterations")},
+                    "median_iterations": median("iterations"),
+                    "median_entries": median("entries"),
+                    "median_kept_entries": median("kept_entries") if per_frame and all(
+                        p.get("kept_entries") is not None for p in per_frame) else None},
         "per_frame": per_frame,
     }
     if truth is not None and done:

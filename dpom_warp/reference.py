@@ -254,26 +254,69 @@ def front_transparency(r):
     return t
 
 
-def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, start=None):
+def pixel_lists(depth_m, geom: Geometry, bg: Background, params: ModelParams):
+    """The per-pixel lists of a frame as padded arrays: valid, L (locations), D (Delta) of
+    shape (pixels with entries, longest list), each pixel's Delta_bg, and the entry count."""
+    pixel, loc, _, delta = mask_entries(depth_m, geom, params, bg)
+    pix, valid, L, D = _padded_lists(pixel, loc, delta.astype(np.float64))
+    return valid, L, D, background_delta(depth_m, bg, params).ravel()[pix], len(pixel)
+
+
+def evidence_bound(valid, L, D, dbg, rho0, params: ModelParams):
+    """Upper bounds u_k of rho_new_k over every state the iterations can reach from rho0
+    (params.bound_rounds rounds; kernels.sparse.bound_pass): the pruning bound.
+
+    Every rho stays at or below max(rho0_k, u_k) (a damped update is a convex combination of
+    the start and of rho_new values), so with r_m <= rmax_m = max(rho0_m, u_m):
+    T_j >= Tmin_j = prod_{m<j} (1 - rmax_m), and B_j >= Bmin_j (Bmin_n = Delta_bg,i,
+    Bmin_j = Bmin_{j+1} + min(0, rmax_{j+1} (D_{j+1} - Bmin_{j+1}))); with x = D_j - Bmin_j
+    pixel i adds to k_j's evidence at most x if x >= 0, else Tmin_j x. u_k = sigmoid(logit(prior)
+    + those sums); each round starts from the last round's u (u = 1 before the first)."""
+    K = len(rho0)
+    logit_prior = np.log(params.prior) - np.log1p(-params.prior)
+    upper = np.ones(K)
+    for _ in range(params.bound_rounds):
+        r = np.where(valid, np.maximum(rho0, upper)[L], 0.0)
+        t_min = front_transparency(r)
+        b_min = np.empty_like(D)
+        b = dbg.copy()
+        for j in range(D.shape[1] - 1, -1, -1):
+            b_min[:, j] = b
+            b = b + np.minimum(0.0, r[:, j] * (D[:, j] - b))
+        x = D - b_min
+        contrib = np.where(x >= 0, x, t_min * x)
+        bound = np.bincount(L[valid], weights=contrib[valid], minlength=K)
+        upper = np.minimum(upper, sigmoid(logit_prior + bound))
+    return upper
+
+
+def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, start=None,
+               trace: list | None = None):
     """Mean-field inference of MODEL.md in exclusive form, with damping and soft threshold.
 
-    With params.sparse_epsilon > 0, the sparse iterations of kernels.sparse: full passes at
+    With params.sparse_epsilon > 0, the pruning bound first (evidence_bound: a location whose
+    bound is below epsilon leaves every list for good, rho = 0), then the sparse iterations of
+    kernels.sparse: full passes at
     params.full_pass(it), after which a location whose rho and rho_new are both below epsilon
     is dead until a later full pass; in between only live locations are in the lists (dead
     ones count as rho = 0, transparent) and only they move. `start`: initial rho
-    (warm start) instead of the prior.
+    (warm start) instead of the prior. `trace`: a list that receives every iteration's
+    rho_new (K,).
 
     Returns:
-        dict with rho (K,), rho_star (K,), evidence_share e_k (K,), iterations, entries, live.
+        dict with rho (K,), rho_star (K,), evidence_share e_k (K,), iterations, entries, live,
+        pruned (locations the bound removed).
     """
     K = len(geom.rect)
-    pixel, loc, _, delta = mask_entries(depth_m, geom, params, bg)
-    d_bg = background_delta(depth_m, bg, params).ravel()
-    pix, valid, L, D = _padded_lists(pixel, loc, delta.astype(np.float64))
-    dbg = d_bg[pix]
+    valid, L, D, dbg, entries = pixel_lists(depth_m, geom, bg, params)
     logit_prior = np.log(params.prior) - np.log1p(-params.prior)
     rho = np.full(K, params.prior) if start is None else np.array(start, dtype=np.float64)
-    live = np.ones(K, bool)
+    kept = np.ones(K, bool)
+    if params.sparse_epsilon > 0 and params.bound_rounds > 0:
+        kept = evidence_bound(valid, L, D, dbg, rho, params) >= params.sparse_epsilon
+        rho = np.where(kept, rho, 0.0)  # pruned: rho_new < epsilon at every iteration
+        valid = valid & kept[L]
+    live = kept.copy()
     iterations = 0
     for it in range(params.max_iterations):
         full = params.full_pass(it)
@@ -288,13 +331,15 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         contrib = np.where(use, T * (D - B), 0.0)
         evidence = np.bincount(L[use], weights=contrib[use], minlength=K)
         rho_new = sigmoid(logit_prior + evidence)
-        moving = np.ones(K, bool) if full else live
+        if trace is not None:
+            trace.append(rho_new)
+        moving = kept if full else live
         diff = float(np.max(np.abs(rho_new - rho)[moving])) if moving.any() else 0.0
         lam = params.damping_at(it)
         damped = (1.0 - lam) * rho + lam * rho_new
         if full:
-            live = (rho_new >= params.sparse_epsilon) | (damped >= params.sparse_epsilon)
-            rho = damped
+            live = kept & ((rho_new >= params.sparse_epsilon) | (damped >= params.sparse_epsilon))
+            rho = np.where(kept, damped, 0.0)
         else:
             rho = np.where(live, damped, rho)
         iterations = it + 1
@@ -310,7 +355,9 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(geom.area > 0, tsum / denominator, 0.0)
     rho_star = np.where(geom.area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
-    support, against, hidden = top_band(depth_m, geom, params, rho)
+    # the top band is counted where rho* can still reach TOP_MIN_RHO (its factor is <= 1)
+    gate = rho if params.share_of == "unhidden" else rho_star
+    support, against, hidden = top_band(depth_m, geom, params, gate)
     if params.top_support > 0 and geom.height > 0:
         n = support + against + hidden
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -318,13 +365,13 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
             factor = sigmoid(params.top_slope * (u - params.top_support))
         rho_star = rho_star * np.where(n >= max(params.top_min_pixels, 1), factor, 1.0)
     return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
-                entries=len(pixel), live=int(live.sum()), top_support=support, top_against=against,
+                entries=entries, live=int(live.sum()), pruned=int((~kept).sum()), top_support=support, top_against=against,
                 top_hidden=hidden)
 
 
 def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
     """The top-band test of the soft threshold (ModelParams.top_support): for each location
-    with rho >= TOP_MIN_RHO of a standing box, the silhouette pixels with a reading whose
+    with rho >= TOP_MIN_RHO (mean_field gives rho* before the test) of a standing box, the silhouette pixels with a reading whose
     object point lies between top_band x height and the height that pass the mask test
     (support), and of the others those that read beyond the object (against) and in front
     of it (hidden). `whole`: the same counts over the whole silhouette, any grid (the

@@ -187,7 +187,8 @@ class FrameWorker:
             "xy": [[d.x, d.y, d.z] if cfg.grid.mode == "voxel" else [d.x, d.y] for d in dets],
             "stats": {"frame": f.name, "detections": len(dets), "iterations": res.iterations,
                       "converged": res.converged,
-                      "live": res.live, "entries": res.entries, "read_s": read_s,
+                      "live": res.live, "entries": res.entries, "kept_entries": res.kept_entries,
+                      "read_s": read_s,
                       "infer_s": infer_s, "detect_s": t2 - t1, "render_s": t3 - t2,
                       "worker": self.name, **{f"engine_{k}": v for k, v in res.timings.items()}},
         }

@@ -5,7 +5,8 @@
   into per-pixel lists kept in depth order (location id breaking ties).
 - `mean_field`: the exclusive-form mean-field evidence pass, damped update, on-device
   convergence check (batches, graphs), soft threshold with the top-band test.
-- `sparse`: the per-pixel lists compacted to the live locations (sparse iterations).
+- `sparse`: the pruning bound, and the per-pixel lists compacted to the live locations
+  (sparse iterations).
 - `background`: background distributions from background frames, from the run's own frames
   (streamed clusters, `input.background: auto`) or from the floor plane.
 """
@@ -16,11 +17,11 @@ from .masks import TileIndex, pair_depth_bounds, pixel_entries
 from .mean_field import (check_converged, evidence_pass, soft_threshold, top_band, transparency_pass,
                          update_rho)
 from .pixel_model import GeometryArrays, PixelModel
-from .sparse import count_live, fill_live
+from .sparse import PRUNED, bound_pass, count_live, fill_live, prune, prune_lists, update_bound
 
 __all__ = [
-    "GeometryArrays", "PixelModel", "TileIndex", "background_delta", "background_from_frames",
-    "check_converged", "cluster_background", "cluster_frames", "count_live", "evidence_pass", "fill_live", "floor_background",
-    "pair_depth_bounds", "pixel_entries", "soft_threshold", "top_band", "transparency_pass",
-    "update_rho",
+    "GeometryArrays", "PRUNED", "PixelModel", "TileIndex", "background_delta", "background_from_frames",
+    "bound_pass", "check_converged", "cluster_background", "cluster_frames", "count_live", "evidence_pass", "fill_live", "floor_background",
+    "pair_depth_bounds", "pixel_entries", "prune", "prune_lists", "soft_threshold", "top_band", "transparency_pass",
+    "update_bound", "update_rho",
 ]

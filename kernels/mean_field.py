@@ -120,6 +120,8 @@ def update_rho(
         return
     if i == f * locations:
         iterations[f] = iteration + 1
+    if live[i] < 0:  # pruned by the bound (kernels.sparse.PRUNED): rho = 0, in no list
+        return
     if full == 0 and live[i] == 0:  # dead: in no compact list, its evidence is 0
         return
     rho_new = sigmoid(logit_prior + evidence[i])

@@ -9,11 +9,114 @@ nothing to compete for). These kernels then copy each pixel's list, in order, ke
 the live locations: `count_live` counts, an exclusive scan gives the offsets, `fill_live`
 copies. The passes in between run the ordinary evidence pass on the compact lists and update
 only live locations. Frames that are done get empty compact lists.
+
+The pruning bound, before the first pass (`bound_pass`, `update_bound`, `prune`,
+`prune_lists`): a few rounds bound every location's rho_new from above over every state the
+iterations can reach; a location whose bound is below epsilon can never matter and leaves
+every list for the whole frame (rho = 0, transparent), so every pass walks less from the start.
 """
 
 import warp as wp
 
-from .mean_field import frame_of
+from .mean_field import frame_of, sigmoid
+from .pixel_model import f64
+
+PRUNED = -1  # live[k] of a location the pruning bound removed for the whole frame
+
+
+@wp.kernel(enable_backward=False)
+def bound_pass(
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    entry_loc: wp.array(dtype=wp.int32),
+    entry_delta: wp.array(dtype=wp.float32),
+    delta_bg: wp.array(dtype=wp.float64),
+    rho: wp.array(dtype=wp.float64),
+    upper: wp.array(dtype=wp.float64),
+    behind: wp.array(dtype=wp.float64),
+    evidence: wp.array(dtype=wp.float64),
+    pixels: int,
+    done: wp.array(dtype=wp.int32),
+):
+    """One round of the pruning bound (reference.evidence_bound): with rmax = max(rho, upper)
+    (rho: the start; no iteration takes a location above it), a back-to-front pass gives
+    Bmin_j, the least B_j can be, and a front-to-back pass Tmin_j, the least T_j can be; pixel
+    i adds to k_j's `evidence` x = D_j - Bmin_j where x >= 0, else Tmin_j x: at least what it
+    adds in any iteration. One thread per pixel of the batch, skipping frames that are done."""
+    p = wp.tid()
+    n = counts[p]
+    if n == 0:
+        return
+    if done[frame_of(p, pixels)] != 0:
+        return
+    start = offsets[p]
+    b = delta_bg[p]
+    for jj in range(n):
+        j = start + n - 1 - jj
+        behind[j] = b
+        k = entry_loc[j]
+        x = f64(entry_delta[j]) - b
+        if x < f64(0.0):
+            b = b + wp.max(rho[k], upper[k]) * x
+    t = f64(1.0)
+    for j in range(start, start + n):
+        k = entry_loc[j]
+        x = f64(entry_delta[j]) - behind[j]
+        if x >= f64(0.0):
+            wp.atomic_add(evidence, k, x)
+        else:
+            wp.atomic_add(evidence, k, t * x)
+        t = t * (f64(1.0) - wp.max(rho[k], upper[k]))
+
+
+@wp.kernel(enable_backward=False)
+def update_bound(
+    logit_prior: wp.float64,
+    evidence: wp.array(dtype=wp.float64),
+    upper: wp.array(dtype=wp.float64),
+):
+    """upper <- min(upper, sigmoid(logit(prior) + the round's bound)); clears the evidence."""
+    i = wp.tid()
+    upper[i] = wp.min(upper[i], sigmoid(logit_prior + evidence[i]))
+    evidence[i] = f64(0.0)
+
+
+@wp.kernel(enable_backward=False)
+def prune(
+    epsilon: wp.float64,
+    upper: wp.array(dtype=wp.float64),
+    rho: wp.array(dtype=wp.float64),
+    live: wp.array(dtype=wp.int32),
+):
+    """A location whose bound is below epsilon: live = PRUNED and rho = 0 for the frame."""
+    i = wp.tid()
+    if upper[i] < epsilon:
+        live[i] = PRUNED
+        rho[i] = f64(0.0)
+
+
+@wp.kernel(enable_backward=False)
+def prune_lists(
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    entry_loc: wp.array(dtype=wp.int32),
+    entry_mu: wp.array(dtype=wp.float32),
+    entry_delta: wp.array(dtype=wp.float32),
+    live: wp.array(dtype=wp.int32),
+):
+    """Each pixel's list, in place and in order, without the pruned locations (its count
+    shrinks; its offset stays)."""
+    p = wp.tid()
+    start = offsets[p]
+    e = start
+    for j in range(start, start + counts[p]):
+        k = entry_loc[j]
+        if live[k] != PRUNED:
+            entry_loc[e] = k
+            entry_mu[e] = entry_mu[j]
+            entry_delta[e] = entry_delta[j]
+            e += 1
+    counts[p] = e - start
 
 
 @wp.kernel(enable_backward=False)

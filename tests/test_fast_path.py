@@ -2,6 +2,7 @@
 and the NumPy reference."""
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ import pytest
 from dpom_warp import reference as ref
 from dpom_warp.config import ConfigError, load_config
 from dpom_warp.engine import Engine
+from dpom_warp.kernels import PRUNED
 from dpom_warp.geometry import Camera, Grid, ObjectBox, pose_from_angles
 from dpom_warp.resolution import (AUTO_MIN_PIXELS, REDUCERS, auto_stride, farthest_object_pixels,
                                   reduce_depth, strided_camera)
@@ -18,10 +20,11 @@ from paths import CONFIGS
 
 DEMO = CONFIGS / "demo_people.yaml"
 
-# The stated bound of the sparse path (model.sparse_epsilon = eps): rho* moves by at most eps
-# from the exact path's on the random test scenes (measured: 0.41 eps at most over 20 scenes,
-# eps 1e-5 to 1e-3), and by at most 20 eps on rendered people frames (measured 11 eps on the
-# demo at stride 4). `python -m bench` prints the distance on its scenes.
+# The stated bound of the sparse path (model.sparse_epsilon = eps, with the pruning bound):
+# rho* moves by at most eps from the exact path's on the random test scenes (measured: 0.41 eps
+# at most over 20 scenes, eps 1e-5 to 1e-3; 0.65 eps with the pruning bound over 12), and by at
+# most 20 eps on rendered people frames (measured 11 eps on the demo at stride 4). `python -m
+# bench` prints the distance on its scenes.
 BOUND_RANDOM = 1.0
 BOUND_RENDERED = 20.0
 
@@ -103,6 +106,46 @@ def test_config_stride_reduce_and_exact(tmp_path):
         assert str(e.value) == f"{DEMO}: {message}"
 
 
+@pytest.mark.parametrize("shape", ["plane", "solid"])
+@pytest.mark.parametrize("seed", range(4))
+def test_pruning_bound_kernel_matches_reference(device, seed, shape):
+    geom, params, depth, bg_frames = random_scene(seed, shape=shape)
+    params = dataclasses.replace(params, sparse_epsilon=1e-3, bound_rounds=1 + seed % 3)
+    engine = Engine(geom, params, device)
+    engine.set_background_frames(bg_frames)
+    engine.build_lists(depth)
+    start = np.random.default_rng(seed).uniform(0, 2 * params.prior, len(geom.rect))  # a warm start
+    engine.rho.assign(start)
+    engine.done.zero_()
+    engine.prune(math.log(params.prior) - math.log1p(-params.prior))
+    valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, ref.background_from_frames(bg_frames, params), params)
+    want = ref.evidence_bound(valid, L, D, dbg, start, params)
+    np.testing.assert_allclose(engine.upper.numpy(), want, rtol=1e-6, atol=1e-12)
+    pruned = engine.live.numpy() == PRUNED
+    np.testing.assert_array_equal(pruned, want < params.sparse_epsilon)
+    assert 0 < pruned.sum() < len(pruned)
+    assert (engine.rho.numpy()[pruned] == 0).all()
+
+
+@pytest.mark.parametrize("shape", ["plane", "solid"])
+@pytest.mark.parametrize("seed", range(6))
+def test_pruning_bound_holds_at_every_iteration_of_the_exact_path(seed, shape):
+    """The bound's promise (reference.evidence_bound): from the start, no iteration's rho_new
+    exceeds it, whatever the other locations do; so a location pruned (bound < epsilon) never
+    reaches epsilon."""
+    geom, params, depth, bg_frames = random_scene(seed, shape=shape)
+    bg = ref.background_from_frames(bg_frames, params)
+    valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, bg, params)
+    params = dataclasses.replace(params, bound_rounds=4)
+    upper = ref.evidence_bound(valid, L, D, dbg, np.full(len(geom.rect), params.prior), params)
+    trace = []
+    ref.mean_field(depth, geom, bg, dataclasses.replace(params, sparse_epsilon=0.0), trace=trace)
+    assert len(trace) > 10
+    assert max((rho_new - upper).max() for rho_new in trace) <= 1e-12
+    assert (upper < 1e-3).sum() > len(upper) // 4  # not vacuous: it prunes
+    assert (upper > 0.5).any()  # and it is not a guess: some can rise
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_sparse_path_matches_sparse_reference(device, seed):
     geom, params, depth, bg_frames = random_scene(seed)
@@ -112,6 +155,7 @@ def test_sparse_path_matches_sparse_reference(device, seed):
     want = ref.mean_field(depth, geom, ref.background_from_frames(bg_frames, params), params)
     got = engine.infer(depth)
     assert got.iterations == want["iterations"] and got.live == want["live"]
+    assert got.pruned == want["pruned"] > 0 and got.kept_entries < got.entries
     assert got.live < len(geom.rect) // 2, "nothing was dropped: the sparse path is not exercised"
     np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
@@ -126,7 +170,7 @@ def test_sparse_path_stays_within_bound_of_exact(seed, eps):
     for e in (engine, exact):
         e.set_background_frames(bg_frames)
     fast, slow = engine.infer(depth), exact.infer(depth)
-    assert slow.live == len(geom.rect)
+    assert slow.live == len(geom.rect) and slow.pruned == 0 and fast.pruned > 0
     assert np.abs(fast.rho_star - slow.rho_star).max() <= BOUND_RANDOM * eps
     assert np.abs(fast.rho - slow.rho).max() <= BOUND_RANDOM * eps
 
