@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-TOP_MIN_RHO = 1e-3  # locations below it skip the top-band test (their rho* is below it anyway)
+TOP_MIN_RHO = 1e-3  # locations whose rho* is below it before the top-band test skip it (a factor <= 1)
 BAND_ALL = 1e30  # a height band that holds every pixel (the unhidden share of eq. 13)
 
 
@@ -69,8 +69,9 @@ class ModelParams:
             hide them) or in front of it (f: hidden by something nearer, which may hide a
             head: each counts as top_hidden of a supporting pixel). rho* is multiplied by
             sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f); a
-            band with fewer than top_min_pixels readings, a location with rho < TOP_MIN_RHO
-            and voxel grids are not judged. A table or cabinet lower than the box shows the
+            band with fewer than top_min_pixels readings, a location whose rho* before the
+            test is below TOP_MIN_RHO (rho with share_of unhidden) and voxel grids are not
+            judged. A table or cabinet lower than the box shows the
             wall through the band (u = 0); a person's head and shoulders support it (with the
             solid, on the tuning draw of bench.robustness: found people 0.14 to 1, median
             0.6; an arm beside a person seen from above 0.08 to 0.1), also when their legs
