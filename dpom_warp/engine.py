@@ -151,6 +151,7 @@ class Engine:
         self.batch = batch
         self.graph = wp.get_device(device).is_cuda if graph is None else graph
         self.local_scratch = 0 if wp.get_device(device).is_cuda else 1  # see kernels.evidence_pass
+        self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
         self._graph, self._graph_lists = None, None
         self._last_rho = None  # the last frame's rho, for params.warm_start
         self.tile, tiles_x = tile, -(-self.width // tile)
@@ -213,6 +214,8 @@ class Engine:
             self.live = wp.ones(L, dtype=wp.int32)
             self.live_counts = wp.zeros(P, dtype=wp.int32)
             self.live_offsets = wp.zeros(P, dtype=wp.int32)
+            self.reserved = wp.zeros(2, dtype=wp.int32)  # kernels.masks.pixel_entries_once
+            self.no_reserved = wp.zeros(0, dtype=wp.int32)
         self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
         self._allocate_lists(int(entries_per_pixel * P))
         self.set_floor_background()
@@ -335,21 +338,43 @@ class Engine:
                   inputs=[self.depth, self.pm, self.bg, self.delta_bg])
         lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
         inputs = [self.depth, self.geo, self.pm, self.bg, self.tiles, self.n_locations]
-        wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev, inputs=inputs + [0] + lists)
+        if self.one_pass_lists:  # CPU: each mask test once (kernels.masks.pixel_entries_once)
+            def one_pass():
+                self.reserved.zero_()
+                wp.launch(K.pixel_entries_once, dim=self.depth.shape, device=dev,
+                          inputs=inputs + lists + [self.reserved])
+                return (int(x) for x in self.reserved.numpy())
+
+            total, long_lists = one_pass()
+            if total > self.capacity:
+                self._grow(total)
+                lists[2:] = [self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
+                total, long_lists = one_pass()
+            if long_lists:  # lists longer than its stack buffer: filled as on a GPU, alone
+                wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev,
+                          inputs=inputs + [1] + lists + [self.reserved])
+            return total
+        wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev,
+                  inputs=inputs + [0] + lists + [self.no_reserved])
         wp.utils.array_scan(self.counts, self.offsets, inclusive=False)
         total = int(self.offsets[-1:].numpy()[0]) + int(self.counts[-1:].numpy()[0])
         if total > self.capacity:
-            if total > self.max_entries or total < 0:
-                what = "batch" if self.batch > 1 else "frame"
-                raise ListOverflow(
-                    f"{what} needs {total} mask entries ({total * ENTRY_BYTES / 2**30:.2f} GiB), "
-                    f"above the cap of {self.max_entries} (engine.max_entries, engine.memory_gb "
-                    f"and the int32 offsets); coarsen the grid or raise the cap")
-            self.grown.append(total)
-            self._allocate_lists(int(total * 1.25))
+            self._grow(total)
             lists[2:] = [self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
-        wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev, inputs=inputs + [1] + lists)
+        wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev,
+                  inputs=inputs + [1] + lists + [self.no_reserved])
         return total
+
+    def _grow(self, total: int):
+        """Lists for `total` entries (and a quarter more), or ListOverflow above the cap."""
+        if total > self.max_entries or total < 0:
+            what = "batch" if self.batch > 1 else "frame"
+            raise ListOverflow(
+                f"{what} needs {total} mask entries ({total * ENTRY_BYTES / 2**30:.2f} GiB), "
+                f"above the cap of {self.max_entries} (engine.max_entries, engine.memory_gb "
+                f"and the int32 offsets); coarsen the grid or raise the cap")
+        self.grown.append(total)
+        self._allocate_lists(int(total * 1.25))
 
     def iterate(self, it: int, logit_prior: float, damping: float, full: bool = True):
         """One mean-field iteration: evidence pass, then damped update (recording

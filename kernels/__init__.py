@@ -13,7 +13,7 @@
 
 from .background import (background_delta, background_from_frames, cluster_background, cluster_frames,
                          floor_background)
-from .masks import TileIndex, pair_depth_bounds, pixel_entries
+from .masks import TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once
 from .mean_field import (check_converged, evidence_pass, soft_threshold, top_band, transparency_pass,
                          update_rho)
 from .pixel_model import GeometryArrays, PixelModel
@@ -22,6 +22,6 @@ from .sparse import PRUNED, bound_pass, count_live, fill_live, prune, prune_list
 __all__ = [
     "GeometryArrays", "PRUNED", "PixelModel", "TileIndex", "background_delta", "background_from_frames",
     "bound_pass", "check_converged", "cluster_background", "cluster_frames", "count_live", "evidence_pass", "fill_live", "floor_background",
-    "pair_depth_bounds", "pixel_entries", "prune", "prune_lists", "soft_threshold", "top_band", "transparency_pass",
+    "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "prune", "prune_lists", "soft_threshold", "top_band", "transparency_pass",
     "update_bound", "update_rho",
 ]

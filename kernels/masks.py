@@ -17,7 +17,8 @@ search and runs the exact mask test of the reference on those with z <= hi. The 
 a superset of the mask by construction, so the lists are the same as a scan of every
 silhouette. With `fill == 0` the kernel writes each pixel's count; with `fill == 1` it writes
 the entries into the pixel's slice at `offsets[p]`, keeping it sorted by (mu, location id) as
-it goes (insertion, no atomics). Frames of a batch are blocks of pixels and of locations: the
+it goes (insertion, no atomics). On the CPU `pixel_entries_once` does both in one pass (each
+mask test once). Frames of a batch are blocks of pixels and of locations: the
 entries of frame b name location b * n_locations + k. With `background_occludes`, a location
 does not claim a pixel whose known background is clearly in front of it.
 """
@@ -117,9 +118,12 @@ def pixel_entries(
     entry_loc: wp.array(dtype=wp.int32),
     entry_mu: wp.array(dtype=wp.float32),
     entry_delta: wp.array(dtype=wp.float32),
+    reserved: wp.array(dtype=wp.int32),
 ):
     b, v, u = wp.tid()
     p = (b * depth.shape[1] + v) * depth.shape[2] + u
+    if fill == 1 and reserved.shape[0] > 0 and counts[p] <= LOCAL_MATCHES:
+        return  # after pixel_entries_once: only the lists too long for its stack buffer
     z = f64(depth[b, v, u])
     n = int(0)
     if is_reading(pm, z):
@@ -165,3 +169,88 @@ def pixel_entries(
             j += 1
     if fill == 0:
         counts[p] = n
+
+
+LOCAL_MATCHES = 128  # pixel_entries_once keeps up to this many of a pixel's entries on its stack
+LocalLoc = wp.types.vector(length=LOCAL_MATCHES, dtype=wp.int32)
+LocalValues = wp.types.vector(length=LOCAL_MATCHES, dtype=wp.float32)
+
+
+@wp.kernel(enable_backward=False)
+def pixel_entries_once(
+    depth: wp.array3d(dtype=wp.float32),
+    geo: GeometryArrays,
+    pm: PixelModel,
+    bg: wp.array2d(dtype=wp.float64),
+    tiles: TileIndex,
+    n_locations: int,
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    capacity: int,
+    entry_loc: wp.array(dtype=wp.int32),
+    entry_mu: wp.array(dtype=wp.float32),
+    entry_delta: wp.array(dtype=wp.float32),
+    reserved: wp.array(dtype=wp.int32),
+):
+    """The lists in one pass (CPU): each pixel runs pixel_entries' mask tests once, keeps its
+    entries sorted on its stack, takes its slice with an atomic add on reserved[0] (in pixel
+    order on one CPU thread, so the offsets are the exclusive scan's) and copies them there if
+    the slice fits the capacity. reserved[0] ends as the total, reserved[1] counts the pixels
+    with more than LOCAL_MATCHES entries: pixel_entries (fill 1, these `reserved`) fills those."""
+    b, v, u = wp.tid()
+    p = (b * depth.shape[1] + v) * depth.shape[2] + u
+    z = f64(depth[b, v, u])
+    n = int(0)
+    locs = LocalLoc()
+    mus = LocalValues()
+    deltas = LocalValues()
+    if is_reading(pm, z):
+        t = (v / tiles.size) * tiles.tiles_x + u / tiles.size
+        first = tiles.start[t]
+        last = tiles.start[t + 1]
+        key = z - tiles.span[t]
+        while first < last:
+            mid = (first + last) / 2
+            if tiles.lo[mid] < key:
+                first = mid + 1
+            else:
+                last = mid
+        last = tiles.start[t + 1]
+        d = geo.rays[v, u]
+        j = first
+        while j < last and tiles.lo[j] <= z:
+            if z <= tiles.hi[j]:
+                k = tiles.loc[j]
+                r = geo.rect[k]
+                if u >= r[0] and u <= r[2] and v >= r[1] and v <= r[3]:
+                    o = object_depth(geo, k, d)
+                    mu = o[0]
+                    if mu > f64(0.0):
+                        inlier = object_log_inlier(pm, z, mu, o[1])
+                        if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
+                            if n < LOCAL_MATCHES:
+                                mu32 = wp.float32(mu)
+                                kb = b * n_locations + k
+                                e = n
+                                while e > 0 and entry_before(mu32, kb, mus[e - 1], locs[e - 1]):
+                                    locs[e] = locs[e - 1]
+                                    mus[e] = mus[e - 1]
+                                    deltas[e] = deltas[e - 1]
+                                    e -= 1
+                                locs[e] = kb
+                                mus[e] = mu32
+                                deltas[e] = wp.float32(pm.log_reading + logaddexp(pm.log_outlier, inlier))
+                            n += 1
+            j += 1
+    counts[p] = n
+    start = int(0)
+    if n > 0:
+        start = wp.atomic_add(reserved, 0, n)
+    offsets[p] = start
+    if n > LOCAL_MATCHES:
+        wp.atomic_add(reserved, 1, 1)
+    elif start + n <= capacity:
+        for e in range(n):
+            entry_loc[start + e] = locs[e]
+            entry_mu[start + e] = mus[e]
+            entry_delta[start + e] = deltas[e]

@@ -61,13 +61,16 @@ def distorted_voxel_scene(seed, shape="plane"):
     return geom, params, depth
 
 
+@pytest.mark.parametrize("one_pass", [False, True])
 @pytest.mark.parametrize("tile", [1, 5, 8, 64])
-def test_sorted_lists_match_reference(device, tile):
-    """The tile index finds exactly the reference's masks, in its order, whatever the tile."""
+def test_sorted_lists_match_reference(device, tile, one_pass):
+    """The tile index finds exactly the reference's masks, in its order, whatever the tile,
+    with the lists built in two passes (count, scan, fill) or in one (the CPU's)."""
     for geom, params, depth, bg in [random_scene(11)[:3] + (None,), distorted_voxel_scene(tile) + (None,),
                                     random_scene(11 + tile, shape="solid")[:3] + (None,),
                                     distorted_voxel_scene(tile, "solid") + (None,)]:
         engine = Engine(geom, params, device, tile=tile)
+        engine.one_pass_lists = one_pass
         if params.background_occludes:
             frames = np.stack([np.roll(depth, 3 * i, axis=1) for i in range(3)])
             engine.set_background_frames(frames)
@@ -99,9 +102,36 @@ def test_background_kernels_match_reference(device):
     np.testing.assert_allclose(engine.delta_bg.numpy().size, depth.size)
 
 
-def test_list_capacity_grows_and_is_reported(device):
+def test_lists_longer_than_the_one_pass_buffer(device):
+    """Pixels with more entries than pixel_entries_once keeps on its stack are filled by the
+    two-pass kernel, alone; the lists are the reference's either way."""
+    from dpom_warp.kernels.masks import LOCAL_MATCHES
+
+    geom, params, depth, _ = random_scene(4)
+    geom = build_geometry(Camera(24, 20, 20.0, 20.0, 11.5, 9.5, pose_from_angles(2.2, 15.0, 0.0)),
+                          Grid(x=(-1.5, 1.5, 0.1), y=(1.5, 5.0, 0.1)), ObjectBox(0.5, 1.8))
+    params = dataclasses.replace(params, sigma_object=3.0)  # every box claims every reading
+    depth = np.random.default_rng(4).uniform(1.0, 6.0, (20, 24)).astype(np.float32)
+    want = ref.mask_entries(depth, geom, params, None)
+    lists = []
+    for one_pass in (False, True):
+        engine = Engine(geom, params, device, entries_per_pixel=1.0)
+        engine.one_pass_lists = one_pass
+        assert engine.build_lists(depth) == len(want[0])
+        lists.append(lists_as_entries(engine))
+    counts = np.bincount(want[0])
+    assert counts.max() > LOCAL_MATCHES >= counts[counts > 0].min()  # both kinds of pixel
+    for got in lists:
+        for a, b in zip(got[:3], want[:3]):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_allclose(got[3], want[3], rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("one_pass", [False, True])
+def test_list_capacity_grows_and_is_reported(device, one_pass):
     geom, params, depth, _ = random_scene(5)
     engine = Engine(geom, params, device, entries_per_pixel=0.01)
+    engine.one_pass_lists = one_pass
     small = engine.capacity
     want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
     assert want["entries"] > small
