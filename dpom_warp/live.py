@@ -16,9 +16,13 @@ code 1; its SDK failing to stop (as an unplugged camera does) loses nothing eith
 
 from __future__ import annotations
 
+import dataclasses
 import statistics
 import threading
 import time
+from collections import deque
+from concurrent.futures import Future
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
@@ -53,9 +57,76 @@ class NewestFrame:
             return frame
 
 
+def _helper_start(spec, cache) -> None:
+    """A helper process of a live run: Ctrl-C is the main process's to handle; the engine is
+    built from the run's spec with the kernels the main process compiled."""
+    import signal
+
+    from .worker import _pool_start
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _pool_start(spec, cache)
+
+
+def _helper_infer(small: np.ndarray):
+    """(result, inference seconds, the process's name) of one frame at the engine's resolution."""
+    from .worker import _pool_worker
+
+    worker = _pool_worker[0]
+    t = time.perf_counter()
+    res = worker.engine.infer(small)
+    return res, time.perf_counter() - t, worker.name
+
+
+class Helpers:
+    """`n` processes, each with its own engine, inferring the frames the main process hands
+    them while it infers others itself (Warp runs a CPU launch on one thread: this is how a
+    live run uses more cores). If one dies, its frames are inferred by the main process and
+    the run goes on without helpers."""
+
+    def __init__(self, spec, engine, n: int):
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        from .worker import kernel_cache
+
+        if engine.floor_mode and engine.fallback_pixels == engine.n_pixels:
+            given = None  # the floor-only model, completed from each frame
+        else:  # the background this engine holds, and the pixels it leaves to the floor model
+            fallback = (engine.floor_pixels.numpy().reshape(engine.height, engine.width) > 0
+                        if engine.fallback_pixels else None)
+            given = (engine.background(0), fallback)
+        spec = dataclasses.replace(spec, background=given)
+        engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))  # every kernel compiled
+        self.n, self.running = n, []
+        self.pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"),
+                                        initializer=_helper_start, initargs=(spec, kernel_cache()))
+        warm = [self.pool.submit(_helper_infer, np.zeros((engine.height, engine.width), np.float32))
+                for _ in range(n)]
+        for w in warm:  # started, engines built: the first frames do not wait for them
+            w.result()
+
+    def idle(self) -> bool:
+        self.running = [f for f in self.running if not f.done()]
+        return self.pool is not None and len(self.running) < self.n
+
+    def submit(self, small: np.ndarray):
+        fut = self.pool.submit(_helper_infer, small)
+        self.running.append(fut)
+        return fut
+
+    def close(self):
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+            self.pool = None
+
+
 def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None = None, log=print,
-             max_frames: int | None = None, overwrite: bool = False, first_frame_timeout: float = 10.0) -> dict:
-    """Infer a live camera's frames until Ctrl-C or `max_frames`; returns the summary."""
+             max_frames: int | None = None, overwrite: bool = False, first_frame_timeout: float = 10.0,
+             workers: int = 1) -> dict:
+    """Infer a live camera's frames until Ctrl-C or `max_frames`; returns the summary. With
+    `workers` > 1, workers - 1 helper processes infer beside this one (Helpers); frames are
+    written and tracked in the order they were taken."""
     from .pipeline import _jsonable, prepare_output, set_up, summarise, track_table_files
     from .sources.realsense import RealSenseLive
     from .tracking import Cells, OnlineTracker
@@ -68,6 +139,9 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         raise ConfigError("camera.extrinsics: auto fits the floor on frames read before the run; expected "
                           "the live camera's pose ({height, pitch_deg, ...}; `dpom-warp fit-ground` on a "
                           "few saved frames gives it)")
+    if workers > 1 and cfg.model.warm_start:
+        raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
+                          "must run in order in one process; expected no --workers with it")
     t_start = time.perf_counter()
     source = RealSenseLive(cfg.inputs.frames)
     info = source.info()
@@ -96,52 +170,96 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         view.camera(camera)
     slot = NewestFrame()
     records, names, latencies, infer_s = {}, [], [], []
-    done, t_first, last_line, track_s = 0, None, time.perf_counter(), 0.0
+    done, taken, t_first, last_line, track_s = 0, 0, None, time.perf_counter(), 0.0
+    pending: deque = deque()  # [frame, depth, small, FrameResult or future, inference s, process]
+    helpers = Helpers(setup.spec, engine, workers - 1) if workers > 1 else None
+
+    def result_of(item, wait: bool) -> bool:
+        """Whether item's result is in (waiting for it with `wait`); a helper that died: the
+        frame is inferred here, and the run goes on without helpers."""
+        nonlocal helpers
+        if not isinstance(item[3], Future):
+            return True
+        if not (wait or item[3].done()):
+            return False
+        try:
+            item[3], item[4], item[5] = item[3].result()
+        except BrokenProcessPool as e:
+            log(f"live: a helper process died ({e or 'no reason given'}); its frames are inferred here, "
+                f"the run goes on in one process")
+            helpers.close()
+            helpers = None
+            for other in pending:  # every frame it held
+                if isinstance(other[3], Future):
+                    t = time.perf_counter()
+                    other[3], other[5] = engine.infer(other[2]), worker.name
+                    other[4] = time.perf_counter() - t
+        return True
+
+    def finish(item):
+        nonlocal done, track_s
+        fr, depth, _, res, infer, process = item
+        worker.pictures = cfg.output.images and done % cfg.output.images_every == 0
+        name = f"{fr.index:06d}"
+        _, output, _ = worker._finish(FrameItem(name), depth, res, 0.0, infer, [])
+        output.record["timestamp"] = output.record["stats"]["timestamp"] = fr.timestamp
+        output.record["stats"]["worker"] = process
+        records[name] = write_output(out, output)
+        names.append(name)
+        if view is not None:
+            rho_map, dets = worker.detections(res)
+            view.frame(done, fr.timestamp, depth, dets, rho_map)
+        if tracking_on:
+            t1 = time.perf_counter()
+            tracker.push(res.rho_star)
+            track_s += time.perf_counter() - t1
+        latencies.append(time.perf_counter() - fr.arrived)
+        infer_s.append(infer)
+        done += 1
+
+    def drain(wait: bool):
+        while pending and result_of(pending[0], wait):
+            finish(pending.popleft())
+
     source.start(slot.put)
     stopped_by, stop_error = "max_frames", None
     try:
-        while max_frames is None or done < max_frames:
-            fr = slot.take(first_frame_timeout if done == 0 else STALL_S)
+        while max_frames is None or taken < max_frames:
+            fr = slot.take(first_frame_timeout if taken == 0 else STALL_S)
             if fr is None:
-                if done == 0:
+                if taken == 0:
                     raise ConfigError(f"input.frames: {cfg.inputs.frames}: no frame within "
                                       f"{first_frame_timeout:g} s of starting the camera")
                 stopped_by = "camera stopped sending"
                 break
             t_first = t_first or fr.arrived
             depth = units_to_metres(fr.depth, cfg.inputs.depth_scale)
-            t0 = time.perf_counter()
-            res = engine.infer(engine.resolution.frames(depth))
-            infer = time.perf_counter() - t0
-            worker.pictures = cfg.output.images and done % cfg.output.images_every == 0
-            name = f"{fr.index:06d}"
-            _, output, _ = worker._finish(FrameItem(name), depth, res, 0.0, infer, [])
-            output.record["timestamp"] = output.record["stats"]["timestamp"] = fr.timestamp
-            records[name] = write_output(out, output)
-            names.append(name)
-            if view is not None:
-                rho_map, dets = worker.detections(res)
-                view.frame(done, fr.timestamp, depth, dets, rho_map)
-            if tracking_on:
-                t1 = time.perf_counter()
-                tracker.push(res.rho_star)
-                track_s += time.perf_counter() - t1
-            latencies.append(time.perf_counter() - fr.arrived)
-            infer_s.append(infer)
-            done += 1
-            if time.perf_counter() - last_line >= 1.0:
+            small = engine.resolution.frames(depth)
+            taken += 1
+            if helpers is not None and helpers.idle():
+                pending.append([fr, depth, small, helpers.submit(small), None, None])
+            else:
+                t0 = time.perf_counter()
+                res = engine.infer(small)
+                pending.append([fr, depth, small, res, time.perf_counter() - t0, worker.name])
+            drain(wait=False)
+            if latencies and time.perf_counter() - last_line >= 1.0:
                 last_line = time.perf_counter()
                 rate = done / max(1e-9, last_line - t_first)
                 log(f"live: {done} frames, {rate:.1f} frames/s, {slot.dropped} dropped, latency "
                     f"{1000 * statistics.median(latencies[-30:]):.0f} ms")
+        drain(wait=True)
     except KeyboardInterrupt:
         stopped_by = "Ctrl-C"
+        drain(wait=True)  # the frames taken are inferred and written: nothing is lost
     finally:
         try:
             source.stop()
         except RuntimeError as e:  # an unplugged camera's SDK may fail to stop it: keep the frames
             stop_error = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
             log(f"live: the camera did not stop cleanly ({stop_error})")
+        if helpers is not None:
+            helpers.close()
         if view is not None:
             view.close()
     wall = time.perf_counter() - (t_first or time.perf_counter())
@@ -159,7 +277,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     summary["tracking"] = report
     summary["live"] = {"source": info.kind, "frames": done, "received": slot.received,
                        "dropped": slot.dropped, "dropped_share": slot.dropped / max(1, slot.received),
-                       "frames_per_s": done / wall if wall > 0 else None,
+                       "frames_per_s": done / wall if wall > 0 else None, "processes": workers,
                        "camera_fps": fps, "stopped_by": stopped_by, "stop_error": stop_error,
                        "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
                        "latency_ms_p95": 1000 * float(np.percentile(latencies, 95)) if latencies else None,

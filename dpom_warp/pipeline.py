@@ -155,7 +155,7 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     if cfg.inputs.frames is not None and is_live(cfg.inputs.frames):
         from .live import run_live
 
-        return run_live(cfg, output_dir, device, log, max_frames, overwrite)
+        return run_live(cfg, output_dir, device, log, max_frames, overwrite, workers=workers)
     plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1)
     open_output(plan, overwrite, resume, log)
     if workers > 1 and len(plan.todo) > 1:

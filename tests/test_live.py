@@ -61,6 +61,97 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     assert rows["/world/camera/depth"] == rows["/world/camera/depth/detections"] == 12
 
 
+def plain_maps(path, tmp):
+    """The maps the plain run gives the live test's six rendered frames."""
+    import numpy as np
+
+    plain = yaml.safe_load(path.read_text())
+    plain["input"].update(frames=f"{tmp}/scene/frames/*.png", depth_scale=0.001)  # small_config's
+    plain["camera"].update(width=128, height=106, intrinsics={"fx": 91.25, "fy": 91.25, "cx": 63.5, "cy": 52.5})
+    plain["output"].update(dir=str(tmp / "plain"), rerun=None)
+    plain_path = tmp / "plain.yaml"
+    plain_path.write_text(yaml.safe_dump(plain))
+    assert main(["run", str(plain_path), "--no-progress"]) == 0
+    return [np.load(tmp / "plain" / "maps" / f"{i:04d}.npy") for i in range(6)]
+
+
+def assert_plain_maps_in_stream_order(out, want, frames):
+    """Every map of the live run is the plain run's of the same rendered frame (bit for bit),
+    written in stream order; returns the per-frame records."""
+    import numpy as np
+
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["live"]["frames"] == frames
+    names = [p["frame"] for p in summary["per_frame"]]  # in the order written and tracked
+    assert len(names) == frames and names == sorted(names)
+    first = [j for j in range(6) if np.array_equal(np.load(out / "maps" / f"{names[0]}.npy"), want[j])]
+    assert len(first) == 1  # the stream's first frame is one of the rendered ones, then in order
+    for name in names:
+        np.testing.assert_array_equal(np.load(out / "maps" / f"{name}.npy"),
+                                      want[(first[0] + int(name) - int(names[0])) % 6], err_msg=name)
+    return summary
+
+
+def test_live_run_on_two_processes_gives_the_plain_runs_maps_in_stream_order(camera_config):
+    """--workers 2: a helper process infers beside the main one; every frame's map is the one
+    the plain run gives the same rendered frame, records come in stream order, and both
+    processes inferred some."""
+    path, cam, tmp = camera_config
+    want = plain_maps(path, tmp)
+    cam.start()
+    try:
+        assert main(["run", str(path), "--no-progress", "--max-frames", "12", "--workers", "2"]) == 0
+    finally:
+        cam.stop()
+    summary = assert_plain_maps_in_stream_order(tmp / "out", want, 12)
+    assert summary["live"]["processes"] == 2
+    workers = {p["worker"] for p in summary["per_frame"]}
+    assert "main" in workers and any(w.startswith("process ") for w in workers), workers
+
+
+def test_a_helper_process_that_dies_loses_no_frame(camera_config, capsys):
+    """The helper is killed mid-run: its frame is inferred by the main process, the run goes
+    on in one process to --max-frames, every map still the plain run's; one line says so."""
+    import os
+    import signal
+    import threading
+    import time
+    from pathlib import Path
+
+    path, cam, tmp = camera_config
+    want = plain_maps(path, tmp)
+    out, killed = tmp / "out", []
+
+    def kill_the_helper():
+        deadline = time.time() + 60
+        while time.time() < deadline and not killed:
+            records = list((out / "frames").glob("*.json")) if (out / "frames").exists() else []
+            if len(records) >= 4:
+                for proc in Path("/proc").iterdir():
+                    try:
+                        stat = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+                        cmd = (proc / "cmdline").read_bytes()
+                    except (OSError, IndexError):
+                        continue
+                    if int(stat[1]) == os.getpid() and b"multiprocessing" in cmd and b"spawn_main" in cmd:
+                        os.kill(int(proc.name), signal.SIGKILL)
+                        killed.append(int(proc.name))
+            time.sleep(0.01)
+
+    killer = threading.Thread(target=kill_the_helper, daemon=True)
+    cam.start()
+    killer.start()
+    try:
+        assert main(["run", str(path), "--no-progress", "--max-frames", "20", "--workers", "2"]) == 0
+    finally:
+        cam.stop()
+        killer.join(5)
+    assert killed, "the helper process was not found"
+    assert "live: a helper process died" in capsys.readouterr().out
+    summary = assert_plain_maps_in_stream_order(out, want, 20)
+    assert summary["per_frame"][-1]["worker"] == "main"
+
+
 def test_no_camera_is_one_line(camera_config, capsys):
     path, cam, _ = camera_config
     cam.unregister()
