@@ -152,6 +152,14 @@ def test_a_helper_process_that_dies_loses_no_frame(camera_config, capsys):
     assert summary["per_frame"][-1]["worker"] == "main"
 
 
+def test_live_workers_with_warm_start_is_one_line(camera_config, capsys):
+    path, _, _ = camera_config
+    assert main(["run", str(path), "--no-progress", "--workers", "2", "--set", "model.warm_start=true"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "model.warm_start: each frame starts from the previous one" in err
+    assert "expected no --workers with it" in err
+
+
 def test_no_camera_is_one_line(camera_config, capsys):
     path, cam, _ = camera_config
     cam.unregister()
