@@ -51,8 +51,8 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 24  # rect, normal, plane, centre, area, five
-# accumulators and the pruning bound, live, top-band and whole-silhouette counts
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 24  # rect, normal, plane, centre, area,
+# five accumulators and the pruning bound, live, live index, entries, top-band and whole-silhouette counts
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
@@ -154,6 +154,7 @@ class Engine:
         self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
         self._graph, self._graph_lists = None, None
         self._last_rho = None  # the last frame's rho, for params.warm_start
+        self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.tile, tiles_x = tile, -(-self.width // tile)
         self.n_tiles = tiles_x * -(-self.height // tile)
         pair_loc, pair_tile = tile_pairs(geometry.rect, tile, tiles_x)
@@ -214,6 +215,11 @@ class Engine:
             self.live = wp.ones(L, dtype=wp.int32)
             self.live_counts = wp.zeros(P, dtype=wp.int32)
             self.live_offsets = wp.zeros(P, dtype=wp.int32)
+            self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
+            self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.count_entries
+            self.live_count = wp.zeros(1, dtype=wp.int32)
+            self.live_changed = wp.zeros(1, dtype=wp.int32)
+            self.no_index = wp.zeros(0, dtype=wp.int32)
             self.reserved = wp.zeros(2, dtype=wp.int32)  # kernels.masks.pixel_entries_once
             self.no_reserved = wp.zeros(0, dtype=wp.int32)
         self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
@@ -386,10 +392,16 @@ class Engine:
         wp.launch(K.evidence_pass, dim=self.batch * self.n_pixels, device=self.device,
                   inputs=[*lists, self.delta_bg, self.rho, self.behind, self.evidence,
                           self.n_pixels, self.done, self.local_scratch])
-        wp.launch(K.update_rho, dim=self.batch * self.n_locations, device=self.device,
-                  inputs=[logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
-                          self.done, self.max_change, self.iterations, int(full),
-                          self.params.sparse_epsilon, self.live])
+        index, dim = self.no_index, self.batch * self.n_locations
+        if not full and self.n_live is not None:  # the live locations alone (gather_live)
+            index, dim = self.live_index, self.n_live
+            wp.launch(K.count_iteration, dim=self.batch, device=self.device,
+                      inputs=[it, self.done, self.iterations])
+        if dim:
+            wp.launch(K.update_rho, dim=dim, device=self.device,
+                      inputs=[logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
+                              self.done, self.max_change, self.iterations, int(full),
+                              self.params.sparse_epsilon, self.live, index, self.live_changed])
 
     def compact(self):
         """Copy each pixel's list, in order, keeping the live locations (count, scan, fill)."""
@@ -422,6 +434,23 @@ class Engine:
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
                           self.live])
 
+    def _compact_if_changed(self):
+        """Before a sparse pass: the compact lists. Driven from the host (no graph), they are
+        rebuilt only when the full pass changed which locations are live (update_rho's
+        `live_changed`), and the sparse updates then run over the live locations alone (their
+        count read back with the flag: one sync, where the loop syncs for its check anyway)."""
+        if self.graph:
+            self.compact()
+            return
+        if self.n_live is not None and not int(self.live_changed.numpy()[0]):
+            return  # the same live locations: the compact lists and the index still hold
+        self.live_changed.zero_()
+        self.compact()
+        self.live_count.zero_()
+        wp.launch(K.gather_live, dim=len(self.live), device=self.device,
+                  inputs=[self.live, self.n_locations, self.done, self.live_index, self.live_count])
+        self.n_live = int(self.live_count.numpy()[0])
+
     def _check(self, it: int):
         wp.launch(K.check_converged, dim=self.batch, device=self.device,
                   inputs=[it, self.params.tolerance, self.max_change, self.done])
@@ -432,11 +461,11 @@ class Engine:
         sparse iterations the checked iterations are full passes, so a frame stops only when
         a pass over every location has found nothing to revive."""
         p = self.params
-        full = True
+        full, self.n_live = True, None
         for it in range(p.max_iterations):
             was_full, full = full, p.full_pass(it)
             if not full and was_full:
-                self.compact()
+                self._compact_if_changed()
             self.iterate(it, logit_prior, p.damping_at(it), full)
             if (it + 1) % p.check_every == 0:
                 self._check(it)
@@ -487,6 +516,11 @@ class Engine:
         bound = p.sparse_epsilon > 0 and p.bound_rounds > 0
         if bound:
             self.prune(logit_prior)
+        if p.sparse_epsilon > 0:  # locations in no list stay where they start (kernels.sparse.IDLE)
+            self.per_location.zero_()
+            wp.launch(K.count_entries, dim=self.batch * self.n_pixels, device=dev,
+                      inputs=[self.offsets, self.counts, self.entry_loc, self.per_location])
+            wp.launch(K.mark_idle, dim=len(self.live), device=dev, inputs=[self.per_location, self.live])
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()

@@ -295,11 +295,12 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     """Mean-field inference of MODEL.md in exclusive form, with damping and soft threshold.
 
     With params.sparse_epsilon > 0, the pruning bound first (evidence_bound: a location whose
-    bound is below epsilon leaves every list for good, rho = 0), then the sparse iterations of
-    kernels.sparse: full passes at
-    params.full_pass(it), after which a location whose rho and rho_new are both below epsilon
-    is dead until a later full pass; in between only live locations are in the lists (dead
-    ones count as rho = 0, transparent) and only they move. `start`: initial rho
+    bound is below epsilon leaves every list for good, rho = 0; a location in no list is idle:
+    its rho_new is the prior whatever the others do, and it keeps its start), then the sparse
+    iterations of kernels.sparse: full passes at params.full_pass(it), after which a location
+    whose rho and rho_new are both below epsilon is dead until a later full pass; in between
+    only live locations are in the lists (dead ones count as rho = 0, transparent) and only
+    they move. `start`: initial rho
     (warm start) instead of the prior. `trace`: a list that receives every iteration's
     rho_new (K,).
 
@@ -316,6 +317,9 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         kept = evidence_bound(valid, L, D, dbg, rho, params) >= params.sparse_epsilon
         rho = np.where(kept, rho, 0.0)  # pruned: rho_new < epsilon at every iteration
         valid = valid & kept[L]
+    pruned = int((~kept).sum())
+    if params.sparse_epsilon > 0:  # in no list (idle): rho_new is the prior; left at its start
+        kept = kept & (np.bincount(L[valid], minlength=K) > 0)
     live = kept.copy()
     iterations = 0
     for it in range(params.max_iterations):
@@ -339,7 +343,7 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         damped = (1.0 - lam) * rho + lam * rho_new
         if full:
             live = kept & ((rho_new >= params.sparse_epsilon) | (damped >= params.sparse_epsilon))
-            rho = np.where(kept, damped, 0.0)
+            rho = np.where(kept, damped, rho)  # pruned ones hold 0, idle ones their start
         else:
             rho = np.where(live, damped, rho)
         iterations = it + 1
@@ -365,7 +369,7 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
             factor = sigmoid(params.top_slope * (u - params.top_support))
         rho_star = rho_star * np.where(n >= max(params.top_min_pixels, 1), factor, 1.0)
     return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
-                entries=entries, live=int(live.sum()), pruned=int((~kept).sum()), top_support=support, top_against=against,
+                entries=entries, live=int(live.sum()), pruned=pruned, top_support=support, top_against=against,
                 top_hidden=hidden)
 
 

@@ -104,23 +104,30 @@ def update_rho(
     full: int,
     epsilon: wp.float64,
     live: wp.array(dtype=wp.int32),
+    index: wp.array(dtype=wp.int32),
+    changed: wp.array(dtype=wp.int32),
 ):
     """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence); clears the evidence;
     max_change[frame, iteration] = max |rho_new - rho|; iterations[frame] counts the updates.
-    One thread per location of the batch, skipping frames that are done.
+    One thread per location of the batch, skipping frames that are done; with a non-empty
+    `index`, one thread per location it names (a sparse pass's live ones: kernels.sparse
+    gather_live), and kernels.sparse.count_iteration counts the iteration.
 
     Sparse iterations (kernels.sparse): after a full pass (`full` = 1, the evidence of every
     location) a location whose rho and rho_new are both below `epsilon` is marked dead
-    (live = 0), any other live; after a pass over the compact lists
-    (`full` = 0) only live locations move. With epsilon = 0 and every pass full this is the
-    exact damped update."""
+    (live = 0), any other live, and changed[0] = 1 where that differs from before; after a
+    pass over the compact lists (`full` = 0) only live locations move. With epsilon = 0 and
+    every pass full this is the exact damped update."""
     i = wp.tid()
+    indexed = index.shape[0] > 0
+    if indexed:
+        i = index[i]
     f = frame_of(i, locations)
     if done[f] != 0:
         return
-    if i == f * locations:
+    if not indexed and i == f * locations:
         iterations[f] = iteration + 1
-    if live[i] < 0:  # pruned by the bound (kernels.sparse.PRUNED): rho = 0, in no list
+    if live[i] < 0:  # pruned by the bound (rho = 0) or idle (in no list): kernels.sparse
         return
     if full == 0 and live[i] == 0:  # dead: in no compact list, its evidence is 0
         return
@@ -128,10 +135,12 @@ def update_rho(
     wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
     evidence[i] = f64(0.0)
     rho[i] = (f64(1.0) - damping) * rho[i] + damping * rho_new
+    now = int(1)
     if full != 0 and rho_new < epsilon and rho[i] < epsilon:
-        live[i] = 0
-    else:
-        live[i] = 1
+        now = 0
+    if now != live[i] and changed.shape[0] > 0:
+        changed[0] = 1
+    live[i] = now
 
 
 @wp.kernel(enable_backward=False)

@@ -22,6 +22,54 @@ from .mean_field import frame_of, sigmoid
 from .pixel_model import f64
 
 PRUNED = -1  # live[k] of a location the pruning bound removed for the whole frame
+IDLE = -2  # live[k] of a location in no list: its evidence is 0, it keeps its start
+
+
+@wp.kernel(enable_backward=False)
+def count_entries(
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    entry_loc: wp.array(dtype=wp.int32),
+    per_location: wp.array(dtype=wp.int32),
+):
+    """per_location[k] += the entries of location k (one thread per pixel)."""
+    p = wp.tid()
+    start = offsets[p]
+    for j in range(start, start + counts[p]):
+        wp.atomic_add(per_location, entry_loc[j], 1)
+
+
+@wp.kernel(enable_backward=False)
+def mark_idle(per_location: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32)):
+    """A location in no list (and not pruned) is IDLE for the frame: rho_new is the prior
+    whatever the others do, so it is left where it starts (the prior, or a warm start)."""
+    i = wp.tid()
+    if per_location[i] == 0 and live[i] != PRUNED:
+        live[i] = IDLE
+
+
+@wp.kernel(enable_backward=False)
+def gather_live(
+    live: wp.array(dtype=wp.int32),
+    locations: int,
+    done: wp.array(dtype=wp.int32),
+    index: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=wp.int32),
+):
+    """The live locations of the frames not done, into index[0 : count[0]] (the updates of a
+    sparse pass launch over these alone; the order does not matter, each is its own)."""
+    i = wp.tid()
+    if live[i] == 1 and done[frame_of(i, locations)] == 0:
+        index[wp.atomic_add(count, 0, 1)] = i
+
+
+@wp.kernel(enable_backward=False)
+def count_iteration(iteration: int, done: wp.array(dtype=wp.int32), iterations: wp.array(dtype=wp.int32)):
+    """iterations[frame] = iteration + 1 for the frames not done (update_rho does it when it
+    runs over every location)."""
+    f = wp.tid()
+    if done[f] == 0:
+        iterations[f] = iteration + 1
 
 
 @wp.kernel(enable_backward=False)
