@@ -103,6 +103,39 @@ def entry_before(mu_a: wp.float32, k_a: wp.int32, mu_b: wp.float32, k_b: wp.int3
     return mu_a < mu_b or (mu_a == mu_b and k_a < k_b)
 
 
+@wp.func
+def first_pair(tiles: TileIndex, t: int, z: wp.float64) -> int:
+    """The first pair of tile t with lo >= z - span (binary search): earlier ones end before z."""
+    first = tiles.start[t]
+    last = tiles.start[t + 1]
+    key = z - tiles.span[t]
+    while first < last:
+        mid = (first + last) / 2
+        if tiles.lo[mid] < key:
+            first = mid + 1
+        else:
+            last = mid
+    return first
+
+
+@wp.func
+def pair_entry(geo: GeometryArrays, pm: PixelModel, bg: wp.array2d(dtype=wp.float64), tiles: TileIndex,
+               j: int, p: int, u: int, v: int, d: wp.vec3d, z: wp.float64) -> wp.vec2d:
+    """Pair j's mask test at pixel p = (u, v), ray d, reading z: (mu, Delta) of its entry when
+    the reading passes, else mu = -1."""
+    if z <= tiles.hi[j]:
+        k = tiles.loc[j]
+        r = geo.rect[k]
+        if u >= r[0] and u <= r[2] and v >= r[1] and v <= r[3]:
+            o = object_depth(geo, k, d)
+            mu = o[0]
+            if mu > f64(0.0):
+                inlier = object_log_inlier(pm, z, mu, o[1])
+                if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
+                    return wp.vec2d(mu, pm.log_reading + logaddexp(pm.log_outlier, inlier))
+    return wp.vec2d(f64(-1.0), f64(0.0))
+
+
 @wp.kernel(enable_backward=False)
 def pixel_entries(
     depth: wp.array3d(dtype=wp.float32),
@@ -128,44 +161,28 @@ def pixel_entries(
     n = int(0)
     if is_reading(pm, z):
         t = (v / tiles.size) * tiles.tiles_x + u / tiles.size
-        first = tiles.start[t]
-        last = tiles.start[t + 1]
-        key = z - tiles.span[t]
-        while first < last:  # first pair with lo >= z - span: earlier ones end before z
-            mid = (first + last) / 2
-            if tiles.lo[mid] < key:
-                first = mid + 1
-            else:
-                last = mid
         last = tiles.start[t + 1]
         d = geo.rays[v, u]
         e0 = int(0)
         if fill == 1:
             e0 = offsets[p]
-        j = first
+        j = first_pair(tiles, t, z)
         while j < last and tiles.lo[j] <= z:
-            if z <= tiles.hi[j]:
-                k = tiles.loc[j]
-                r = geo.rect[k]
-                if u >= r[0] and u <= r[2] and v >= r[1] and v <= r[3]:
-                    o = object_depth(geo, k, d)
-                    mu = o[0]
-                    if mu > f64(0.0):
-                        inlier = object_log_inlier(pm, z, mu, o[1])
-                        if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
-                            if fill == 1 and e0 + n < capacity:
-                                mu32 = wp.float32(mu)
-                                kb = b * n_locations + k
-                                e = e0 + n
-                                while e > e0 and entry_before(mu32, kb, entry_mu[e - 1], entry_loc[e - 1]):
-                                    entry_loc[e] = entry_loc[e - 1]
-                                    entry_mu[e] = entry_mu[e - 1]
-                                    entry_delta[e] = entry_delta[e - 1]
-                                    e -= 1
-                                entry_loc[e] = kb
-                                entry_mu[e] = mu32
-                                entry_delta[e] = wp.float32(pm.log_reading + logaddexp(pm.log_outlier, inlier))
-                            n += 1
+            m = pair_entry(geo, pm, bg, tiles, j, p, u, v, d, z)
+            if m[0] > f64(0.0):
+                if fill == 1 and e0 + n < capacity:
+                    mu32 = wp.float32(m[0])
+                    kb = b * n_locations + tiles.loc[j]
+                    e = e0 + n
+                    while e > e0 and entry_before(mu32, kb, entry_mu[e - 1], entry_loc[e - 1]):
+                        entry_loc[e] = entry_loc[e - 1]
+                        entry_mu[e] = entry_mu[e - 1]
+                        entry_delta[e] = entry_delta[e - 1]
+                        e -= 1
+                    entry_loc[e] = kb
+                    entry_mu[e] = mu32
+                    entry_delta[e] = wp.float32(m[1])
+                n += 1
             j += 1
     if fill == 0:
         counts[p] = n
@@ -206,41 +223,25 @@ def pixel_entries_once(
     deltas = LocalValues()
     if is_reading(pm, z):
         t = (v / tiles.size) * tiles.tiles_x + u / tiles.size
-        first = tiles.start[t]
-        last = tiles.start[t + 1]
-        key = z - tiles.span[t]
-        while first < last:
-            mid = (first + last) / 2
-            if tiles.lo[mid] < key:
-                first = mid + 1
-            else:
-                last = mid
         last = tiles.start[t + 1]
         d = geo.rays[v, u]
-        j = first
+        j = first_pair(tiles, t, z)
         while j < last and tiles.lo[j] <= z:
-            if z <= tiles.hi[j]:
-                k = tiles.loc[j]
-                r = geo.rect[k]
-                if u >= r[0] and u <= r[2] and v >= r[1] and v <= r[3]:
-                    o = object_depth(geo, k, d)
-                    mu = o[0]
-                    if mu > f64(0.0):
-                        inlier = object_log_inlier(pm, z, mu, o[1])
-                        if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
-                            if n < LOCAL_MATCHES:
-                                mu32 = wp.float32(mu)
-                                kb = b * n_locations + k
-                                e = n
-                                while e > 0 and entry_before(mu32, kb, mus[e - 1], locs[e - 1]):
-                                    locs[e] = locs[e - 1]
-                                    mus[e] = mus[e - 1]
-                                    deltas[e] = deltas[e - 1]
-                                    e -= 1
-                                locs[e] = kb
-                                mus[e] = mu32
-                                deltas[e] = wp.float32(pm.log_reading + logaddexp(pm.log_outlier, inlier))
-                            n += 1
+            m = pair_entry(geo, pm, bg, tiles, j, p, u, v, d, z)
+            if m[0] > f64(0.0):
+                if n < LOCAL_MATCHES:
+                    mu32 = wp.float32(m[0])
+                    kb = b * n_locations + tiles.loc[j]
+                    e = n
+                    while e > 0 and entry_before(mu32, kb, mus[e - 1], locs[e - 1]):
+                        locs[e] = locs[e - 1]
+                        mus[e] = mus[e - 1]
+                        deltas[e] = deltas[e - 1]
+                        e -= 1
+                    locs[e] = kb
+                    mus[e] = mu32
+                    deltas[e] = wp.float32(m[1])
+                n += 1
             j += 1
     counts[p] = n
     start = int(0)
