@@ -51,8 +51,9 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 24  # rect, normal, plane, centre, area,
-# five accumulators and the pruning bound, live, live index, entries, top-band and whole-silhouette counts
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 24  # rect, normal, plane, centre,
+# area, five accumulators and the pruning bound, live, live and kept indices, entries, top-band and
+# whole-silhouette counts
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
@@ -155,6 +156,7 @@ class Engine:
         self._graph, self._graph_lists = None, None
         self._last_rho = None  # the last frame's rho, for params.warm_start
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
+        self.n_kept = None  # locations neither pruned nor idle, for the full passes' updates
         self.tile, tiles_x = tile, -(-self.width // tile)
         self.n_tiles = tiles_x * -(-self.height // tile)
         pair_loc, pair_tile = tile_pairs(geometry.rect, tile, tiles_x)
@@ -216,6 +218,7 @@ class Engine:
             self.live_counts = wp.zeros(P, dtype=wp.int32)
             self.live_offsets = wp.zeros(P, dtype=wp.int32)
             self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
+            self.kept_index = wp.zeros(L, dtype=wp.int32)
             self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.count_entries
             self.live_count = wp.zeros(1, dtype=wp.int32)
             self.live_changed = wp.zeros(1, dtype=wp.int32)
@@ -395,6 +398,9 @@ class Engine:
         index, dim = self.no_index, self.batch * self.n_locations
         if not full and self.n_live is not None:  # the live locations alone (gather_live)
             index, dim = self.live_index, self.n_live
+        elif full and self.n_kept is not None:  # all but the pruned and idle ones
+            index, dim = self.kept_index, self.n_kept
+        if len(index):
             wp.launch(K.count_iteration, dim=self.batch, device=self.device,
                       inputs=[it, self.done, self.iterations])
         if dim:
@@ -521,6 +527,12 @@ class Engine:
             wp.launch(K.count_entries, dim=self.batch * self.n_pixels, device=dev,
                       inputs=[self.offsets, self.counts, self.entry_loc, self.per_location])
             wp.launch(K.mark_idle, dim=len(self.live), device=dev, inputs=[self.per_location, self.live])
+        self.n_kept = None
+        if p.sparse_epsilon > 0 and not self.graph:  # full passes update the others alone
+            self.live_count.zero_()
+            wp.launch(K.gather_live, dim=len(self.live), device=dev,
+                      inputs=[self.live, self.n_locations, self.done, self.kept_index, self.live_count])
+            self.n_kept = int(self.live_count.numpy()[0])
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()
