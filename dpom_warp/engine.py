@@ -219,7 +219,7 @@ class Engine:
             self.live_offsets = wp.zeros(P, dtype=wp.int32)
             self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
             self.kept_index = wp.zeros(L, dtype=wp.int32)
-            self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.count_entries
+            self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.prune_lists
             self.live_count = wp.zeros(1, dtype=wp.int32)
             self.live_changed = wp.zeros(1, dtype=wp.int32)
             self.no_index = wp.zeros(0, dtype=wp.int32)
@@ -317,6 +317,16 @@ class Engine:
         if self.floor_mode:
             self._floor_background(0)
         return self.fallback_pixels
+
+    def background_state(self) -> tuple | None:
+        """What another engine of this camera and grid needs to hold this one's background
+        (worker.WorkerSpec.background): None for the floor-only model, else (Background,
+        the pixels left to the floor model or None)."""
+        if self.floor_mode and self.fallback_pixels == self.n_pixels:
+            return None  # the floor-only model, completed from each frame
+        fallback = (self.floor_pixels.numpy().reshape(self.height, self.width) > 0
+                    if self.fallback_pixels else None)
+        return self.background(0), fallback
 
     def background(self, frame: int = 0) -> Background:
         """The background distribution of frame `frame` of the last batch (arrays (H, W))."""
@@ -423,22 +433,34 @@ class Engine:
     def prune(self, logit_prior: float):
         """The pruning bound from the current rho (the start): params.bound_rounds rounds,
         then every location whose bound is below sparse_epsilon leaves the lists for the
-        frame (kernels.sparse; no host sync)."""
+        frame (kernels.sparse; no host sync). Without rounds nothing is pruned. Either way a
+        location left in no list is marked idle."""
         p, dim, dev = self.params, self.batch * self.n_pixels, self.device
-        self.upper.fill_(1.0)
-        self.evidence.zero_()
-        for _ in range(p.bound_rounds):
-            wp.launch(K.bound_pass, dim=dim, device=dev,
-                      inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
-                              self.delta_bg, self.rho, self.upper, self.behind, self.evidence,
-                              self.n_pixels, self.done])
-            wp.launch(K.update_bound, dim=len(self.upper), device=dev,
-                      inputs=[logit_prior, self.evidence, self.upper])
-        wp.launch(K.prune, dim=len(self.upper), device=dev,
-                  inputs=[p.sparse_epsilon, self.upper, self.rho, self.live])
+        if p.bound_rounds > 0:
+            self.upper.fill_(1.0)
+            self.evidence.zero_()
+            for _ in range(p.bound_rounds):
+                wp.launch(K.bound_pass, dim=dim, device=dev,
+                          inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
+                                  self.delta_bg, self.rho, self.upper, self.behind, self.evidence,
+                                  self.n_pixels, self.done])
+                wp.launch(K.update_bound, dim=len(self.upper), device=dev,
+                          inputs=[logit_prior, self.evidence, self.upper])
+            wp.launch(K.prune, dim=len(self.upper), device=dev,
+                      inputs=[p.sparse_epsilon, self.upper, self.rho, self.live])
+        self.per_location.zero_()
         wp.launch(K.prune_lists, dim=dim, device=dev,
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
-                          self.live])
+                          self.live, self.per_location])
+        wp.launch(K.mark_idle, dim=len(self.live), device=dev, inputs=[self.per_location, self.live])
+
+    def _gather(self, index) -> int:
+        """The live locations of the frames not done into `index` (kernels.sparse.gather_live);
+        returns how many (a host sync)."""
+        self.live_count.zero_()
+        wp.launch(K.gather_live, dim=len(self.live), device=self.device,
+                  inputs=[self.live, self.n_locations, self.done, index, self.live_count])
+        return int(self.live_count.numpy()[0])
 
     def _compact_if_changed(self):
         """Before a sparse pass: the compact lists. Driven from the host (no graph), they are
@@ -452,10 +474,7 @@ class Engine:
             return  # the same live locations: the compact lists and the index still hold
         self.live_changed.zero_()
         self.compact()
-        self.live_count.zero_()
-        wp.launch(K.gather_live, dim=len(self.live), device=self.device,
-                  inputs=[self.live, self.n_locations, self.done, self.live_index, self.live_count])
-        self.n_live = int(self.live_count.numpy()[0])
+        self.n_live = self._gather(self.live_index)
 
     def _check(self, it: int):
         wp.launch(K.check_converged, dim=self.batch, device=self.device,
@@ -520,19 +539,11 @@ class Engine:
         self.done.assign(np.arange(self.batch, dtype=np.int32) >= n)  # padding frames: done
         logit_prior = math.log(p.prior) - math.log1p(-p.prior)
         bound = p.sparse_epsilon > 0 and p.bound_rounds > 0
-        if bound:
-            self.prune(logit_prior)
-        if p.sparse_epsilon > 0:  # locations in no list stay where they start (kernels.sparse.IDLE)
-            self.per_location.zero_()
-            wp.launch(K.count_entries, dim=self.batch * self.n_pixels, device=dev,
-                      inputs=[self.offsets, self.counts, self.entry_loc, self.per_location])
-            wp.launch(K.mark_idle, dim=len(self.live), device=dev, inputs=[self.per_location, self.live])
         self.n_kept = None
-        if p.sparse_epsilon > 0 and not self.graph:  # full passes update the others alone
-            self.live_count.zero_()
-            wp.launch(K.gather_live, dim=len(self.live), device=dev,
-                      inputs=[self.live, self.n_locations, self.done, self.kept_index, self.live_count])
-            self.n_kept = int(self.live_count.numpy()[0])
+        if p.sparse_epsilon > 0:  # the bound, then locations in no list stay where they start
+            self.prune(logit_prior)
+            if not self.graph:  # full passes update all but the pruned and idle ones
+                self.n_kept = self._gather(self.kept_index)
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()

@@ -90,13 +90,7 @@ class Helpers:
 
         from .worker import kernel_cache
 
-        if engine.floor_mode and engine.fallback_pixels == engine.n_pixels:
-            given = None  # the floor-only model, completed from each frame
-        else:  # the background this engine holds, and the pixels it leaves to the floor model
-            fallback = (engine.floor_pixels.numpy().reshape(engine.height, engine.width) > 0
-                        if engine.fallback_pixels else None)
-            given = (engine.background(0), fallback)
-        spec = dataclasses.replace(spec, background=given)
+        spec = dataclasses.replace(spec, background=engine.background_state())
         engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))  # every kernel compiled
         self.n, self.running = n, []
         self.pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"),

@@ -138,7 +138,7 @@ def update_rho(
     now = int(1)
     if full != 0 and rho_new < epsilon and rho[i] < epsilon:
         now = 0
-    if now != live[i] and changed.shape[0] > 0:
+    if now != live[i]:
         changed[0] = 1
     live[i] = now
 

@@ -14,6 +14,9 @@ The pruning bound, before the first pass (`bound_pass`, `update_bound`, `prune`,
 `prune_lists`): a few rounds bound every location's rho_new from above over every state the
 iterations can reach; a location whose bound is below epsilon can never matter and leaves
 every list for the whole frame (rho = 0, transparent), so every pass walks less from the start.
+A location left in no list is idle (`mark_idle`): it keeps its start. Driven from the host,
+the updates run over an index of the locations that can move (`gather_live`;
+`count_iteration` then counts the iteration).
 """
 
 import warp as wp
@@ -23,20 +26,6 @@ from .pixel_model import f64
 
 PRUNED = -1  # live[k] of a location the pruning bound removed for the whole frame
 IDLE = -2  # live[k] of a location in no list: its evidence is 0, it keeps its start
-
-
-@wp.kernel(enable_backward=False)
-def count_entries(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
-    per_location: wp.array(dtype=wp.int32),
-):
-    """per_location[k] += the entries of location k (one thread per pixel)."""
-    p = wp.tid()
-    start = offsets[p]
-    for j in range(start, start + counts[p]):
-        wp.atomic_add(per_location, entry_loc[j], 1)
 
 
 @wp.kernel(enable_backward=False)
@@ -151,9 +140,10 @@ def prune_lists(
     entry_mu: wp.array(dtype=wp.float32),
     entry_delta: wp.array(dtype=wp.float32),
     live: wp.array(dtype=wp.int32),
+    per_location: wp.array(dtype=wp.int32),
 ):
     """Each pixel's list, in place and in order, without the pruned locations (its count
-    shrinks; its offset stays)."""
+    shrinks; its offset stays); per_location[k] += the entries of k it keeps (for mark_idle)."""
     p = wp.tid()
     start = offsets[p]
     e = start
@@ -163,6 +153,7 @@ def prune_lists(
             entry_loc[e] = k
             entry_mu[e] = entry_mu[j]
             entry_delta[e] = entry_delta[j]
+            wp.atomic_add(per_location, k, 1)
             e += 1
     counts[p] = e - start
 

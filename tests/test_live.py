@@ -19,6 +19,7 @@ def camera_config(tmp_path):
 
     path = small_config(tmp_path, frames=6)
     cam = SoftwareCamera.of_config(load_config(path)).register()  # the rendered frames at 30 fps
+    (tmp_path / "plain.yaml").write_text(path.read_text())  # the same frames as files (plain_maps)
     cfg = yaml.safe_load(path.read_text())
     del cfg["synthetic"]
     cfg["input"]["frames"] = "realsense"
@@ -61,15 +62,13 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     assert rows["/world/camera/depth"] == rows["/world/camera/depth/detections"] == 12
 
 
-def plain_maps(path, tmp):
+def plain_maps(tmp):
     """The maps the plain run gives the live test's six rendered frames."""
     import numpy as np
 
-    plain = yaml.safe_load(path.read_text())
-    plain["input"].update(frames=f"{tmp}/scene/frames/*.png", depth_scale=0.001)  # small_config's
-    plain["camera"].update(width=128, height=106, intrinsics={"fx": 91.25, "fy": 91.25, "cx": 63.5, "cy": 52.5})
-    plain["output"].update(dir=str(tmp / "plain"), rerun=None)
-    plain_path = tmp / "plain.yaml"
+    plain_path = tmp / "plain.yaml"  # camera_config's: small_config before the live changes
+    plain = yaml.safe_load(plain_path.read_text())
+    plain["output"]["dir"] = str(tmp / "plain")
     plain_path.write_text(yaml.safe_dump(plain))
     assert main(["run", str(plain_path), "--no-progress"]) == 0
     return [np.load(tmp / "plain" / "maps" / f"{i:04d}.npy") for i in range(6)]
@@ -97,7 +96,7 @@ def test_live_run_on_two_processes_gives_the_plain_runs_maps_in_stream_order(cam
     the plain run gives the same rendered frame, records come in stream order, and both
     processes inferred some."""
     path, cam, tmp = camera_config
-    want = plain_maps(path, tmp)
+    want = plain_maps(tmp)
     cam.start()
     try:
         assert main(["run", str(path), "--no-progress", "--max-frames", "12", "--workers", "2"]) == 0
@@ -119,7 +118,7 @@ def test_a_helper_process_that_dies_loses_no_frame(camera_config, capsys):
     from pathlib import Path
 
     path, cam, tmp = camera_config
-    want = plain_maps(path, tmp)
+    want = plain_maps(tmp)
     out, killed = tmp / "out", []
 
     def kill_the_helper():
