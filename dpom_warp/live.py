@@ -105,7 +105,14 @@ class Helpers:
         return self.pool is not None and len(self.running) < self.n
 
     def submit(self, small: np.ndarray):
-        fut = self.pool.submit(_helper_infer, small)
+        """A future of the frame's result; a pool already broken by a helper's death (which
+        the main process may learn of here first) gives a future holding that error, so the
+        frame is inferred where every other death is handled (run_live's result_of)."""
+        try:
+            fut = self.pool.submit(_helper_infer, small)
+        except BrokenProcessPool as e:
+            fut = Future()
+            fut.set_exception(e)
         self.running.append(fut)
         return fut
 

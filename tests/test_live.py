@@ -108,6 +108,23 @@ def test_live_run_on_two_processes_gives_the_plain_runs_maps_in_stream_order(cam
     assert "main" in workers and any(w.startswith("process ") for w in workers), workers
 
 
+def helper_pids() -> list[int]:
+    """This process's spawned multiprocessing children (a live run's helpers)."""
+    import os
+    from pathlib import Path
+
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            stat = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+            cmd = (proc / "cmdline").read_bytes()
+        except (OSError, IndexError):
+            continue
+        if int(stat[1]) == os.getpid() and b"multiprocessing" in cmd and b"spawn_main" in cmd:
+            pids.append(int(proc.name))
+    return pids
+
+
 def test_a_helper_process_that_dies_loses_no_frame(camera_config, capsys):
     """The helper is killed mid-run: its frame is inferred by the main process, the run goes
     on in one process to --max-frames, every map still the plain run's; one line says so."""
@@ -115,7 +132,6 @@ def test_a_helper_process_that_dies_loses_no_frame(camera_config, capsys):
     import signal
     import threading
     import time
-    from pathlib import Path
 
     path, cam, tmp = camera_config
     want = plain_maps(tmp)
@@ -126,15 +142,9 @@ def test_a_helper_process_that_dies_loses_no_frame(camera_config, capsys):
         while time.time() < deadline and not killed:
             records = list((out / "frames").glob("*.json")) if (out / "frames").exists() else []
             if len(records) >= 4:
-                for proc in Path("/proc").iterdir():
-                    try:
-                        stat = (proc / "stat").read_text().rsplit(")", 1)[1].split()
-                        cmd = (proc / "cmdline").read_bytes()
-                    except (OSError, IndexError):
-                        continue
-                    if int(stat[1]) == os.getpid() and b"multiprocessing" in cmd and b"spawn_main" in cmd:
-                        os.kill(int(proc.name), signal.SIGKILL)
-                        killed.append(int(proc.name))
+                for pid in helper_pids():
+                    os.kill(pid, signal.SIGKILL)
+                    killed.append(pid)
             time.sleep(0.01)
 
     killer = threading.Thread(target=kill_the_helper, daemon=True)
@@ -149,6 +159,37 @@ def test_a_helper_process_that_dies_loses_no_frame(camera_config, capsys):
     assert "live: a helper process died" in capsys.readouterr().out
     summary = assert_plain_maps_in_stream_order(out, want, 20)
     assert summary["per_frame"][-1]["worker"] == "main"
+
+
+def test_a_frame_handed_to_a_pool_already_broken_is_a_future_of_that_error(camera_config):
+    """The main process may learn of a helper's death when it hands over the next frame (the
+    pool is marked broken before its futures fail): that frame must come back as a failed
+    future, as every other frame of a dead helper does, not as an error out of the run."""
+    import os
+    import signal
+    from concurrent.futures.process import BrokenProcessPool
+
+    import numpy as np
+
+    from dpom_warp.config import load_config
+    from dpom_warp.live import Helpers
+    from dpom_warp.pipeline import set_up
+
+    _, _, tmp = camera_config
+    setup = set_up(load_config(tmp / "plain.yaml"), [], "cpu", log=lambda *a: None)
+    helpers = Helpers(setup.spec, setup.engine, 1)
+    frame = np.zeros((setup.engine.height, setup.engine.width), np.float32)
+    try:
+        pids = helper_pids()
+        assert len(pids) == 1
+        os.kill(pids[0], signal.SIGKILL)
+        with pytest.raises(BrokenProcessPool):
+            helpers.submit(frame).result(timeout=60)  # the death seen: the pool is broken now
+        late = helpers.submit(frame)  # raised out of submit before the fix (CI, stop 28)
+        with pytest.raises(BrokenProcessPool):
+            late.result(timeout=0)
+    finally:
+        helpers.close()
 
 
 def test_live_workers_with_warm_start_is_one_line(camera_config, capsys):
