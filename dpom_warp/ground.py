@@ -83,16 +83,16 @@ class GroundFit:
 def backproject(depth_m: np.ndarray, camera: Camera, depth_max: float, stride: int = 1) -> np.ndarray:
     """Camera-frame points (N, 3) of the readings of a depth frame (metres, 0 = no reading).
 
-    Open3D's back-projection, x = (u - cx) z / fx with pixel centres at integer u as in the
-    rest of the project (no half-pixel shift); with lens distortion the normalised
-    coordinates are then undistorted.
+    x = (u - cx) z / fx with pixel centres at integer u as in the rest of the project (no
+    half-pixel shift), every `stride`-th row and column from 0; with lens distortion the
+    normalised coordinates are then undistorted. Points come in pixel order (Open3D's
+    back-projection returns them in a different order each call, which made the fit's sums,
+    and so its rms, differ in their last bits between two runs of the same frames).
     """
-    intr = o3d.core.Tensor([[camera.fx, 0, camera.cx], [0, camera.fy, camera.cy], [0, 0, 1]],
-                           o3d.core.Dtype.Float64)
-    img = o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(depth_m, dtype=np.float32)))
-    pcd = o3d.t.geometry.PointCloud.create_from_depth_image(
-        img, intr, depth_scale=1.0, depth_max=float(depth_max), stride=int(stride))
-    pts = pcd.point.positions.numpy().astype(np.float64)
+    z = np.asarray(depth_m, dtype=np.float64)[::stride, ::stride]
+    v, u = np.nonzero(np.isfinite(z) & (z > 0) & (z < depth_max))
+    z = z[v, u]
+    pts = np.stack([(u * stride - camera.cx) * z / camera.fx, (v * stride - camera.cy) * z / camera.fy, z], 1)
     if camera.distortion is not None and len(pts):
         z = pts[:, 2]
         x, y = camera.undistort(pts[:, 0] / z, pts[:, 1] / z)
