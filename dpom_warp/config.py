@@ -448,6 +448,13 @@ class ModelSection(Node):
     top_slope: Num = Field(_d(ModelParams, "top_slope"), gt=0, description="steepness of the top-band sigmoid")
     top_min_pixels: Int = Field(_d(ModelParams, "top_min_pixels"), ge=1,
                                 description="fewer readings in the band: not judged")
+    exclusion: Num = Field(_d(ModelParams, "exclusion"), ge=0,
+                           description="two objects cannot stand within exclusion_radius: a location's "
+                                       "evidence loses exclusion x its neighbours' rho above "
+                                       "exclusion_gate (README, How it works); 0: off")
+    exclusion_radius: Num = Field(_d(ModelParams, "exclusion_radius"), gt=0, description="metres")
+    exclusion_gate: Num = Field(_d(ModelParams, "exclusion_gate"), ge=0, lt=1,
+                                description="neighbours' rho above it count")
 
     @model_validator(mode="after")
     def _checks(self):

@@ -11,7 +11,7 @@ import numpy as np
 import warp as wp
 
 from . import kernels as K
-from .geometry import Geometry
+from .geometry import Geometry, neighbour_lists
 from .model import BAND_ALL, TOP_MIN_RHO, AutoBackground, Background, ModelParams
 from .resolution import Resolution
 from .warp_setup import init_warp
@@ -225,6 +225,9 @@ class Engine:
             self.no_index = wp.zeros(0, dtype=wp.int32)
             self.reserved = wp.zeros(2, dtype=wp.int32)  # kernels.masks.pixel_entries_once
             self.no_reserved = wp.zeros(0, dtype=wp.int32)
+            start, nbrs = neighbour_lists(geometry.locations, params.exclusion_radius if params.exclusion > 0 else 0.0)
+            self.neighbour_start = wp.array(start, dtype=wp.int32)
+            self.neighbours = wp.array(nbrs, dtype=wp.int32)
         self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
         self._allocate_lists(int(entries_per_pixel * P))
         self.set_floor_background()
@@ -413,6 +416,11 @@ class Engine:
         if len(index):
             wp.launch(K.count_iteration, dim=self.batch, device=self.device,
                       inputs=[it, self.done, self.iterations])
+        if dim and self.params.exclusion > 0:  # neighbours above the gate push each other down
+            p = self.params
+            wp.launch(K.exclusion_pass, dim=self.batch * self.n_locations, device=self.device,
+                      inputs=[p.exclusion, p.exclusion_gate, self.rho, self.neighbour_start, self.neighbours,
+                              self.evidence, self.n_locations, self.done, int(full), self.live])
         if dim:
             wp.launch(K.update_rho, dim=dim, device=self.device,
                       inputs=[logit_prior, damping, it, self.evidence, self.rho, self.n_locations,

@@ -375,3 +375,20 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
         bounds=np.stack([corners.min(axis=(0, 1)), corners.max(axis=(0, 1))], 1).ravel(),
         height=float(obj.height) if grid.mode == "ground" else 0.0, solid=obj.solid(grid.mode),
     )
+
+
+def neighbour_lists(locations: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """(start (K + 1,), neighbours): location k's neighbours, the other locations closer than
+    `radius` (metres, 3D), are neighbours[start[k]:start[k + 1]], in index order; radius 0:
+    none."""
+    from scipy.spatial import cKDTree
+
+    n = len(locations)
+    if radius <= 0 or n == 0:
+        return np.zeros(n + 1, np.int32), np.zeros(1, np.int32)
+    pairs = cKDTree(locations).query_pairs(radius * (1 - 1e-9), output_type="ndarray")
+    both = np.concatenate([pairs, pairs[:, ::-1]]) if len(pairs) else np.zeros((0, 2), np.int64)
+    both = both[np.lexsort((both[:, 1], both[:, 0]))]
+    start = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(both[:, 0], minlength=n), out=start[1:])
+    return start.astype(np.int32), (both[:, 1].astype(np.int32) if len(both) else np.zeros(1, np.int32))

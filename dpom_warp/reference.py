@@ -11,7 +11,7 @@ import warnings
 
 import numpy as np
 
-from .geometry import Geometry
+from .geometry import Geometry, neighbour_lists
 from .model import BAND_ALL, TOP_MIN_RHO, AutoBackground, Background, ModelParams
 
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
@@ -300,7 +300,9 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     iterations of kernels.sparse: full passes at params.full_pass(it), after which a location
     whose rho and rho_new are both below epsilon is dead until a later full pass; in between
     only live locations are in the lists (dead ones count as rho = 0, transparent) and only
-    they move. `start`: initial rho
+    they move. With params.exclusion > 0 each location's evidence loses exclusion x the sum
+    over its neighbours within exclusion_radius of max(0, rho - gate) / (1 - gate), from the
+    rho before the update (kernels.mean_field.exclusion_pass). `start`: initial rho
     (warm start) instead of the prior. `trace`: a list that receives every iteration's
     rho_new (K,).
 
@@ -321,6 +323,10 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     if params.sparse_epsilon > 0:  # in no list (idle): rho_new is the prior; left at its start
         kept = kept & (np.bincount(L[valid], minlength=K) > 0)
     live = kept.copy()
+    if params.exclusion > 0:  # each location's neighbours within exclusion_radius
+        start, neighbours = neighbour_lists(geom.locations, params.exclusion_radius)
+        owner = np.repeat(np.arange(K), np.diff(start))
+        neighbours = neighbours[:len(owner)]
     iterations = 0
     for it in range(params.max_iterations):
         full = params.full_pass(it)
@@ -334,6 +340,9 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         use = valid & (full | live[L])
         contrib = np.where(use, T * (D - B), 0.0)
         evidence = np.bincount(L[use], weights=contrib[use], minlength=K)
+        if params.exclusion > 0:  # neighbours above the gate push a location down
+            over = np.maximum(rho - params.exclusion_gate, 0.0) / (1.0 - params.exclusion_gate)
+            evidence -= params.exclusion * np.bincount(owner, weights=over[neighbours], minlength=K)
         rho_new = sigmoid(logit_prior + evidence)
         if trace is not None:
             trace.append(rho_new)

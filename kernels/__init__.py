@@ -14,7 +14,7 @@
 from .background import (background_delta, background_from_frames, cluster_background, cluster_frames,
                          floor_background)
 from .masks import TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once
-from .mean_field import (check_converged, evidence_pass, soft_threshold, top_band, transparency_pass,
+from .mean_field import (check_converged, evidence_pass, exclusion_pass, soft_threshold, top_band, transparency_pass,
                          update_rho)
 from .pixel_model import GeometryArrays, PixelModel
 from .sparse import (IDLE, PRUNED, bound_pass, count_iteration, count_live, fill_live,

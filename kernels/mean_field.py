@@ -144,6 +144,39 @@ def update_rho(
 
 
 @wp.kernel(enable_backward=False)
+def exclusion_pass(
+    strength: wp.float64,
+    gate: wp.float64,
+    rho: wp.array(dtype=wp.float64),
+    neighbour_start: wp.array(dtype=wp.int32),
+    neighbours: wp.array(dtype=wp.int32),
+    evidence: wp.array(dtype=wp.float64),
+    locations: int,
+    done: wp.array(dtype=wp.int32),
+    full: int,
+    live: wp.array(dtype=wp.int32),
+):
+    """Two objects cannot stand closer than the exclusion radius: each location l with rho_l
+    above the gate subtracts strength x (rho_l - gate) / (1 - gate) from the evidence of its
+    neighbours (the locations within the radius) that update_rho will update in this pass
+    (not pruned or idle; live in a sparse pass), so each gets strength x the sum over its
+    neighbours. Launched between the evidence pass and update_rho: it reads rho before the
+    update and writes only the evidence. One thread per location of the batch; the few
+    above the gate do the work."""
+    i = wp.tid()
+    f = frame_of(i, locations)
+    r = rho[i]
+    if done[f] != 0 or r <= gate:
+        return
+    push = strength * (r - gate) / (f64(1.0) - gate)
+    k = i - f * locations
+    for j in range(neighbour_start[k], neighbour_start[k + 1]):
+        n = f * locations + neighbours[j]
+        if live[n] >= 0 and (full != 0 or live[n] != 0):
+            wp.atomic_sub(evidence, n, push)
+
+
+@wp.kernel(enable_backward=False)
 def check_converged(
     iteration: int,
     tolerance: wp.float64,

@@ -98,9 +98,10 @@ def test_object_hiding_another_one_step(device):
 
 
 def test_hidden_object_is_explained_away_not_penalised(device):
-    """At convergence the front object takes the pixels; the one behind it returns to its
-    prior (it is hidden, not absent), and its soft-thresholded rho* vanishes."""
-    params = ModelParams(prior=0.05, sigma_object=0.15, damping=0.2, max_iterations=300)
+    """With the paper's independent prior (no exclusion), at convergence the front object
+    takes the pixels; the one behind it returns to its prior (it is hidden, not absent), and
+    its soft-thresholded rho* vanishes."""
+    params = ModelParams(prior=0.05, sigma_object=0.15, damping=0.2, max_iterations=300, exclusion=0.0)
     geom = toy_geometry([2.0, 2.1, 4.0], [(1, 1, 3, 2), (1, 1, 3, 2), (1, 1, 3, 2)])
     depth = np.full((H, W), 5.0)
     depth[1:3, 1:4] = 2.0
@@ -110,6 +111,21 @@ def test_hidden_object_is_explained_away_not_penalised(device):
     assert got.rho[2] == pytest.approx(0.05, abs=1e-12)  # 2 m in front of its plane: no mask
     assert got.rho_star[1] < 1e-3 and got.rho_star[2] < 1e-3
     assert got.rho_star[0] > 0.99
+
+
+def test_exclusion_pushes_the_hidden_neighbour_below_its_prior(device):
+    """The same scene with the exclusion prior: B stands 0.1 m behind A, within the radius,
+    so with rho_A ~ 1 its rho_new tends to sigmoid(logit(prior) + ~0 - exclusion); the far
+    location, 2 m away, keeps its prior; A is unchanged."""
+    params = ModelParams(prior=0.05, sigma_object=0.15, damping=0.2, max_iterations=300, exclusion=6.0)
+    geom = toy_geometry([2.0, 2.1, 4.0], [(1, 1, 3, 2), (1, 1, 3, 2), (1, 1, 3, 2)])
+    depth = np.full((H, W), 5.0)
+    depth[1:3, 1:4] = 2.0
+    got = run_both(device, depth, geom, wall_background(), params)
+    lp = math.log(0.05 / 0.95)
+    assert got.rho[0] > 0.999
+    assert got.rho[1] == pytest.approx(sigmoid(lp - 6.0), rel=0.05)  # its own evidence x (1 - rho_A) -> 0
+    assert got.rho[2] == pytest.approx(0.05, abs=1e-12)
 
 
 def test_empty_scene_stays_at_or_below_prior(device):

@@ -180,7 +180,7 @@ def batch_frames(seed, n):
 def test_batch_gives_each_frame_its_own_result(device, graph):
     """Frames run side by side (and the loop as a replayed graph) stop at their own iteration
     and get exactly what they get alone; a short batch is padded."""
-    geom, params, depths, frames = batch_frames(4, 3)
+    geom, params, depths, frames = batch_frames(6, 3)  # converging at 28, 26 and 30 iterations alone
     alone = Engine(geom, params, device)
     alone.set_background_frames(frames)
     want = [alone.infer(d) for d in depths]
@@ -237,3 +237,44 @@ def test_unhidden_share_matches_reference(device, seed, shape):
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, share_of="silhouette"))
     assert np.any(want["evidence_share"] > plain["evidence_share"] + 1e-3)
+
+
+@pytest.mark.parametrize("path", ["exact", "sparse", "graph"])
+@pytest.mark.parametrize("seed", [0, 2])
+def test_exclusion_matches_reference(device, seed, path):
+    """model.exclusion (neighbours above the gate push a location's evidence down) on the
+    Warp path (full and sparse passes, the loop as a graph) equals the reference, on a scene
+    with two objects 0.3 m apart, both occupied without it and one with it."""
+    from scenes import draw_slab
+
+    geom, params, depth, bg_frames = random_scene(seed, shape="solid")
+    bg = ref.background_from_frames(bg_frames, params)
+    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4)
+    k = int(np.argmax(ref.mean_field(depth, geom, bg, params)["rho"]))
+    near = np.linalg.norm(geom.locations - geom.locations[k], axis=1)
+    other = int(np.flatnonzero((near > 0.2) & (near < 0.35) & (geom.rect_area > 0))[0])
+    draw_slab(depth, geom, other)
+    params = dataclasses.replace(params, exclusion=100.0, exclusion_radius=0.45, exclusion_gate=0.2)
+    engine = Engine(geom, params, device, graph=path == "graph")
+    engine.set_background_frames(bg_frames)
+    want = ref.mean_field(depth, geom, bg, params)
+    got = engine.infer(depth)
+    assert got.iterations == want["iterations"]
+    np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, exclusion=0.0))["rho"]
+    assert min(plain[k], plain[other]) > 0.9 and min(want["rho"][k], want["rho"][other]) < 0.1
+
+
+def test_neighbour_lists_are_the_locations_within_the_radius():
+    from dpom_warp.geometry import neighbour_lists
+
+    rng = np.random.default_rng(0)
+    locs = rng.uniform(0, 2, (60, 3))
+    start, nbrs = neighbour_lists(locs, 0.5)
+    for k in range(60):
+        d = np.linalg.norm(locs - locs[k], axis=1)
+        want = np.flatnonzero((d < 0.5) & (np.arange(60) != k))
+        np.testing.assert_array_equal(nbrs[start[k]:start[k + 1]], want)
+    start, _ = neighbour_lists(locs, 0.0)
+    assert start.shape == (61,) and not start.any()
