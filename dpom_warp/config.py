@@ -448,10 +448,12 @@ class ModelSection(Node):
     top_slope: Num = Field(_d(ModelParams, "top_slope"), gt=0, description="steepness of the top-band sigmoid")
     top_min_pixels: Int = Field(_d(ModelParams, "top_min_pixels"), ge=1,
                                 description="fewer readings in the band: not judged")
-    exclusion: Num = Field(_d(ModelParams, "exclusion"), ge=0,
-                           description="two objects cannot stand within exclusion_radius: a location's "
-                                       "evidence loses exclusion x its neighbours' rho above "
-                                       "exclusion_gate (README, How it works); 0: off")
+    exclusion: Num | None = Field(None, ge=0,
+                                  description=f"two objects cannot stand within exclusion_radius: a "
+                                              f"location's evidence loses exclusion x its neighbours' rho "
+                                              f"above exclusion_gate (README, How it works); default "
+                                              f"{_d(ModelParams, 'exclusion'):g} on ground grids, 0 (off) "
+                                              f"in voxel mode, where it is not measured to help")
     exclusion_radius: Num = Field(_d(ModelParams, "exclusion_radius"), gt=0, description="metres")
     exclusion_gate: Num = Field(_d(ModelParams, "exclusion_gate"), ge=0, lt=1,
                                 description="neighbours' rho above it count")
@@ -844,7 +846,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     obj = _fill(ObjectBox, c.object)
     m = c.model
     damping_max = m.damping_max if m.damping_max is not None else max(_d(ModelParams, "damping_max"), m.damping)
-    model = _fill(ModelParams, m, damping_max=damping_max)
+    exclusion = m.exclusion if m.exclusion is not None else (_d(ModelParams, "exclusion") if c.grid.mode == "ground" else 0.0)
+    model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion)
     detection = _fill(Detection, c.detection)
     evaluation = _fill(Evaluation, c.evaluation)
     output = _fill(Output, c.output)

@@ -162,6 +162,8 @@ class Engine:
         pair_loc, pair_tile = tile_pairs(geometry.rect, tile, tiles_x)
         P, L = batch * self.n_pixels, batch * self.n_locations
         self.extra_bytes = background_auto.state_bytes(self.n_pixels) if background_auto else 0
+        start, nbrs = neighbour_lists(geometry.locations, params.exclusion_radius if params.exclusion > 0 else 0.0)
+        self.extra_bytes += 4 * (len(start) + len(nbrs))  # model.exclusion's neighbour lists
         cap = INT32_MAX if max_entries is None else min(max_entries, INT32_MAX)
         if memory_gb is not None:
             fixed = memory_estimate(P, L, 0, len(pair_loc)) + self.extra_bytes
@@ -225,7 +227,6 @@ class Engine:
             self.no_index = wp.zeros(0, dtype=wp.int32)
             self.reserved = wp.zeros(2, dtype=wp.int32)  # kernels.masks.pixel_entries_once
             self.no_reserved = wp.zeros(0, dtype=wp.int32)
-            start, nbrs = neighbour_lists(geometry.locations, params.exclusion_radius if params.exclusion > 0 else 0.0)
             self.neighbour_start = wp.array(start, dtype=wp.int32)
             self.neighbours = wp.array(nbrs, dtype=wp.int32)
         self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)

@@ -286,3 +286,14 @@ def test_top_view_shows_the_camera_footprint():
     out = grey(frame_picture(depth, rho, grid, [], cam.centre[:2], in_view=seen))
     everything = grey(frame_picture(depth, rho, grid, [], cam.centre[:2], in_view=np.zeros(grid.shape, bool)))
     assert 0 < out < everything and out / everything == pytest.approx(1 - seen.mean(), abs=0.05)
+
+
+def test_exclusion_defaults_to_on_for_ground_grids_and_off_in_voxel_mode():
+    """model.exclusion unset: 10 on a ground grid (people), 0 in voxel mode (not measured to
+    help drones); given, it is what was given, and the resolved config records it."""
+    people = load_config(str(ROOT / "configs" / "demo_people.yaml"))
+    drones = load_config(str(ROOT / "configs" / "demo_drones.yaml"))
+    assert people.model.exclusion == 10.0 and people.resolved["model"]["exclusion"] == 10.0
+    assert drones.model.exclusion == 0.0 and drones.resolved["model"]["exclusion"] == 0.0
+    assert load_config(str(ROOT / "configs" / "demo_drones.yaml"), ["model.exclusion=3"]).model.exclusion == 3.0
+    assert load_config(str(ROOT / "configs" / "demo_people.yaml"), ["model.exclusion=0"]).model.exclusion == 0.0
