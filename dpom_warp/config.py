@@ -453,7 +453,7 @@ class ModelSection(Node):
                                               f"location's evidence loses exclusion x its neighbours' rho "
                                               f"above exclusion_gate (README, How it works); default "
                                               f"{_d(ModelParams, 'exclusion'):g} on ground grids, 0 (off) "
-                                              f"in voxel mode, where it is not measured to help")
+                                              f"in voxel mode")
     exclusion_radius: Num = Field(_d(ModelParams, "exclusion_radius"), gt=0, description="metres")
     exclusion_gate: Num = Field(_d(ModelParams, "exclusion_gate"), ge=0, lt=1,
                                 description="neighbours' rho above it count")

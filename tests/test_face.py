@@ -289,8 +289,8 @@ def test_top_view_shows_the_camera_footprint():
 
 
 def test_exclusion_defaults_to_on_for_ground_grids_and_off_in_voxel_mode():
-    """model.exclusion unset: 10 on a ground grid (people), 0 in voxel mode (not measured to
-    help drones); given, it is what was given, and the resolved config records it."""
+    """model.exclusion unset: 10 on a ground grid (people), 0 in voxel mode (README: twice the
+    drone demo's time); given, it is what was given, and the resolved config records it."""
     people = load_config(str(ROOT / "configs" / "demo_people.yaml"))
     drones = load_config(str(ROOT / "configs" / "demo_drones.yaml"))
     assert people.model.exclusion == 10.0 and people.resolved["model"]["exclusion"] == 10.0
