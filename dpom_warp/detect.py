@@ -37,12 +37,15 @@ def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, thresh
     """Detections of one frame, strongest first.
 
     Args:
-        rho_star: occupancy map (grid shape), soft-thresholded.
+        rho_star: occupancy map (grid shape), soft-thresholded; taken as float32, as the maps
+            are written, so that the detections re-detected from a run's maps are the run's
+            (cells saturated near 1 would otherwise be ordered by digits the maps drop).
         locations: (K, 3) location centres, metres, in map order.
         rect: (K, 4) silhouette rectangles u0, v0, u1, v1.
         threshold: minimum rho*.
         nms_radius: a detection suppresses weaker ones closer than this, metres.
     """
+    rho_star = np.asarray(rho_star, dtype=np.float32)
     flat = rho_star.ravel()
     cand = np.flatnonzero(local_maxima(rho_star).ravel() & (flat >= threshold))
     cand = cand[np.lexsort((cand, -flat[cand]))]  # strongest first, ties by index
