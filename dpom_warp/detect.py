@@ -39,16 +39,22 @@ def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, thresh
     Args:
         rho_star: occupancy map (grid shape), soft-thresholded; taken as float32, as the maps
             are written, so that the detections re-detected from a run's maps are the run's
-            (cells saturated near 1 would otherwise be ordered by digits the maps drop).
+            (cells saturated near 1 were ordered by digits the maps drop; ties now go to the
+            cell with the most occupancy around it).
         locations: (K, 3) location centres, metres, in map order.
         rect: (K, 4) silhouette rectangles u0, v0, u1, v1.
         threshold: minimum rho*.
         nms_radius: a detection suppresses weaker ones closer than this, metres.
     """
+    from scipy.ndimage import uniform_filter
+
     rho_star = np.asarray(rho_star, dtype=np.float32)
     flat = rho_star.ravel()
     cand = np.flatnonzero(local_maxima(rho_star).ravel() & (flat >= threshold))
-    cand = cand[np.lexsort((cand, -flat[cand]))]  # strongest first, ties by index
+    # strongest first; among equals (cells saturated at 1) the one whose 3 x 3 (x 3)
+    # neighbourhood holds the most, the middle of its blob; then by index
+    mass = uniform_filter(rho_star.astype(np.float64), 3, mode="constant").ravel()
+    cand = cand[np.lexsort((cand, -mass[cand], -flat[cand]))]
     kept: list[int] = []
     for k in cand:
         if all(np.linalg.norm(locations[k] - locations[j]) >= nms_radius for j in kept):

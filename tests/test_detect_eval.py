@@ -56,3 +56,20 @@ def test_scores_hand_computed():
     assert s["n_gt_visible"] == 2 and s["moda_visible"] == pytest.approx(1 - 2 / 2)
     empty = score_frames({}, {"x.png": []}, 0.5)
     assert empty["n_gt"] == 0 and np.isnan(empty["moda"])
+
+
+def test_saturated_cells_tie_to_the_middle_of_their_blob_and_float32_is_the_map():
+    """Two adjacent cells at rho* 1 (float32, as maps are written): the one with more
+    occupancy around it is the detection whatever its index; digits below float32 do not
+    reorder them, so re-detecting a written map gives the run's detections."""
+    ys, xs = np.mgrid[0:5, 0:6]
+    locations = np.stack([xs.ravel() * 0.1, ys.ravel() * 0.1, np.zeros(30)], 1)
+    rect = np.zeros((30, 4), int)
+    for left_first in (True, False):
+        m = np.zeros((5, 6))
+        m[2, 2] = m[2, 3] = 1.0 - (1e-12 if left_first else 0.0)  # the left one weaker in float64 digits
+        m[2, 3] = 1.0
+        m[1, 4 if left_first else 1] = 0.8  # beside the right (or the left) one
+        got = detect(m, locations, rect, 0.5, 0.4)
+        assert len(got) == 1 and got[0].k == (2 * 6 + 3 if left_first else 2 * 6 + 2)
+        assert got == detect(m.astype(np.float32), locations, rect, 0.5, 0.4)
