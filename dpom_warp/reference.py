@@ -342,7 +342,8 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         evidence = np.bincount(L[use], weights=contrib[use], minlength=K)
         if params.exclusion > 0:  # neighbours above the gate push a location down
             over = np.maximum(rho - params.exclusion_gate, 0.0) / (1.0 - params.exclusion_gate)
-            evidence -= params.exclusion * np.bincount(owner, weights=over[neighbours], minlength=K)
+            # (not in place: bincount of an empty selection is an integer array)
+            evidence = evidence - params.exclusion * np.bincount(owner, weights=over[neighbours], minlength=K)
         rho_new = sigmoid(logit_prior + evidence)
         if trace is not None:
             trace.append(rho_new)
