@@ -90,6 +90,13 @@ def evidence_pass(
         t = t * (f64(1.0) - rho[k])
 
 
+@wp.func
+def moves(state: int, full: int) -> bool:
+    """Whether update_rho updates a location whose live state is `state` in a pass that is
+    `full` or not: never if pruned or idle (< 0), in a sparse pass only if live (1)."""
+    return state >= 0 and (full != 0 or state != 0)
+
+
 @wp.kernel(enable_backward=False)
 def update_rho(
     logit_prior: wp.float64,
@@ -127,9 +134,7 @@ def update_rho(
         return
     if not indexed and i == f * locations:
         iterations[f] = iteration + 1
-    if live[i] < 0:  # pruned by the bound (rho = 0) or idle (in no list): kernels.sparse
-        return
-    if full == 0 and live[i] == 0:  # dead: in no compact list, its evidence is 0
+    if not moves(live[i], full):  # pruned or idle (kernels.sparse); dead in a sparse pass
         return
     rho_new = sigmoid(logit_prior + evidence[i])
     wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
@@ -159,7 +164,7 @@ def exclusion_pass(
     """Two objects cannot stand closer than the exclusion radius: each location l with rho_l
     above the gate subtracts strength x (rho_l - gate) / (1 - gate) from the evidence of its
     neighbours (the locations within the radius) that update_rho will update in this pass
-    (not pruned or idle; live in a sparse pass), so each gets strength x the sum over its
+    (`moves`), so each gets strength x the sum over its
     neighbours. Launched between the evidence pass and update_rho: it reads rho before the
     update and writes only the evidence. One thread per location of the batch; the few
     above the gate do the work."""
@@ -172,7 +177,7 @@ def exclusion_pass(
     k = i - f * locations
     for j in range(neighbour_start[k], neighbour_start[k + 1]):
         n = f * locations + neighbours[j]
-        if live[n] >= 0 and (full != 0 or live[n] != 0):
+        if moves(live[n], full):
             wp.atomic_sub(evidence, n, push)
 
 
