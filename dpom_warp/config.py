@@ -414,6 +414,11 @@ class ModelSection(Node):
     damping_max: Num | None = Field(None, gt=0, le=1,
                                     description=f"cap of lambda (default {_d(ModelParams, 'damping_max')}, "
                                                 f"never below damping)")
+    damping_streak: Num = Field(_d(ModelParams, "damping_streak"), ge=1,
+                                description="per-location growth of lambda while a location's target stays on one side of "
+                                            "its rho (1: off)")
+    damping_streak_max: Num = Field(_d(ModelParams, "damping_streak_max"), gt=0, le=1,
+                                    description="cap of the per-location lambda (never below the iteration's lambda)")
     tolerance: Num = Field(_d(ModelParams, "tolerance"), gt=0,
                            description="stop when max |rho_new - rho| is below it")
     max_iterations: Int = Field(_d(ModelParams, "max_iterations"), ge=1,

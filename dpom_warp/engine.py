@@ -51,9 +51,9 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 24  # rect, normal, plane, centre,
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 24 + 4  # rect, normal, plane, centre,
 # area, five accumulators and the pruning bound, live, live and kept indices, entries, top-band and
-# whole-silhouette counts
+# whole-silhouette counts, the damping streak
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
@@ -217,6 +217,7 @@ class Engine:
             self.done = wp.zeros(batch, dtype=wp.int32)
             self.iterations = wp.zeros(batch, dtype=wp.int32)
             self.live = wp.ones(L, dtype=wp.int32)
+            self.streak = wp.zeros(L, dtype=wp.int32)  # per-location damping runs (update_rho)
             self.live_counts = wp.zeros(P, dtype=wp.int32)
             self.live_offsets = wp.zeros(P, dtype=wp.int32)
             self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
@@ -426,7 +427,8 @@ class Engine:
             wp.launch(K.update_rho, dim=dim, device=self.device,
                       inputs=[logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
                               self.done, self.max_change, self.iterations, int(full),
-                              self.params.sparse_epsilon, self.live, index, self.live_changed])
+                              self.params.sparse_epsilon, self.live, index, self.live_changed,
+                              self.streak, self.params.damping_streak, self.params.damping_streak_max])
 
     def compact(self):
         """Copy each pixel's list, in order, keeping the live locations (count, scan, fill)."""
@@ -542,6 +544,7 @@ class Engine:
         else:
             self.rho.assign(np.tile(np.asarray(start, dtype=np.float64), self.batch))
         self.live.fill_(1)
+        self.streak.zero_()
         self.evidence.zero_()
         self.max_change.zero_()
         self.iterations.zero_()

@@ -37,6 +37,15 @@ class ModelParams:
         damping_growth: lambda is multiplied by this after every iteration (annealing: small
             steps while neighbours compete, larger ones once the map has settled) ...
         damping_max: ... up to this value (None: no growth beyond `damping`).
+        damping_streak: per-location damping: a location whose target rho_new has stayed on
+            the same side of its rho for its last s updates takes lambda_k = max(lambda,
+            min(damping_streak_max, lambda x damping_streak^s)); a target on the other side
+            starts a new run. Neighbours that explain each other away keep changing side
+            and keep the annealed lambda; a location heading steadily to 0 (most of the
+            grid) or to 1 gets there in a few iterations and leaves the sparse lists early
+            (1.1 with cap 0.6: 39 % fewer iterations on the tuning draw of bench.robustness
+            at the same errors with background frames, README). 1: off.
+        damping_streak_max: the cap of lambda_k.
         tolerance: stop when max |rho_new - rho| falls below it.
         max_iterations: iteration cap.
         check_every: read the convergence test back to the host every this many iterations.
@@ -99,6 +108,8 @@ class ModelParams:
     damping: float = 0.1
     damping_growth: float = 1.03
     damping_max: float | None = 0.4
+    damping_streak: float = 1.1
+    damping_streak_max: float = 0.6
     tolerance: float = 1e-4
     max_iterations: int = 100
     check_every: int = 5

@@ -328,6 +328,7 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         owner = np.repeat(np.arange(K), np.diff(start))
         neighbours = neighbours[:len(owner)]
     iterations = 0
+    streak = np.zeros(K, np.int64)  # signed run of same-side targets (damping_streak)
     for it in range(params.max_iterations):
         full = params.full_pass(it)
         r = np.where(valid & (full | live[L]), rho[L], 0.0)
@@ -350,6 +351,11 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         moving = kept if full else live
         diff = float(np.max(np.abs(rho_new - rho)[moving])) if moving.any() else 0.0
         lam = params.damping_at(it)
+        if params.damping_streak > 1.0:  # per-location lambda (ModelParams.damping_streak)
+            step = np.where(rho_new < rho, -1, 1)
+            run = np.where(streak * step > 0, np.abs(streak), 0)
+            lam = np.maximum(lam, np.minimum(params.damping_streak_max, lam * params.damping_streak ** run))
+            streak = np.where(moving, step * (run + 1), streak)
         damped = (1.0 - lam) * rho + lam * rho_new
         if full:
             live = kept & ((rho_new >= params.sparse_epsilon) | (damped >= params.sparse_epsilon))

@@ -113,6 +113,9 @@ def update_rho(
     live: wp.array(dtype=wp.int32),
     index: wp.array(dtype=wp.int32),
     changed: wp.array(dtype=wp.int32),
+    streak: wp.array(dtype=wp.int32),
+    streak_growth: wp.float64,
+    streak_cap: wp.float64,
 ):
     """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence); clears the evidence;
     max_change[frame, iteration] = max |rho_new - rho|; iterations[frame] counts the updates.
@@ -124,7 +127,12 @@ def update_rho(
     location) a location whose rho and rho_new are both below `epsilon` is marked dead
     (live = 0), any other live, and changed[0] = 1 where that differs from before; after a
     pass over the compact lists (`full` = 0) only live locations move. With epsilon = 0 and
-    every pass full this is the exact damped update."""
+    every pass full this is the exact damped update.
+
+    Per-location damping (ModelParams.damping_streak, `streak_growth` > 1): streak[i] is the
+    signed count of the location's last updates whose target rho_new lay on the same side of
+    rho (+ at or above, - below); an update continuing a run of s takes lambda = max(damping,
+    min(streak_cap, damping x streak_growth^s)), one that changes side starts a new run."""
     i = wp.tid()
     indexed = index.shape[0] > 0
     if indexed:
@@ -139,7 +147,17 @@ def update_rho(
     rho_new = sigmoid(logit_prior + evidence[i])
     wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
     evidence[i] = f64(0.0)
-    rho[i] = (f64(1.0) - damping) * rho[i] + damping * rho_new
+    lam = damping
+    if streak_growth > f64(1.0):  # per-location lambda: the run of targets on one side of rho
+        step = int(1)
+        if rho_new < rho[i]:
+            step = -1
+        run = int(0)
+        if streak[i] * step > 0:
+            run = wp.abs(streak[i])
+        lam = wp.max(damping, wp.min(streak_cap, damping * wp.pow(streak_growth, f64(run))))
+        streak[i] = step * (run + 1)
+    rho[i] = (f64(1.0) - lam) * rho[i] + lam * rho_new
     now = int(1)
     if full != 0 and rho_new < epsilon and rho[i] < epsilon:
         now = 0

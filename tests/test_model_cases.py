@@ -55,7 +55,7 @@ def run_both(device, depth, geom, bg, params):
 
 def test_single_visible_object(device):
     params = ModelParams(prior=0.02, sigma_object=0.1, damping=0.2, damping_growth=1.0, tolerance=1e-4,
-                         max_iterations=200, check_every=1)
+                         max_iterations=200, check_every=1, damping_streak=1.0)
     geom = toy_geometry([2.0], [(1, 1, 3, 2)])  # 3 x 2 pixels
     depth = np.full((H, W), 5.0)
     depth[1:3, 1:4] = 2.0
@@ -73,6 +73,29 @@ def test_single_visible_object(device):
     assert got.evidence_share[0] == pytest.approx(1.0)  # every silhouette pixel supports it
     assert got.rho_star[0] == pytest.approx(sigmoid(100 * 1.0 - 8) * got.rho[0], abs=1e-9)
     assert got.entries == 6
+
+
+def test_per_location_damping_grows_while_the_target_stays_on_one_side(device):
+    """The single object with damping_streak: its target is constant and above its rho, so its
+    t-th update (0-based) takes lambda = max(0.2, min(0.7, 0.2 x 1.5^t)): 0.2, 0.3, 0.45,
+    0.675, then 0.7, and rho_t = target - prod(1 - lambda_i) (target - prior)."""
+    params = ModelParams(prior=0.02, sigma_object=0.1, damping=0.2, damping_growth=1.0, tolerance=1e-4,
+                         max_iterations=200, check_every=1, damping_streak=1.5, damping_streak_max=0.7)
+    geom = toy_geometry([2.0], [(1, 1, 3, 2)])
+    depth = np.full((H, W), 5.0)
+    depth[1:3, 1:4] = 2.0
+    got = run_both(device, depth, geom, wall_background(), params)
+    s = math.hypot(0.1, params.sensor_sigma(2.0))
+    target = sigmoid(math.log(0.02 / 0.98) + 6 * (log_theta(2.0, 2.0, s, params, params.missing_prob)
+                                                   - log_theta(2.0, 5.0, 0.05, params, 0.05)))
+    lams = [max(0.2, min(0.7, 0.2 * 1.5 ** t)) for t in range(200)]
+    assert lams[:5] == pytest.approx([0.2, 0.3, 0.45, 0.675, 0.7])
+    gap = [target - 0.02]  # target - rho_t
+    for lam in lams:
+        gap.append(gap[-1] * (1 - lam))
+    t = next(t for t in range(1, 200) if abs(gap[t - 1]) < 1e-4)
+    assert got.iterations == t < 12  # over 40 with lambda 0.2 throughout (the test above)
+    assert got.rho[0] == pytest.approx(target - gap[t], abs=1e-9)
 
 
 def test_object_hiding_another_one_step(device):
@@ -117,7 +140,8 @@ def test_exclusion_pushes_the_hidden_neighbour_below_its_prior(device):
     """The same scene with the exclusion prior: B stands 0.1 m behind A, within the radius,
     so with rho_A ~ 1 its rho_new tends to sigmoid(logit(prior) + ~0 - exclusion); the far
     location, 2 m away, keeps its prior; A is unchanged."""
-    params = ModelParams(prior=0.05, sigma_object=0.15, damping=0.2, max_iterations=300, exclusion=6.0)
+    params = ModelParams(prior=0.05, sigma_object=0.15, damping=0.2, max_iterations=300, exclusion=6.0,
+                         tolerance=1e-9)  # B's limit is ~1e-4: converge well past it
     geom = toy_geometry([2.0, 2.1, 4.0], [(1, 1, 3, 2), (1, 1, 3, 2), (1, 1, 3, 2)])
     depth = np.full((H, W), 5.0)
     depth[1:3, 1:4] = 2.0

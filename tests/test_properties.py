@@ -20,6 +20,8 @@ params_strategy = st.fixed_dictionaries({
     "missing_prob": st.floats(0.0, 0.9),
     "damping": st.floats(0.01, 1.0),
     "damping_growth": st.floats(1.0, 1.2),
+    "damping_streak": st.floats(1.0, 1.5),
+    "damping_streak_max": st.floats(0.05, 1.0),
     "max_iterations": st.integers(1, 40),
     "check_every": st.integers(1, 7),
     "alpha": st.floats(-200, 200),
