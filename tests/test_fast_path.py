@@ -146,10 +146,11 @@ def test_pruning_bound_holds_at_every_iteration_of_the_exact_path(seed, shape):
     assert (upper > 0.5).any()  # and it is not a guess: some can rise
 
 
+@pytest.mark.parametrize("streak", [1.0, 1.1])  # model.damping_streak: off, and on (cap 0.6)
 @pytest.mark.parametrize("seed", range(4))
-def test_sparse_path_matches_sparse_reference(device, seed):
+def test_sparse_path_matches_sparse_reference(device, seed, streak):
     geom, params, depth, bg_frames = random_scene(seed)
-    params = dataclasses.replace(params, sparse_epsilon=1e-3)
+    params = dataclasses.replace(params, sparse_epsilon=1e-3, damping_streak=streak, damping_streak_max=0.6)
     engine = Engine(geom, params, device)
     engine.set_background_frames(bg_frames)
     want = ref.mean_field(depth, geom, ref.background_from_frames(bg_frames, params), params)
