@@ -42,10 +42,10 @@ class ModelParams:
             min(damping_streak_max, lambda x damping_streak^s)); a target on the other side
             starts a new run. Neighbours that explain each other away keep changing side
             and keep the annealed lambda; a location heading steadily to 0 (most of the
-            grid) or to 1 gets there in a few iterations and leaves the sparse lists early
+            grid) or to 1 gets there in a few iterations and leaves the sparse lists early.
             1 (the default): off. Measured (README, How it works): 1.05 with cap 0.6 gives
-            31 % fewer iterations on the tuning draw of bench.robustness at the same errors,
-            but the held-out table's median drops 0.975 -> 0.960, so it stays off.
+            31 % fewer iterations on the tuning draw of bench.robustness at about the same
+            errors, but the held-out table's median drops 0.975 -> 0.960, so it stays off.
         damping_streak_max: the cap of lambda_k.
         tolerance: stop when max |rho_new - rho| falls below it.
         max_iterations: iteration cap.
