@@ -453,6 +453,9 @@ class ModelSection(Node):
     top_slope: Num = Field(_d(ModelParams, "top_slope"), gt=0, description="steepness of the top-band sigmoid")
     top_min_pixels: Int = Field(_d(ModelParams, "top_min_pixels"), ge=1,
                                 description="fewer readings in the band: not judged")
+    top_unseen: Num = Field(_d(ModelParams, "top_unseen"), ge=0, le=1,
+                            description="the top-band factor where fewer than top_min_pixels of the "
+                                        "band are in the image (its top out of view); 1: not judged")
     exclusion: Num | None = Field(None, ge=0,
                                   description=f"two objects cannot stand within exclusion_radius: a "
                                               f"location's evidence loses exclusion x its neighbours' rho "

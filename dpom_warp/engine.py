@@ -51,9 +51,9 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 24 + 4  # rect, normal, plane, centre,
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 32 + 4  # rect, normal, plane, centre,
 # area, five accumulators and the pruning bound, live, live and kept indices, entries, top-band and
-# whole-silhouette counts, the damping streak
+# whole-silhouette counts (four each), the damping streak
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 
@@ -209,9 +209,11 @@ class Engine:
             self.top_support = wp.zeros(L, dtype=wp.int32)
             self.top_against = wp.zeros(L, dtype=wp.int32)
             self.top_hidden = wp.zeros(L, dtype=wp.int32)
+            self.top_seen = wp.zeros(L, dtype=wp.int32)  # the band's pixels in the image (-1: not counted)
             self.all_support = wp.zeros(L, dtype=wp.int32)  # the same counts, whole silhouette
             self.all_against = wp.zeros(L, dtype=wp.int32)
             self.all_hidden = wp.zeros(L, dtype=wp.int32)
+            self.all_seen = wp.zeros(L, dtype=wp.int32)
             self.rho_star = wp.zeros(L, dtype=wp.float64)
             self.max_change = wp.zeros((batch, max(1, params.max_iterations)), dtype=wp.float64)
             self.done = wp.zeros(batch, dtype=wp.int32)
@@ -568,8 +570,9 @@ class Engine:
         def soft_threshold(top_share):
             wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
                       inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support,
-                              self.top_against, self.top_hidden, p.top_hidden, top_share, p.top_slope,
-                              p.top_min_pixels, unhidden, self.all_support, self.all_against,
+                              self.top_against, self.top_hidden, self.top_seen, p.top_hidden, top_share,
+                              p.top_slope, p.top_min_pixels, p.top_unseen, unhidden, self.all_support,
+                              self.all_against,
                               self.share, self.rho_star])
 
         def top_band(lo, hi, gate, counts):
@@ -578,7 +581,7 @@ class Engine:
                               TOP_MIN_RHO, gate, *counts])
 
         if unhidden:
-            top_band(-BAND_ALL, BAND_ALL, self.rho, (self.all_support, self.all_against, self.all_hidden))
+            top_band(-BAND_ALL, BAND_ALL, self.rho, (self.all_support, self.all_against, self.all_hidden, self.all_seen))
         if top > 0:
             # counted only where rho* before the test (a factor <= 1) reaches TOP_MIN_RHO: the
             # silhouette walk is the threshold's whole cost, and most locations are far below
@@ -586,7 +589,7 @@ class Engine:
                 soft_threshold(0.0)
             h = self.geometry.height
             top_band(p.top_band * h, h, self.rho if unhidden else self.rho_star,
-                     (self.top_support, self.top_against, self.top_hidden))
+                     (self.top_support, self.top_against, self.top_hidden, self.top_seen))
         soft_threshold(top)
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))

@@ -87,6 +87,11 @@ class ModelParams:
             0.6; an arm beside a person seen from above 0.08 to 0.1), also when their legs
             are hidden. 0.05 suits the facing plane. 0: off.
         top_band, top_hidden, top_slope, top_min_pixels: see top_support.
+        top_unseen: the top-band factor of a location with fewer than top_min_pixels of its
+            band's pixels in the image, with a reading or not (its top out of view: nothing
+            then tells it from furniture as tall as the part in view; a table at the edge of
+            a ceiling camera's image supports the lower part of a solid whose head lies
+            outside it); 0: not a detection, 1: not judged.
         exclusion: two objects cannot stand within exclusion_radius of each other: each
             location's evidence loses exclusion x sum over the locations within the radius
             of max(0, rho - exclusion_gate) / (1 - exclusion_gate) (kernels.mean_field
@@ -126,6 +131,7 @@ class ModelParams:
     top_hidden: float = 0.15
     top_slope: float = 100.0
     top_min_pixels: int = 3
+    top_unseen: float = 0.0
     exclusion: float = 10.0
     exclusion_radius: float = 0.45
     exclusion_gate: float = 0.5

@@ -370,23 +370,26 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     tsum = np.bincount(L[valid], weights=T[valid], minlength=K)
     denominator = geom.area.astype(np.float64)
     if params.share_of == "unhidden":
-        s_all, a_all, _ = top_band(depth_m, geom, params, rho, whole=True)
+        s_all, a_all, _, _ = top_band(depth_m, geom, params, rho, whole=True)
         denominator = np.where(s_all + a_all > 0, s_all + a_all, denominator)
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(geom.area > 0, tsum / denominator, 0.0)
     rho_star = np.where(geom.area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
     # the top band is counted where rho* can still reach TOP_MIN_RHO (its factor is <= 1)
     gate = rho if params.share_of == "unhidden" else rho_star
-    support, against, hidden = top_band(depth_m, geom, params, gate)
+    support, against, hidden, seen = top_band(depth_m, geom, params, gate)
     if params.top_support > 0 and geom.height > 0:
         n = support + against + hidden
         with np.errstate(divide="ignore", invalid="ignore"):
             u = (support + params.top_hidden * hidden) / n
-            factor = sigmoid(params.top_slope * (u - params.top_support))
-        rho_star = rho_star * np.where(n >= max(params.top_min_pixels, 1), factor, 1.0)
+            factor = np.where(n >= max(params.top_min_pixels, 1),
+                              sigmoid(params.top_slope * (u - params.top_support)), 1.0)
+        # a band with too few pixels in the image (its top out of view): top_unseen
+        factor = np.where((seen >= 0) & (seen < params.top_min_pixels), params.top_unseen, factor)
+        rho_star = rho_star * factor
     return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
                 entries=entries, live=int(live.sum()), pruned=pruned, top_support=support, top_against=against,
-                top_hidden=hidden)
+                top_hidden=hidden, top_seen=seen)
 
 
 def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
@@ -395,22 +398,26 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
     object point lies between top_band x height and the height that pass the mask test
     (support), and of the others those that read beyond the object (against) and in front
     of it (hidden). `whole`: the same counts over the whole silhouette, any grid (the
-    unhidden share of ModelParams.share_of). Returns three (K,) arrays."""
+    unhidden share of ModelParams.share_of). Also `seen`: the band's pixels in the image,
+    with a reading or not (-1 where not counted). Returns four (K,) arrays."""
     K = len(geom.rect)
     support, against, hidden = (np.zeros(K, np.int64) for _ in range(3))
+    seen = np.full(K, -1, np.int64)
     if geom.height <= 0 and not whole:
-        return support, against, hidden
+        return support, against, hidden, seen
     z_img = np.asarray(depth_m, dtype=np.float64)
     lo, hi = (-BAND_ALL, BAND_ALL) if whole else (params.top_band * geom.height, geom.height)
     for k in np.flatnonzero(np.asarray(rho) >= TOP_MIN_RHO):
+        seen[k] = 0
         sil = silhouette(z_img, geom, k, params)
         if sil is None:
             continue
         _, rays, z, mu, inlier = sil
         h = geom.centre[2] + mu * rays[..., 2]
+        seen[k] = np.sum((mu > 0) & (h >= lo) & (h <= hi))
         band = (mu > 0) & (h >= lo) & (h <= hi) & valid_reading(z, params)
         passes = inlier > log_outlier(params)
         support[k] = np.sum(band & passes)
         against[k] = np.sum(band & ~passes & (z > mu))
         hidden[k] = np.sum(band & ~passes & (z <= mu))
-    return support, against, hidden
+    return support, against, hidden, seen

@@ -242,12 +242,14 @@ def top_band(
     support: wp.array(dtype=wp.int32),
     against: wp.array(dtype=wp.int32),
     hidden: wp.array(dtype=wp.int32),
+    seen: wp.array(dtype=wp.int32),
 ):
     """The top band of a standing box (heights lo to hi on its facing plane): how many of its
     silhouette's pixels there pass the mask test (support), read behind the plane (against:
     the box would hide them, so nothing that tall stands there) or in front of it (hidden by
-    something nearer). Missing readings count for none. One thread per location of the
-    batch, for those with rho >= min_rho (the others: 0, 0, 0)."""
+    something nearer). Missing readings count for none; `seen` counts the band's pixels in
+    the image, with a reading or not (a band outside the image has none). One thread per
+    location of the batch, for those with rho >= min_rho (the others: 0, 0, 0 and seen -1)."""
     i = wp.tid()
     n_loc = geo.rect.shape[0]
     b = i / n_loc
@@ -255,6 +257,7 @@ def top_band(
     s = int(0)
     a = int(0)
     f = int(0)
+    n = int(0)
     if rho[i] >= min_rho:
         r = geo.rect[k]
         for v in range(r[1], r[3] + 1):
@@ -265,6 +268,8 @@ def top_band(
                 if mu > f64(0.0):
                     h = centre_z + mu * d[2]
                     z = f64(depth[b, v, u])
+                    if h >= lo and h <= hi:
+                        n += 1
                     if h >= lo and h <= hi and is_reading(pm, z):
                         if object_log_inlier(pm, z, mu, o[1]) > pm.log_outlier:
                             s += 1
@@ -275,13 +280,20 @@ def top_band(
     support[i] = s
     against[i] = a
     hidden[i] = f
+    if rho[i] >= min_rho:
+        seen[i] = n
+    else:
+        seen[i] = -1
 
 
 @wp.func
-def top_factor(s: int, a: int, f: int, weight: wp.float64, share: wp.float64, slope: wp.float64,
-               min_pixels: int) -> wp.float64:
-    """sigmoid(slope ((s + weight f) / (s + a + f) - share)), or 1 with fewer than
-    min_pixels read in the band."""
+def top_factor(s: int, a: int, f: int, seen: int, weight: wp.float64, share: wp.float64,
+               slope: wp.float64, min_pixels: int, unseen: wp.float64) -> wp.float64:
+    """sigmoid(slope ((s + weight f) / (s + a + f) - share)); `unseen` where fewer than
+    min_pixels of the band are in the image (0 <= seen < min_pixels: its top out of view),
+    else 1 with fewer than min_pixels read in the band."""
+    if seen >= 0 and seen < min_pixels:
+        return unseen
     n = s + a + f
     if n < min_pixels or n == 0:
         return f64(1.0)
@@ -298,10 +310,12 @@ def soft_threshold(
     support: wp.array(dtype=wp.int32),
     against: wp.array(dtype=wp.int32),
     hidden: wp.array(dtype=wp.int32),
+    seen: wp.array(dtype=wp.int32),
     top_hidden: wp.float64,
     top_share: wp.float64,
     top_slope: wp.float64,
     top_min_pixels: int,
+    top_unseen: wp.float64,
     unhidden: int,
     all_support: wp.array(dtype=wp.int32),
     all_against: wp.array(dtype=wp.int32),
@@ -312,7 +326,7 @@ def soft_threshold(
     (area holds the L locations of one frame; the arrays hold the frames of a batch), or with
     `unhidden` e = visible / (pixels of S_k reading at or behind the object: all_support +
     all_against, the top_band counts over the whole silhouette) where there are any; times
-    the top-band factor (top_band; top_share = 0: none)."""
+    the top-band factor (top_band, top_factor; top_share = 0: none)."""
     k = wp.tid()
     a = area[k % area.shape[0]]
     if a > f64(0.0):
@@ -323,8 +337,8 @@ def soft_threshold(
         share[k] = e
         rho_star[k] = sigmoid(alpha * e + beta) * rho[k]
         if top_share > f64(0.0):
-            rho_star[k] = rho_star[k] * top_factor(support[k], against[k], hidden[k], top_hidden,
-                                                   top_share, top_slope, top_min_pixels)
+            rho_star[k] = rho_star[k] * top_factor(support[k], against[k], hidden[k], seen[k], top_hidden,
+                                                   top_share, top_slope, top_min_pixels, top_unseen)
     else:
         share[k] = f64(0.0)
         rho_star[k] = f64(0.0)

@@ -37,6 +37,7 @@ def test_top_band_matches_reference(device, seed):
     np.testing.assert_array_equal(engine.top_support.numpy(), want["top_support"])
     np.testing.assert_array_equal(engine.top_against.numpy(), want["top_against"])
     np.testing.assert_array_equal(engine.top_hidden.numpy(), want["top_hidden"])
+    np.testing.assert_array_equal(engine.top_seen.numpy(), want["top_seen"])
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     judged = want["top_support"] + want["top_against"] + want["top_hidden"]
     assert np.all(judged[want["rho"] < TOP_MIN_RHO] == 0)
@@ -134,3 +135,73 @@ def test_side_by_side_pair_is_two_maxima():
     assert np.hypot(*(peaks[0] - peaks[1])) < 0.4  # pulled together by the box
     for radius, found in ((0.4, 1), (0.25, 2)):
         assert len(detect(rho_map, geom.locations, geom.rect, 0.5, radius)) == found
+
+
+def ceiling_room_table_at_the_edge():
+    """A 160 x 120 camera 2.6 m up, 45 deg down: a table (0.75 m) at the image's left edge,
+    where a person standing there would have their head outside the image, and a person in
+    the open. Returns camera, depth, the person's and the table's (x, y)."""
+    from dpom_warp.synthetic import SceneSpec, _box, _scene, person_mesh, render, sensor_noise
+
+    cam = Camera(160, 120, 114.0, 114.0, 79.5, 59.5, pose_from_angles(2.6, 45.0))
+    table, person = (-2.2, 1.5), (0.3, 2.4)
+    meshes = [_box((12, 14, 0.1), (0, 3, -0.05)), _box((12, 0.1, 3), (0, 7.05, 1.5)),
+              _box((1.2, 0.7, 0.04), (*table, 0.73))]
+    for sx in (-0.55, 0.55):
+        for sy in (-0.3, 0.3):
+            meshes.append(_box((0.05, 0.05, 0.71), (table[0] + sx, table[1] + sy, 0.355)))
+    meshes.append(person_mesh(1.75, np.pi / 2 + 0.3, 0.5).translate((*person, 0.0)))
+    t, _ = render(_scene(meshes)[0], cam)
+    depth = sensor_noise(t, SceneSpec(), np.random.default_rng(0)).astype(np.float32)
+    return cam, depth, np.array(person), np.array(table)
+
+
+def test_band_out_of_view_counts_like_the_reference(device):
+    """The top band's pixels in the image (`seen`), counted by the kernel for every location
+    of the ceiling room, equal the reference's, and some locations have none (their top is
+    out of view) while their silhouette is in the image."""
+    import warp as wp
+
+    from dpom_warp import kernels as K
+
+    cam, depth, _, _ = ceiling_room_table_at_the_edge()
+    grid = Grid(x=(-3.0, 1.0, 0.1), y=(0.5, 3.0, 0.1))
+    geom = build_geometry(cam, grid, ObjectBox(0.4, 1.8))
+    params = ModelParams()
+    engine = Engine(geom, params, device)
+    engine.infer(depth)
+    gate = np.ones(len(geom.rect))
+    gate[::7] = 0.0  # not counted: seen -1
+    counts = [wp.zeros(len(gate), dtype=wp.int32, device=device) for _ in range(4)]
+    h = geom.height
+    wp.launch(K.top_band, dim=len(gate), device=device,
+              inputs=[engine.depth, engine.geo, engine.pm, float(geom.centre[2]), params.top_band * h, h,
+                      TOP_MIN_RHO, wp.array(gate, dtype=wp.float64, device=device), *counts])
+    want = ref.top_band(depth, geom, params, gate)
+    for got, w in zip(counts, want):
+        np.testing.assert_array_equal(got.numpy(), w)
+    seen = want[3]
+    assert np.all(seen[::7] == -1)
+    out_of_view = (seen >= 0) & (seen < params.top_min_pixels) & (geom.area > 0)
+    assert out_of_view.sum() > 20 and (seen >= params.top_min_pixels).sum() > 20
+
+
+def test_table_whose_top_would_be_out_of_view_is_not_a_person():
+    """Floor-only model, a ceiling camera: a table at the image's edge supports the lower
+    part of a cell's solid whose head lies outside the image, so no top band judges it; with
+    `model.top_unseen` 0 (the default) such a cell is not a detection, with 1 (not judged)
+    the table is detected. The person in the open is found either way."""
+    cam, depth, person, table = ceiling_room_table_at_the_edge()
+    grid = Grid(x=(-3.0, 3.0, 0.1), y=(0.5, 4.5, 0.1))
+    geom = build_geometry(cam, grid, ObjectBox(0.4, 1.8))
+
+    def found(params):
+        res = Engine(geom, params, "cpu").infer(depth)
+        dets = detect(res.rho_star.reshape(grid.shape), geom.locations, geom.rect, 0.5, 0.4)
+        return np.array([[d.x, d.y] for d in dets]).reshape(-1, 2)
+
+    dets = found(ModelParams())
+    assert len(dets) == 1 and np.hypot(*(dets[0] - person)) < 0.5, dets
+    plain = found(ModelParams(top_unseen=1.0))
+    assert np.any(np.hypot(*(plain - person).T) < 0.5)
+    assert np.any(np.hypot(*(plain - table).T) < 0.8), plain  # what top_unseen removes
