@@ -388,6 +388,11 @@ class ObjectSection(Node):
                           description="solid: where the head begins, share of the height")
     height_spread: Num = Field(_d(ObjectBox, "height_spread"), ge=0,
                                description="solid: spread of the heights of its tops, metres")
+    leg_radius: Num | None = Field(_d(ObjectBox, "leg_radius"), gt=0,
+                                   description="solid, ground grids: the legs' radius below hip x "
+                                               "height, metres (null: the body reaches the floor)")
+    hip: Num = Field(_d(ObjectBox, "hip"), gt=0, lt=1,
+                     description="solid: where the legs end, share of the height")
 
 
 class ModelSection(Node):

@@ -185,6 +185,10 @@ class ObjectBox:
         height_spread: standard deviation of the height of the solid's flat tops (people are
             not all of one height), metres; a pixel whose ray enters through a top expects a
             depth that spread / |ray's vertical share| wide (at most 1 / 0.3 of it).
+        leg_radius: ground mode: the body's cylinder stops at `hip` x height and a coaxial
+            one of this radius (the legs, metres) goes down to the floor; None (or the body
+            radius): the body reaches the floor (README, How it works: measured, off).
+        hip: where the legs end, share of the height.
     """
 
     width: float
@@ -195,6 +199,8 @@ class ObjectBox:
     head_radius: float = 0.11
     shoulder: float = 0.8
     height_spread: float = 0.12
+    leg_radius: float | None = None
+    hip: float = 0.45
 
     @property
     def body_radius(self) -> float:
@@ -213,7 +219,8 @@ class ObjectBox:
 
     def solid(self, mode: str) -> np.ndarray:
         """The solid as (solid, body radius, head radius, bottom, shoulder, top, height
-        spread): heights relative to the location centre; solid = 0 for the plane model."""
+        spread, leg radius, hip): heights relative to the location centre, the body from hip
+        to shoulder, the legs below it (hip = bottom: none); solid = 0 for the plane model."""
         r, h = self.body_radius, self.height
         if mode == "ground":
             head = self.head_radius > 0 and self.shoulder < 1
@@ -221,7 +228,10 @@ class ObjectBox:
             rh = self.head_radius if head else 0.0
         else:
             z0, z1, z2, rh = -0.5 * h, 0.5 * h, 0.5 * h, 0.0
-        return np.array([float(self.shape == "solid"), r, rh, z0, z1, z2, self.height_spread])
+        rl = r if self.leg_radius is None else float(self.leg_radius)
+        legs = mode == "ground" and rl != r and 0 < self.hip * h < z1
+        rl, zh = (rl, self.hip * h) if legs else (r, z0)
+        return np.array([float(self.shape == "solid"), r, rh, z0, z1, z2, self.height_spread, rl, zh])
 
 
 MIN_TOP_SLOPE = 0.3  # a top's depth spread is at most height_spread / MIN_TOP_SLOPE
@@ -267,10 +277,14 @@ def cylinder_entry(centre, rays, axis, radius, z0, z1, spread):
 
 def solid_depth(centre, rays, location, solid):
     """Entry depth (-1: miss) and its variance of each ray into the solid (ObjectBox.solid)
-    standing on, or centred at, `location` (3,): the nearer of body and head."""
-    _, rb, rh, z0, z1, z2, spread = solid
+    standing on, or centred at, `location` (3,): the nearest of legs, body and head."""
+    _, rb, rh, z0, z1, z2, spread, rl, zh = solid
     lz = location[2]
-    t, var = cylinder_entry(centre, rays, location, rb, lz + z0, lz + z1, spread)
+    t, var = cylinder_entry(centre, rays, location, rb, lz + zh, lz + z1, spread)
+    if zh > z0:  # the legs, below the body
+        tl, vl = cylinder_entry(centre, rays, location, rl, lz + z0, lz + zh, spread)
+        legs = (tl > 0) & ((t < 0) | (tl < t))
+        t, var = np.where(legs, tl, t), np.where(legs, vl, var)
     if rh > 0 and z2 > z1:
         th, vh = cylinder_entry(centre, rays, location, rh, lz + z1, lz + z2, spread)
         head = (th > 0) & ((t < 0) | (th < t))
@@ -296,7 +310,7 @@ class Geometry:
             outside can belong to no object.
         height: the height of the boxes standing on the floor (ground mode); 0 for boxes
             centred on voxels, where the top-band test of the soft threshold does not apply.
-        solid: (7,) the object's solid (ObjectBox.solid); solid[0] = 0: the facing-plane
+        solid: (9,) the object's solid (ObjectBox.solid); solid[0] = 0: the facing-plane
             model.
         area: |S_k| (property): the rectangle's area for the facing plane; with a solid, the
             pixels of the rectangle whose rays enter it, counted on first use (seconds at
@@ -312,7 +326,7 @@ class Geometry:
     plane: np.ndarray
     bounds: np.ndarray
     height: float = 0.0
-    solid: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    solid: np.ndarray = field(default_factory=lambda: np.zeros(9))
 
     @cached_property
     def area(self) -> np.ndarray:

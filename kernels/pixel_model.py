@@ -24,6 +24,8 @@ class GeometryArrays:
     shoulder: wp.float64
     top: wp.float64
     height_spread: wp.float64
+    leg_radius: wp.float64  # the legs, from bottom to hip (hip = bottom: none)
+    hip: wp.float64
 
 
 @wp.struct
@@ -132,13 +134,18 @@ def cylinder_entry(c: wp.vec3d, d: wp.vec3d, axis: wp.vec3d, radius: wp.float64,
 @wp.func
 def object_depth(geo: GeometryArrays, k: int, d: wp.vec3d) -> wp.vec2d:
     """(depth pixel ray d expects of location k, -1: not the object's; variance the shape
-    adds): the facing plane's (variance 0), or the entry into the solid, the nearer of body
-    and head (geometry.Geometry.object_depth)."""
+    adds): the facing plane's (variance 0), or the entry into the solid, the nearest of legs,
+    body and head (geometry.Geometry.object_depth)."""
     if geo.solid == 0:
         return wp.vec2d(facing_plane_depth(d, geo.normal[k], geo.plane[k]), f64(0.0))
     p = geo.location[k]
-    body = cylinder_entry(geo.centre, d, p, geo.body_radius, p[2] + geo.bottom, p[2] + geo.shoulder,
+    body = cylinder_entry(geo.centre, d, p, geo.body_radius, p[2] + geo.hip, p[2] + geo.shoulder,
                           geo.height_spread)
+    if geo.hip > geo.bottom:
+        legs = cylinder_entry(geo.centre, d, p, geo.leg_radius, p[2] + geo.bottom, p[2] + geo.hip,
+                              geo.height_spread)
+        if legs[0] > f64(0.0) and (body[0] < f64(0.0) or legs[0] < body[0]):
+            body = legs
     if geo.head_radius > f64(0.0) and geo.top > geo.shoulder:
         head = cylinder_entry(geo.centre, d, p, geo.head_radius, p[2] + geo.shoulder, p[2] + geo.top,
                               geo.height_spread)

@@ -165,3 +165,27 @@ def test_empty_scene_stays_at_or_below_prior(device):
     assert got.entries > 0
     assert got.rho.max() <= params.prior + 1e-9
     assert got.rho_star.max() < 0.01
+
+
+@pytest.mark.parametrize("legs, leg_radius", [(None, 0.2), (0.14, 0.14), (0.2, 0.2)])
+def test_solid_depth_of_legs_body_and_head(legs, leg_radius):
+    """Where rays enter the people solid standing at (0, 3): 1.8 m high, body radius 0.2 m up
+    to the shoulders (0.8 x 1.8 = 1.44 m), head radius 0.11 m above; below the hip (0.45 x 1.8
+    = 0.81 m) legs of `leg_radius` (None, the default, or 0.2: the body reaches the floor)."""
+    from dpom_warp.geometry import ObjectBox, solid_depth
+
+    solid = ObjectBox(0.4, 1.8, leg_radius=legs).solid("ground")
+    at = np.array([0.0, 3.0, 0.0])
+    level = np.array([[0.0, 1.0, 0.0]])
+    down = np.array([[0.0, 0.0, -1.0]])
+    cases = [((0.0, 0.0, 0.4), level, 3.0 - leg_radius),  # the legs' height
+             ((0.0, 0.0, 1.2), level, 3.0 - 0.2),  # the body
+             ((0.0, 0.0, 1.6), level, 3.0 - 0.11),  # the head
+             ((0.0, 3.1, 3.0), down, 3.0 - 1.8),  # the head's top from above
+             ((0.17, 3.0, 3.0), down, 3.0 - 1.44)]  # the shoulders' top beside it
+    for centre, ray, want in cases:
+        t, _ = solid_depth(np.array(centre), ray, at, solid)
+        assert t[0] == pytest.approx(want, abs=1e-9), (centre, legs)
+    # a ray that passes beside the legs but would have hit the body's radius
+    t, _ = solid_depth(np.array([0.17, 0.0, 0.4]), level, at, solid)
+    assert (t[0] < 0) == (leg_radius < 0.17)
