@@ -461,6 +461,9 @@ class ModelSection(Node):
     top_unseen: Num = Field(_d(ModelParams, "top_unseen"), ge=0, le=1,
                             description="the top-band factor where fewer than top_min_pixels of the "
                                         "band are in the image (its top out of view); 1: not judged")
+    top_sigmas: Num = Field(_d(ModelParams, "top_sigmas"), ge=0,
+                            description="a band pixel supports the object within this many sigma of "
+                                        "its depth; 0: the mask test")
     exclusion: Num | None = Field(None, ge=0,
                                   description=f"two objects cannot stand within exclusion_radius: a "
                                               f"location's evidence loses exclusion x its neighbours' rho "

@@ -576,10 +576,10 @@ class Engine:
                               self.all_against,
                               self.share, self.rho_star])
 
-        def top_band(lo, hi, gate, counts):
+        def top_band(lo, hi, gate, counts, sigmas=0.0):
             wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
                       inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]), lo, hi,
-                              TOP_MIN_RHO, gate, *counts])
+                              TOP_MIN_RHO, sigmas, gate, *counts])
 
         if unhidden:
             top_band(-BAND_ALL, BAND_ALL, self.rho, (self.all_support, self.all_against, self.all_hidden, self.all_seen))
@@ -590,7 +590,7 @@ class Engine:
                 soft_threshold(0.0)
             h = self.geometry.height
             top_band(p.top_band * h, h, self.rho if unhidden else self.rho_star,
-                     (self.top_support, self.top_against, self.top_hidden, self.top_seen))
+                     (self.top_support, self.top_against, self.top_hidden, self.top_seen), p.top_sigmas)
         soft_threshold(top)
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))

@@ -75,7 +75,7 @@ class ModelParams:
         top_support: the top-band test of the soft threshold, for objects standing on the
             floor (kernels.mean_field.top_band). In the band of the box from top_band x its
             height to its top, the silhouette pixels with a reading either support the
-            object (s: the mask test), read behind its facing plane (a: the object would
+            object (s: within top_sigmas sigma of its depth), read behind its facing plane (a: the object would
             hide them) or in front of it (f: hidden by something nearer, which may hide a
             head: each counts as top_hidden of a supporting pixel). rho* is multiplied by
             sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f); a
@@ -92,6 +92,9 @@ class ModelParams:
             then tells it from furniture as tall as the part in view; a table at the edge of
             a ceiling camera's image supports the lower part of a solid whose head lies
             outside it); 0: not a detection, 1: not judged.
+        top_sigmas: a band pixel supports the object when its reading is within this many
+            sigma of the object's depth (0: when it passes the mask test, ~3.5 sigma with the
+            defaults, which let a surface behind a cell's head support it).
         exclusion: two objects cannot stand within exclusion_radius of each other: each
             location's evidence loses exclusion x sum over the locations within the radius
             of max(0, rho - exclusion_gate) / (1 - exclusion_gate) (kernels.mean_field
@@ -132,6 +135,7 @@ class ModelParams:
     top_slope: float = 100.0
     top_min_pixels: int = 3
     top_unseen: float = 0.0
+    top_sigmas: float = 2.0
     exclusion: float = 10.0
     exclusion_radius: float = 0.45
     exclusion_gate: float = 0.5

@@ -417,6 +417,9 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
         seen[k] = np.sum((mu > 0) & (h >= lo) & (h <= hi))
         band = (mu > 0) & (h >= lo) & (h <= hi) & valid_reading(z, params)
         passes = inlier > log_outlier(params)
+        if params.top_sigmas > 0 and not whole:  # within top_sigmas sigma instead
+            _, var = geom.object_depth(k, rays)
+            passes = np.abs(z - mu) <= params.top_sigmas * object_sigma(mu, params, var)
         support[k] = np.sum(band & passes)
         against[k] = np.sum(band & ~passes & (z > mu))
         hidden[k] = np.sum(band & ~passes & (z <= mu))

@@ -12,7 +12,8 @@ captured once as a graph, with no host sync) gives every frame what it would get
 
 import warp as wp
 
-from .pixel_model import GeometryArrays, PixelModel, f64, is_reading, object_depth, object_log_inlier
+from .pixel_model import (GeometryArrays, PixelModel, f64, is_reading, object_depth, object_log_inlier,
+                          object_sigma)
 
 
 @wp.func
@@ -238,6 +239,7 @@ def top_band(
     lo: wp.float64,
     hi: wp.float64,
     min_rho: wp.float64,
+    support_sigmas: wp.float64,
     rho: wp.array(dtype=wp.float64),
     support: wp.array(dtype=wp.int32),
     against: wp.array(dtype=wp.int32),
@@ -247,7 +249,8 @@ def top_band(
     """The top band of a standing box (heights lo to hi on its facing plane): how many of its
     silhouette's pixels there pass the mask test (support), read behind the plane (against:
     the box would hide them, so nothing that tall stands there) or in front of it (hidden by
-    something nearer). Missing readings count for none; `seen` counts the band's pixels in
+    something nearer); with `support_sigmas` > 0 a pixel supports it when within that many
+    sigma of the object instead. Missing readings count for none; `seen` counts the band's pixels in
     the image, with a reading or not (a band outside the image has none). One thread per
     location of the batch, for those with rho >= min_rho (the others: 0, 0, 0 and seen -1)."""
     i = wp.tid()
@@ -271,7 +274,10 @@ def top_band(
                     if h >= lo and h <= hi:
                         n += 1
                     if h >= lo and h <= hi and is_reading(pm, z):
-                        if object_log_inlier(pm, z, mu, o[1]) > pm.log_outlier:
+                        passes = object_log_inlier(pm, z, mu, o[1]) > pm.log_outlier
+                        if support_sigmas > f64(0.0):
+                            passes = wp.abs(z - mu) <= support_sigmas * object_sigma(pm, mu, o[1])
+                        if passes:
                             s += 1
                         elif z > mu:
                             a += 1

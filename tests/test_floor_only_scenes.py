@@ -27,10 +27,11 @@ def with_low_slabs(seed):
     return geom, params, depth
 
 
+@pytest.mark.parametrize("sigmas", [0.0, 1.5])
 @pytest.mark.parametrize("seed", [0, 1, 2, 9])  # scenes where bands are judged both ways
-def test_top_band_matches_reference(device, seed):
+def test_top_band_matches_reference(device, seed, sigmas):
     geom, params, depth = with_low_slabs(seed)
-    params = dataclasses.replace(params, sparse_epsilon=0.0, top_support=0.3)
+    params = dataclasses.replace(params, sparse_epsilon=0.0, top_support=0.3, top_sigmas=sigmas)
     engine = Engine(geom, params, device)
     got = engine.infer(depth)
     want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
@@ -45,6 +46,19 @@ def test_top_band_matches_reference(device, seed):
     ok = judged >= params.top_min_pixels
     share = want["top_support"][ok] / judged[ok]
     assert share.max() > params.top_support and share.min() < params.top_support, share
+
+
+def test_top_sigmas_is_a_stricter_support_than_the_mask_test():
+    """model.top_sigmas 1 (within one sigma; the mask test passes ~3.5 sigma here): every band
+    pixel it counts as support the mask test does too, and somewhere it counts fewer; the
+    pixels it no longer counts become against or hidden (the band's readings are the same)."""
+    geom, params, depth = with_low_slabs(1)
+    gate = np.ones(len(geom.rect))
+    mask = ref.top_band(depth, geom, dataclasses.replace(params, top_sigmas=0.0), gate)
+    strict = ref.top_band(depth, geom, dataclasses.replace(params, top_sigmas=1.0), gate)
+    assert np.all(strict[0] <= mask[0]) and np.any(strict[0] < mask[0])
+    np.testing.assert_array_equal(sum(strict[:3]), sum(mask[:3]))
+    np.testing.assert_array_equal(strict[3], mask[3])
 
 
 def test_off_and_voxel_grids_leave_rho_star_alone():
@@ -176,7 +190,7 @@ def test_band_out_of_view_counts_like_the_reference(device):
     h = geom.height
     wp.launch(K.top_band, dim=len(gate), device=device,
               inputs=[engine.depth, engine.geo, engine.pm, float(geom.centre[2]), params.top_band * h, h,
-                      TOP_MIN_RHO, wp.array(gate, dtype=wp.float64, device=device), *counts])
+                      TOP_MIN_RHO, params.top_sigmas, wp.array(gate, dtype=wp.float64, device=device), *counts])
     want = ref.top_band(depth, geom, params, gate)
     for got, w in zip(counts, want):
         np.testing.assert_array_equal(got.numpy(), w)
