@@ -582,7 +582,8 @@ class Engine:
                               TOP_MIN_RHO, sigmas, gate, *counts])
 
         if unhidden:
-            top_band(-BAND_ALL, BAND_ALL, self.rho, (self.all_support, self.all_against, self.all_hidden, self.all_seen))
+            top_band(-BAND_ALL, BAND_ALL, self.rho,
+                     (self.all_support, self.all_against, self.all_hidden, self.all_seen))
         if top > 0:
             # counted only where rho* before the test (a factor <= 1) reaches TOP_MIN_RHO: the
             # silhouette walk is the threshold's whole cost, and most locations are far below

@@ -190,7 +190,8 @@ def test_band_out_of_view_counts_like_the_reference(device):
     h = geom.height
     wp.launch(K.top_band, dim=len(gate), device=device,
               inputs=[engine.depth, engine.geo, engine.pm, float(geom.centre[2]), params.top_band * h, h,
-                      TOP_MIN_RHO, params.top_sigmas, wp.array(gate, dtype=wp.float64, device=device), *counts])
+                      TOP_MIN_RHO, params.top_sigmas, wp.array(gate, dtype=wp.float64, device=device),
+                      *counts])
     want = ref.top_band(depth, geom, params, gate)
     for got, w in zip(counts, want):
         np.testing.assert_array_equal(got.numpy(), w)
