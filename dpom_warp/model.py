@@ -75,8 +75,8 @@ class ModelParams:
         top_support: the top-band test of the soft threshold, for objects standing on the
             floor (kernels.mean_field.top_band). In the band of the box from top_band x its
             height to its top, the silhouette pixels with a reading either support the
-            object (s: within top_sigmas sigma of its depth), read behind its facing plane (a: the object would
-            hide them) or in front of it (f: hidden by something nearer, which may hide a
+            object (s: within top_sigmas sigma of its depth), read behind its facing plane
+            (a: the object would hide them) or in front of it (f: hidden by something nearer, which may hide a
             head: each counts as top_hidden of a supporting pixel). rho* is multiplied by
             sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f); a
             band with fewer than top_min_pixels readings, a location whose rho* before the

@@ -414,12 +414,14 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
             continue
         _, rays, z, mu, inlier = sil
         h = geom.centre[2] + mu * rays[..., 2]
-        seen[k] = np.sum((mu > 0) & (h >= lo) & (h <= hi))
-        band = (mu > 0) & (h >= lo) & (h <= hi) & valid_reading(z, params)
-        passes = inlier > log_outlier(params)
-        if params.top_sigmas > 0 and not whole:  # within top_sigmas sigma instead
+        in_band = (mu > 0) & (h >= lo) & (h <= hi)
+        seen[k] = np.sum(in_band)
+        band = in_band & valid_reading(z, params)
+        if params.top_sigmas > 0 and not whole:  # within top_sigmas sigma instead of the mask test
             _, var = geom.object_depth(k, rays)
             passes = np.abs(z - mu) <= params.top_sigmas * object_sigma(mu, params, var)
+        else:
+            passes = inlier > log_outlier(params)
         support[k] = np.sum(band & passes)
         against[k] = np.sum(band & ~passes & (z > mu))
         hidden[k] = np.sum(band & ~passes & (z <= mu))

@@ -273,16 +273,18 @@ def top_band(
                     z = f64(depth[b, v, u])
                     if h >= lo and h <= hi:
                         n += 1
-                    if h >= lo and h <= hi and is_reading(pm, z):
-                        passes = object_log_inlier(pm, z, mu, o[1]) > pm.log_outlier
-                        if support_sigmas > f64(0.0):
-                            passes = wp.abs(z - mu) <= support_sigmas * object_sigma(pm, mu, o[1])
-                        if passes:
-                            s += 1
-                        elif z > mu:
-                            a += 1
-                        else:
-                            f += 1
+                        if is_reading(pm, z):
+                            passes = False
+                            if support_sigmas > f64(0.0):
+                                passes = wp.abs(z - mu) <= support_sigmas * object_sigma(pm, mu, o[1])
+                            else:
+                                passes = object_log_inlier(pm, z, mu, o[1]) > pm.log_outlier
+                            if passes:
+                                s += 1
+                            elif z > mu:
+                                a += 1
+                            else:
+                                f += 1
     support[i] = s
     against[i] = a
     hidden[i] = f
