@@ -127,6 +127,19 @@ def _report(summary: dict, out: str) -> None:
               f"{s['moda_visible']:.3f} not penalising those less than {s['hidden_visibility']:.0%} visible)")
 
 
+def _up_arg(text: str):
+    """--up: "auto" or three numbers, not all zero."""
+    if text == "auto":
+        return text
+    try:
+        up = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        up = ()
+    if len(up) != 3 or not any(up):
+        raise argparse.ArgumentTypeError(f"expected auto or three numbers X,Y,Z not all 0, found {text!r}")
+    return up
+
+
 def _fit_ground(args) -> int:
     import yaml
 
@@ -135,8 +148,10 @@ def _fit_ground(args) -> int:
     from .io import write_text_atomic
 
     camera, scale = load_camera_file(args.camera)
-    options = GroundOptions(max_angle_deg=args.max_angle, depth_max=args.depth_max)
+    options = GroundOptions(up=args.up, max_angle_deg=args.max_angle, depth_max=args.depth_max)
     fit = fit_ground_files(args.depth, camera, scale, options)
+    if fit.ambiguity:
+        print(f"dpom-warp: warning: {fit.ambiguity}", file=sys.stderr)
     report = fit.report()
     text = (f"# dpom-warp fit-ground on {len(args.depth)} frame(s); paste under camera.extrinsics\n"
             + yaml.safe_dump(report, default_flow_style=None, sort_keys=False))
@@ -305,8 +320,12 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy) of the same camera")
     g.add_argument("--camera", required=True, help="camera YAML: width, height, intrinsics, depth_scale")
     g.add_argument("--output", help="write the pose YAML here (default: print it)")
+    g.add_argument("--up", default="auto", type=_up_arg, metavar="auto|X,Y,Z",
+                   help="the up direction in the camera frame (camera.ground.up): auto (default) takes "
+                        "the floor of any camera from level to straight down; 0,-1,0 the image's up, "
+                        "0,0,-1 a camera looking down")
     g.add_argument("--max-angle", type=float, default=45.0,
-                   help="largest angle between the floor normal and the image's up (degrees)")
+                   help="largest angle between the floor normal and --up (degrees; auto: the largest roll)")
     g.add_argument("--depth-max", type=float, default=6.0, help="ignore readings beyond (metres)")
     e = command("eval", "score runs (or detection CSVs) against ground truth",
                 "Score a run folder (and, with --compare, more runs or detection CSVs) against ground\n"

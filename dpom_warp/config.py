@@ -152,6 +152,19 @@ def _stride(v):
 Stride = Annotated[Union[Literal["auto"], Annotated[int, Field(ge=1, le=64)]], BeforeValidator(_stride)]
 
 
+def _up(v):
+    if v == "auto":
+        return v
+    if (not isinstance(v, (list, tuple)) or len(v) != 3
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+        raise _fail(f"expected auto or a list of 3 numbers, found {_fmt(v)}"
+                    + (f" of length {len(v)}" if isinstance(v, (list, tuple)) else ""))
+    return tuple(float(x) for x in v)
+
+
+Up = Annotated[Union[Literal["auto"], tuple[float, float, float]], BeforeValidator(_up)]
+
+
 # -- the sections -------------------------------------------------------------------------------
 class Node(BaseModel):
     """A mapping of the config: unknown keys are errors that name the closest known key."""
@@ -303,9 +316,13 @@ class GroundSection(Node):
     """Floor fitting for `extrinsics: auto`."""
 
     frames: Int = Field(5, ge=1, description="first frames used when there are no background frames")
-    up: Triple = Field(_d(GroundOptions, "up"), description="prior up direction in the camera frame")
+    up: Up = Field(
+        _d(GroundOptions, "up"), description="up direction in the camera frame (the floor normal's prior); "
+                                             "auto: the floor of any camera from level to looking straight "
+                                             "down (a recording's accelerometer gives it where it has one)")
     max_angle_deg: Num = Field(_d(GroundOptions, "max_angle_deg"), gt=0, le=90,
-                               description="largest angle between the floor normal and `up`")
+                               description="largest angle between the floor normal and `up` (auto: the "
+                                           "largest roll)")
     distance_threshold: Num = Field(_d(GroundOptions, "distance_threshold"), gt=0,
                                     description="RANSAC inlier distance, metres")
     depth_max: Num = Field(_d(GroundOptions, "depth_max"), gt=0, description="readings beyond are not used, metres")
@@ -318,7 +335,7 @@ class GroundSection(Node):
 
     @model_validator(mode="after")
     def _up(self):
-        if np.linalg.norm(self.up) == 0:
+        if not isinstance(self.up, str) and np.linalg.norm(self.up) == 0:
             raise _fail(f"expected a non-zero direction, found {list(self.up)}", "up")
         return self
 
@@ -804,7 +821,7 @@ def camera_from_recording(raw: dict) -> dict:
         return raw
     missing = [k for k in ("width", "height", "intrinsics", "distortion") if k not in cam]
     ground = cam.get("ground") if isinstance(cam.get("ground"), dict) else {}
-    wants_up = cam.get("extrinsics") == "auto" and "up" not in ground
+    wants_up = cam.get("extrinsics") == "auto" and ground.get("up", "auto") == "auto"
     if not missing and "depth_scale" in inp and not wants_up:
         return raw
     try:

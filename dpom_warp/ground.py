@@ -25,8 +25,11 @@ class GroundOptions:
     """How to look for the floor.
 
     Attributes:
-        up: the prior for "up" in the camera frame (OpenCV: -y is up in the image).
-        max_angle_deg: a floor candidate's normal is at most this far from `up`.
+        up: the prior for "up" in the camera frame (OpenCV: -y is up in the image), or "auto":
+            any floor that a camera pitched from level to straight down would see (see
+            `fit_ground`).
+        max_angle_deg: a floor candidate's normal is at most this far from `up` (with "auto":
+            the largest roll, the in-image direction of the floor normal from the image's up).
         distance_threshold: RANSAC inlier distance, metres.
         depth_max: points farther than this are not used (noise grows with depth), metres.
         min_inliers: a floor candidate needs at least this many (downsampled) points.
@@ -36,7 +39,7 @@ class GroundOptions:
         noise: (a, b) of the depth noise sigma(z) = a + b z^2 used by the refinement, metres.
     """
 
-    up: tuple[float, float, float] = (0.0, -1.0, 0.0)
+    up: tuple[float, float, float] | str = "auto"
     max_angle_deg: float = 45.0
     distance_threshold: float = 0.03
     depth_max: float = 6.0
@@ -56,10 +59,13 @@ class GroundFit:
         offset: d of the plane normal . X + d = 0 (camera frame); equals the camera height.
         T_world_from_camera: (4, 4) pose in the world frame described in the module.
         camera_height: metres above the floor.
-        pitch_deg: optical axis below the horizon, degrees.
+        pitch_deg: optical axis below the horizon, degrees (over 90: past straight down).
         roll_deg: rotation about the optical axis, degrees (as geometry.pose_from_angles).
         inlier_count: points within the inlier distance of the refined plane (full cloud).
         rms_m: root mean square distance of those inliers to the plane, metres.
+        ambiguity: with `up: auto`, one line when another plane would also have been a floor
+            to a camera mounted otherwise (a level camera facing a wall sees what a camera
+            looking straight down beside a wall sees), else None.
     """
 
     normal: np.ndarray
@@ -70,6 +76,7 @@ class GroundFit:
     roll_deg: float
     inlier_count: int
     rms_m: float
+    ambiguity: str | None = None
 
     def report(self) -> dict:
         """The pose as written by `dpom-warp fit-ground` (pastable into camera.extrinsics)."""
@@ -116,15 +123,7 @@ def pose_from_plane(normal: np.ndarray, offset: float) -> np.ndarray:
     return t
 
 
-def angles_from_normal(normal: np.ndarray) -> tuple[float, float]:
-    """(pitch_deg, roll_deg) of a camera whose floor normal (camera frame) is `normal`."""
-    n = normal / np.linalg.norm(normal)
-    pitch = -math.asin(float(np.clip(n[2], -1, 1)))
-    roll = math.asin(float(np.clip(-n[0] / max(math.cos(pitch), 1e-9), -1, 1)))
-    return math.degrees(pitch), math.degrees(roll)
-
-
-def _refine(points, normal, offset, options: GroundOptions):
+def _refine(points, normal, offset, options: GroundOptions, max_turn_deg: float | None = None):
     """Weighted least squares of the floor on the points near (normal, offset), iterated to
     its fixed point and rounded to 1e-10, so that the slightly different planes Open3D's
     multithreaded RANSAC returns from run to run give the same pose bit for bit.
@@ -138,7 +137,10 @@ def _refine(points, normal, offset, options: GroundOptions):
     along the ray: things standing on the floor (feet, furniture legs, the foot of a wall)
     lie just in front of it along grazing rays, and a plain least-squares fit would lean
     towards them. Only points whose z_p is within depth_max count: a cut or a weight on the
-    measured depth would favour the points that noise brought nearer.
+    measured depth would favour the points that noise brought nearer. With `max_turn_deg`, a
+    fit that turns the plane further than that has left it (a wall seen edge-on beside the
+    floor: the band along its grazing rays takes in the floor by the corner) and the plane is
+    kept as it came.
     """
     a, b = options.noise
     z = points[:, 2]
@@ -154,6 +156,7 @@ def _refine(points, normal, offset, options: GroundOptions):
         near = (np.abs(z - zp) < band) & (plane_depth <= options.depth_max)
         return near, zp[near], sigma[near], band[near]
 
+    start = normal, offset
     for _ in range(100):
         near, zp, sigma, band = inliers(normal, offset)
         if near.sum() < 3:
@@ -166,25 +169,119 @@ def _refine(points, normal, offset, options: GroundOptions):
         normal, offset = -coef / scale, float(1.0 / scale)
         if np.abs(normal - previous[0]).max() < 1e-13 and abs(offset - previous[1]) < 1e-13:
             break
+    if max_turn_deg is not None and float(normal @ start[0]) < math.cos(math.radians(max_turn_deg)):
+        normal, offset = start  # it left the plane: seen edge-on, a wall's band takes in the floor
     normal = np.round(normal, 10)
     normal /= np.linalg.norm(normal)
-    offset = round(offset, 10)
+    offset = round(float(offset), 10)
     near = inliers(normal, offset)[0]
     rms = float(np.sqrt(np.mean((points[near] @ normal + offset) ** 2))) if near.any() else float("nan")
     return normal, offset, int(near.sum()), rms
+
+
+AUTO_TURN_DEG = 10.0  # up: auto judges a candidate by its refined plane unless that turned further
+AUTO_MARGIN_DEG = 10.0  # up: auto takes floors seen from a camera pitched -10 to 100 degrees
+AUTO_TIE_DEG = 0.5  # a pitch this close to 0 to 90 degrees counts as in it
+AUTO_WARN_DEG = 3.0  # a rival floor whose pitch is within this of 0 to 90 degrees is reported
+
+
+def implied_pitch_roll(normal: np.ndarray) -> tuple[float, float]:
+    """Pitch and roll (degrees) of the camera to which `normal` (camera frame, towards the
+    camera) is the floor's normal: pitch 0 looks level, 90 straight down, over 90 past the
+    vertical (the image's up then points backwards, so the floor normal shows towards the
+    image's bottom); roll is the direction of the normal in the image from the image's up
+    (0 where that direction is undefined, looking exactly straight down)."""
+    n = normal / np.linalg.norm(normal)
+    elevation = math.degrees(math.asin(float(np.clip(-n[2], -1, 1))))
+    if math.hypot(n[0], n[1]) < 1e-9:
+        return elevation, 0.0
+    roll = math.degrees(math.atan2(-n[0], -n[1]))
+    if abs(roll) > 90:
+        return 180.0 - elevation, roll - math.copysign(180.0, roll)
+    return elevation, roll
+
+
+def _auto_penalty(normal: np.ndarray, options: GroundOptions) -> float | None:
+    """up: auto. None if no usual mounting sees this plane as its floor (pitch outside -10 to
+    100 degrees, or roll over `max_angle_deg` for a camera not near straight down); else how
+    far, in degrees, its pitch lies outside 0 to 90 (0 within)."""
+    pitch, roll = implied_pitch_roll(normal)
+    steep = math.hypot(normal[0], normal[1]) <= math.sin(math.radians(AUTO_MARGIN_DEG))
+    if not -AUTO_MARGIN_DEG <= pitch <= 90.0 + AUTO_MARGIN_DEG or (abs(roll) > options.max_angle_deg
+                                                                   and not steep):
+        return None
+    return max(0.0, -pitch - AUTO_TIE_DEG, pitch - 90.0 - AUTO_TIE_DEG)
+
+
+def _perpendicular(a: np.ndarray, b: np.ndarray) -> bool:
+    """Two plane normals more than 45 degrees apart (a wall and a floor, not a table top)."""
+    return abs(float(a @ b)) < math.cos(math.radians(45))
+
+
+def _choose(candidates, auto: bool):
+    """The floor among candidates (penalty, d, normal), and with auto a warning or None.
+
+    Given `up`: the lowest (largest camera height), so table tops lose. With auto: of the
+    candidates with the least penalty, the most level reading's plane and those parallel to it
+    compete, and the lowest of them wins. Two perpendicular planes that are both within `AUTO_TIE_DEG` of a usual
+    mounting (one a level camera's floor, the other a floor seen from straight down: a level
+    camera facing a wall, or a camera looking straight down beside a wall along the image's
+    bottom) are an error: the depth is the same for both. A perpendicular plane that a camera
+    within `AUTO_WARN_DEG` of level or of straight down would see as its floor is a warning.
+
+    Raises:
+        GroundFitError: the two readings tie.
+    """
+    if not auto:  # every candidate is within max_angle_deg of up: the lowest
+        _, d, n = max(candidates, key=lambda c: c[1])
+        return d, n, None
+    best = min(c[0] for c in candidates)
+    pool = [c for c in candidates if c[0] == best]
+    level = min(pool, key=lambda c: implied_pitch_roll(c[2])[0])
+    penalty, d, n = max((c for c in pool if not _perpendicular(c[2], level[2])), key=lambda c: c[1])
+
+    def near(normal, tolerance):  # read as a camera within `tolerance` of level or of straight down
+        pitch = implied_pitch_roll(normal)[0]
+        return min(abs(pitch), abs(pitch - 90.0)) <= tolerance
+
+    rivals = [c for c in candidates if _perpendicular(c[2], n) and near(c[2], AUTO_WARN_DEG)]
+    if not rivals:
+        return d, n, None
+    _, rd, rn = max(rivals, key=lambda c: c[1])
+    (p, r), (rp, rr) = implied_pitch_roll(n), implied_pitch_roll(rn)
+    readings = (f"the plane {d:.2f} m away is the floor of a camera pitched {p:.1f} deg (roll {r:.1f} "
+                f"deg), the plane {rd:.2f} m away that of a camera pitched {rp:.1f} deg (roll {rr:.1f} deg)")
+    if near(n, AUTO_TIE_DEG) and any(near(c[2], AUTO_TIE_DEG) for c in rivals):
+        raise GroundFitError(f"two planes could be the floor and the depth cannot tell which: {readings}; "
+                             f"set camera.ground.up ([0, -1, 0]: the floor towards the image's bottom, "
+                             f"[0, 0, -1]: a camera looking down)")
+    return d, n, (f"camera.ground.up: auto took the floor {d:.2f} m below the camera (pitch {p:.1f} deg, "
+                  f"roll {r:.1f} deg), but the plane {rd:.2f} m away is what a camera pitched {rp:.1f} "
+                  f"deg (roll {rr:.1f} deg) sees of its floor; set camera.ground.up ([0, -1, 0]: the "
+                  f"floor towards the image's bottom, [0, 0, -1]: a camera looking down) if the pose "
+                  f"is wrong")
 
 
 def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), seed: int = 0) -> GroundFit:
     """Find the floor in camera-frame points (several frames may be stacked).
 
     Planes are peeled off the downsampled cloud with Open3D's RANSAC, largest first. Floor
-    candidates have enough inliers, a normal within `max_angle_deg` of `up` and the camera on
-    their upper side; among them the lowest (largest camera height) wins, so table tops and
-    shelves lose to the floor, and walls are too steep to compete. The winner is refined on
-    the full cloud by the regression of `_refine`.
+    candidates have enough inliers, the camera on their upper side, and a normal within
+    `max_angle_deg` of `up`, or with `up: auto` a normal that a camera pitched -10 to 100
+    degrees (roll up to `max_angle_deg`, any near straight down) would see as its floor's;
+    among them the lowest (largest camera height) wins, so table tops and shelves lose to the
+    floor (`_choose`). With auto, a wall is such a candidate only for a camera near level (a
+    wall ahead is the floor of a camera looking straight down) or near straight down (the wall
+    behind it, along the image's bottom, is the floor of a level camera): the reading whose
+    pitch is within 0 to 90 degrees wins (so a level camera tilted down facing a wall, and one
+    looking down beside a wall short of the vertical, are read right), then the more level
+    one; within `AUTO_TIE_DEG` of both it is an error, within `AUTO_WARN_DEG` a warning (the
+    fit's `ambiguity`). With auto every candidate is refined before it is judged; else the
+    winner is refined on the full cloud by the regression of `_refine`.
 
     Raises:
-        GroundFitError: no candidate (too little floor visible, or none near `up`).
+        GroundFitError: no candidate (too little floor visible, or none near `up`), or with
+            auto two readings that tie.
     """
     pts = np.asarray(points, dtype=np.float64)
     pts = pts[np.isfinite(pts).all(1)]
@@ -194,8 +291,10 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
                              f"{options.depth_max} m, need at least {options.min_inliers})")
     o3d.utility.random.seed(seed)
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(in_range)).voxel_down_sample(options.voxel)
-    up = np.asarray(options.up, dtype=np.float64)
-    up /= np.linalg.norm(up)
+    auto = isinstance(options.up, str)
+    if not auto:
+        up = np.asarray(options.up, dtype=np.float64)
+        up /= np.linalg.norm(up)
     candidates, best_other = [], 0
     for _ in range(options.max_planes):
         if len(cloud.points) < options.min_inliers:
@@ -206,22 +305,44 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
         n, d = n / scale, d / scale
         if d < 0:  # orient the normal towards the camera (origin): n . 0 + d > 0
             n, d = -n, -d
-        angle = math.degrees(math.acos(float(np.clip(n @ up, -1, 1))))
-        if len(idx) >= options.min_inliers and angle <= options.max_angle_deg and d > 0.05:
-            candidates.append((d, n))
+        if auto:
+            penalty = _auto_penalty(n, options)
+        else:
+            angle = math.degrees(math.acos(float(np.clip(n @ up, -1, 1))))
+            penalty = 0.0 if angle <= options.max_angle_deg else None
+        if len(idx) >= options.min_inliers and penalty is not None and d > 0.05:
+            candidates.append((penalty, d, n))
         else:
             best_other = max(best_other, len(idx))
         cloud = cloud.select_by_index(idx, invert=True)
     if not candidates:
+        which = (f"is the floor of a camera pitched {-AUTO_MARGIN_DEG:g} to {90 + AUTO_MARGIN_DEG:g} deg "
+                 f"(roll up to {options.max_angle_deg:g} deg)" if auto else
+                 f"lies within {options.max_angle_deg:g} deg of up")
         raise GroundFitError(
-            f"no floor plane found: no plane of at least {options.min_inliers} points lies "
-            f"within {options.max_angle_deg:g} deg of up below the camera (largest other plane: "
-            f"{best_other} points); is enough floor in view?")
-    d, n = max(candidates, key=lambda c: c[0])
-    n, d, count, rms = _refine(pts, n, d, options)
-    pitch, roll = angles_from_normal(n)
+            f"no floor plane found: no plane of at least {options.min_inliers} points below the "
+            f"camera {which} (largest other plane: {best_other} points); is enough floor in view?")
+    if auto:  # judge each candidate by its refined plane: a raw RANSAC plane can be a layer of
+        # a far wall's quantised depths, exactly square to the optical axis
+        refined = {}
+        for penalty, d, n in candidates:
+            n, d, count, rms = _refine(pts, n, d, options, max_turn_deg=AUTO_TURN_DEG)
+            penalty = _auto_penalty(n, options)
+            if penalty is not None:
+                refined[d] = (penalty, d, n), (n, d, count, rms)
+        if not refined:
+            raise GroundFitError(f"no floor plane found: the planes below the camera, fitted on all the "
+                                 f"points, are the floor of no camera pitched {-AUTO_MARGIN_DEG:g} to "
+                                 f"{90 + AUTO_MARGIN_DEG:g} deg; is enough floor in view?")
+        d, n, ambiguity = _choose([c for c, _ in refined.values()], auto)
+        n, d, count, rms = refined[d][1]
+    else:
+        d, n, ambiguity = _choose(candidates, auto)
+        n, d, count, rms = _refine(pts, n, d, options)
+    pitch, roll = implied_pitch_roll(n)
     return GroundFit(normal=n, offset=d, T_world_from_camera=pose_from_plane(n, d),
-                     camera_height=d, pitch_deg=pitch, roll_deg=roll, inlier_count=count, rms_m=rms)
+                     camera_height=d, pitch_deg=pitch, roll_deg=roll, inlier_count=count, rms_m=rms,
+                     ambiguity=ambiguity)
 
 
 def fit_ground_frames(frames_m, camera: Camera, options: GroundOptions = GroundOptions()) -> GroundFit:

@@ -29,6 +29,14 @@ CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
 
 
 
+def _ambiguity(fit, log) -> dict:
+    """A floor fit's ambiguity (camera.ground.up: auto), logged and for summary.json's ground."""
+    if not fit.ambiguity:
+        return {}
+    log(f"warning: {fit.ambiguity}")
+    return {"ambiguity": fit.ambiguity}
+
+
 def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
     """camera.extrinsics: auto. Fit the floor on `files` and return the posed camera and a
     report for summary.json.
@@ -44,7 +52,7 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
         f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")
     report = {**fit.report(), "rms_m": fit.rms_m, "frames": [str(f) for f in files],
-              "fit_s": time.perf_counter() - t}
+              "fit_s": time.perf_counter() - t, **_ambiguity(fit, log)}
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 
 
@@ -625,7 +633,7 @@ def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=pri
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
         f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")
     report = {**fit.report(), "rms_m": fit.rms_m, "frames": "estimated background of "
-              f"{len(files)} frames", "fit_s": time.perf_counter() - t}
+              f"{len(files)} frames", "fit_s": time.perf_counter() - t, **_ambiguity(fit, log)}
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 
 

@@ -105,6 +105,7 @@ CONFIG_CASES = [
     ({"camera__extrinsics": {"T_world_from_camera": [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}},
      "camera.extrinsics.T_world_from_camera: expected a rigid transform"),
     ({"camera__ground__up": [0, 0, 0]}, "camera.ground.up: expected a non-zero direction"),
+    ({"camera__ground__up": "down"}, "camera.ground.up: expected auto or a list of 3 numbers, found 'down'"),
     ({"device": "gpu"}, "device: expected auto, cpu, cuda or cuda:N, found 'gpu'"),
     ({"engine__memory_gb": 0.001}, "engine.memory_gb: the engine needs at least"),
     ({"input__frames": "/nonexistent/*.png"}, "input.frames: no files match '/nonexistent/*.png'"),
@@ -178,9 +179,11 @@ def test_every_frame_bad_is_an_error(tmp_path, capsys, scene):
 def test_no_floor_with_auto_pose_names_the_frame(tmp_path, capsys, scene):
     folder = tmp_path / "frames"
     folder.mkdir()
+    # a flat wall ahead of a level camera (with up: auto it would be a floor seen from straight above)
     write_depth_png(folder / "wall.png", np.full((106, 128), 2.0))
     path = write_config(tmp_path, scene[1], input__frames=f"{folder}/*.png", input__background=None,
-                        camera__extrinsics="auto", evaluation__ground_truth=None)
+                        camera__extrinsics="auto", camera__ground__up=[0, -1, 0],
+                        evaluation__ground_truth=None)
     assert main(["run", str(path), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "wall.png: no floor plane found" in err

@@ -1,6 +1,7 @@
 """Floor fitting and camera pose from depth (camera.extrinsics: auto, dpom-warp fit-ground)."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -9,7 +10,7 @@ import yaml
 from dpom_warp.cli import main
 from dpom_warp.config import load_config
 from dpom_warp.geometry import Camera, pose_from_angles
-from dpom_warp.ground import GroundFitError, backproject, fit_ground_frames
+from dpom_warp.ground import GroundFitError, GroundOptions, backproject, fit_ground_frames
 from dpom_warp.synthetic import SceneSpec, _box, _scene, person_mesh, render, room_meshes, sensor_noise
 import paths
 from paths import CONFIGS
@@ -147,11 +148,20 @@ def test_fit_ground_cli_writes_a_pose_that_pastes_into_a_config(tmp_path, capsys
 
 
 def test_fit_ground_cli_no_floor_is_one_line_exit_2(tmp_path, capsys):
-    wall = np.full((480, 640), 2000, np.uint16)  # a flat wall 2 m in front: no floor
+    wall = np.full((480, 640), 2000, np.uint16)  # a flat wall 2 m in front of a level camera: no floor
     np.save(tmp_path / "wall.npy", wall)
-    assert main(["fit-ground", str(tmp_path / "wall.npy"), "--camera", str(REAL / "camera.yaml")]) == 2
+    camera_file = str(REAL / "camera.yaml")
+    assert main(["fit-ground", str(tmp_path / "wall.npy"), "--camera", camera_file, "--up", "0,-1,0"]) == 2
     err = capsys.readouterr().err.strip()
     assert "wall.npy: no floor plane found" in err and len(err.splitlines()) == 1
+    # with --up auto (the default) the same frame is a floor 2 m below a camera looking straight
+    # down: depth alone cannot tell the two apart
+    assert main(["fit-ground", str(tmp_path / "wall.npy"), "--camera", camera_file]) == 0
+    out = capsys.readouterr().out
+    assert "camera 2.000 m above the floor, pitch 90.00 deg" in out
+    with pytest.raises(SystemExit):
+        main(["fit-ground", str(tmp_path / "wall.npy"), "--camera", camera_file, "--up", "0,0"])
+    assert "expected auto or three numbers" in capsys.readouterr().err
 
 
 def test_run_with_auto_pose_on_the_real_frame(tmp_path, capsys):
@@ -217,7 +227,6 @@ def test_ceiling_camera_floor_with_the_up_hint(pitch, yaw):
     """A ceiling camera (3 m, pitch 55 to 90, any yaw) over a room with a table: with
     camera.ground.up pointing back along the optical axis ([0, 0.0, -1], the camera looks
     down) the floor is found, not a wall or the table top."""
-    from dpom_warp.ground import GroundOptions
 
     rng = np.random.default_rng(pitch)
     room, _ = room_meshes(SceneSpec(furniture=3), rng)
@@ -227,3 +236,87 @@ def test_ceiling_camera_floor_with_the_up_hint(pitch, yaw):
     fit = fit_ground_frames(frames, camera(np.eye(4)), GroundOptions(up=(0.0, 0.0, -1.0)))
     assert fit.camera_height == pytest.approx(3.0, abs=0.02)
     assert fit.pitch_deg == pytest.approx(pitch, abs=0.5)
+
+
+ROOM_4M = SceneSpec(furniture=3, room=(-3.6, 3.6, -0.5, 8.0, 4.0))
+
+
+@pytest.mark.parametrize("height, pitch, yaw, y", [
+    (1.5, 2, 0, 3.0), (2.2, 15, 0, 0.0), (1.2, 35, 20, 0.5), (2.0, 45, 0, 0.0),  # eye level
+    (2.9, 55, 0, 0.0), (3.0, 70, -60, 3.0), (2.9, 80, 30, 0.0), (2.9, 88, 0, 0.0),  # ceiling
+    (2.6, 89, 0, 0.0), (2.6, 90, 0, 1.5), (3.0, 90, 30, 3.0), (3.5, 90, 120, 2.0)])
+def test_auto_up_finds_the_floor_from_level_to_straight_down(height, pitch, yaw, y):
+    """camera.ground.up: auto (the default) in furnished rooms with a table, from eye level to
+    straight down at any yaw, the camera 0.5 m from the back wall (y = 0: from pitch 80 on that
+    wall is in view along the image's bottom, where a level camera's floor would be) or in the
+    room (y = 3: a level camera faces the far wall 5 m away): the floor, never a wall or the
+    table top."""
+    rng = np.random.default_rng(int(10 * pitch + height))
+    room, _ = room_meshes(ROOM_4M, rng)
+    table = _box((1.2, 0.8, 0.04), (0.5, 3.6, 0.74))
+    true = pose_from_angles(height, pitch, 0.0, yaw, 0.0, y)
+    _, frames = rendered(camera(true), room + [table], rng, frames=3)
+    fit = fit_ground_frames(frames, camera(np.eye(4)))
+    assert fit.camera_height == pytest.approx(height, abs=0.02)
+    assert fit.pitch_deg == pytest.approx(pitch, abs=0.5)
+    if pitch < 85:
+        assert fit.roll_deg == pytest.approx(0.0, abs=0.5)
+
+
+def back_wall_frames(pitch, tmp_path=None):
+    """A camera 2.9 m up at `pitch`, 0.5 m from the back wall of an empty room (the wall along
+    the image's bottom): two noisy frames (and, with tmp_path, them as .npy files and a
+    camera.yaml there)."""
+    rng = np.random.default_rng(5)
+    room, _ = room_meshes(SceneSpec(furniture=0), rng)
+    _, frames = rendered(camera(pose_from_angles(2.9, pitch, 0.0)), room, rng, frames=2)
+    if tmp_path is not None:
+        for i, f in enumerate(frames):
+            np.save(tmp_path / f"{i}.npy", np.round(np.nan_to_num(f) * 1000).astype(np.uint16))
+        (tmp_path / "camera.yaml").write_text(yaml.safe_dump({
+            "width": 256, "height": 212, "intrinsics": {"fx": 182.5, "fy": 182.5, "cx": 127.5, "cy": 105.5},
+            "depth_scale": 0.001}))
+    return frames
+
+
+def test_auto_up_refuses_what_depth_cannot_tell(tmp_path, capsys):
+    """Looking straight down 0.5 m from the back wall, the wall along the image's bottom is
+    exactly what a level camera 0.5 m above its floor sees, and the floor 2.9 m below what that
+    camera sees of a wall ahead: auto refuses in one line naming both readings and the hint,
+    and the hint settles it."""
+    frames = back_wall_frames(90.0, tmp_path)
+    with pytest.raises(GroundFitError, match="two planes could be the floor") as e:
+        fit_ground_frames(frames, camera(np.eye(4)))
+    assert "the plane 0.50 m away is the floor of a camera pitched 0.0 deg" in str(e.value)
+    assert "the plane 2.90 m away that of a camera pitched 90.0 deg" in str(e.value)
+    args = ["fit-ground", str(tmp_path / "0.npy"), str(tmp_path / "1.npy"), "--camera", str(tmp_path / "camera.yaml")]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "0.npy and 1 more frames: two planes could be the floor" in err[0]
+    assert "set camera.ground.up" in err[0]
+    assert main(args + ["--up", "0,0,-1"]) == 0
+    captured = capsys.readouterr()
+    h, pitch = re.search(r"camera ([\d.]+) m above the floor, pitch ([\d.]+) deg", captured.out).groups()
+    assert float(h) == pytest.approx(2.9, abs=0.01) and float(pitch) == pytest.approx(90, abs=0.1)
+    assert not captured.err
+    hinted = fit_ground_frames(frames, camera(np.eye(4)), GroundOptions(up=(0.0, 0.0, -1.0)))
+    assert hinted.ambiguity is None and hinted.camera_height == pytest.approx(2.9, abs=0.02)
+
+
+def test_auto_up_warns_near_a_tie(tmp_path, capsys):
+    """1 degree short of straight down beside the wall auto reads the floor right and warns in
+    one line (fit-ground: on stderr) that the wall is a level camera's floor; 1 degree past
+    straight down it cannot read it right (a camera looking down past the vertical is
+    outside 0 to 90 degrees, the level reading inside) and the warning names the floor."""
+    frames = back_wall_frames(89.0, tmp_path)
+    fit = fit_ground_frames(frames, camera(np.eye(4)))
+    assert fit.camera_height == pytest.approx(2.9, abs=0.02)
+    assert fit.ambiguity.startswith("camera.ground.up: auto took the floor 2.90 m below the camera (pitch 89.0")
+    assert "the plane 0.50 m away is what a camera pitched -1.0 deg" in fit.ambiguity
+    assert main(["fit-ground", str(tmp_path / "0.npy"), "--camera", str(tmp_path / "camera.yaml")]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("dpom-warp: warning: camera.ground.up: auto took the floor")
+    past = fit_ground_frames(back_wall_frames(91.0), camera(np.eye(4)))
+    assert past.ambiguity.startswith("camera.ground.up: auto took the floor 0.50 m below the camera")
+    assert "the plane 2.90 m away is what a camera pitched 90.9 deg" in past.ambiguity
+
