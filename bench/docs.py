@@ -20,7 +20,9 @@ the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/
 - recordings: the demo's frames as ROS 1, ROS 2, MCAP and 32FC1 bags: reading cost and the
   detections against the PNG run (`python -m bench.recordings`);
 - live: the live mode on the demo's frames played at 30 fps by a software camera
-  (`python -m bench.live`).
+  (`python -m bench.live`);
+- ground: the floor fit with `camera.ground.up: auto` and the image's up on every robustness
+  scene's empty-room frames (`python -m bench.ground`).
 
 A test (tests/test_docs.py) holds the README to it: every table sits in a generated block and
 the config block is what the models say now.
@@ -340,6 +342,12 @@ def recordings_block(out: Path) -> str:
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.recordings`")])
 
 
+def ground_block(out: Path) -> str:
+    md = bench_markdown("bench.ground", out / "ground", "ground.md")
+    return "\n".join([md, "", stamp("the floor fit alone (no inference: neither the fast nor the exact path); "
+                                    "`python -m bench.ground`")])
+
+
 def live_block(out: Path) -> str:
     md = bench_markdown("bench.live", out / "live", "live.md")
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.live`")])
@@ -351,7 +359,7 @@ BUILDERS = {"config": lambda out, jobs: config_block(), "demo": lambda out, jobs
             "speed": lambda out, jobs: speed_block(out), "scaleout": lambda out, jobs: scaleout_block(out),
             "tracking": lambda out, jobs: tracking_block(out),
             "recordings": lambda out, jobs: recordings_block(out),
-            "live": lambda out, jobs: live_block(out)}
+            "live": lambda out, jobs: live_block(out), "ground": lambda out, jobs: ground_block(out)}
 
 
 def main():

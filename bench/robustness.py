@@ -64,6 +64,21 @@ BACKGROUNDS = {"frames": "background frames", "auto": "background estimated from
                "floor": "floor-only background"}
 
 
+def slug_of(name: str) -> str:
+    return name.replace(" ", "_").replace(",", "").replace(".", "")
+
+
+def scene_sets(name: str, overrides: list[str], frames: int, background: str, tuning: bool) -> list[str]:
+    """The demo config's overrides for one scene of one draw (its seed, its cached frames)."""
+    seed = (int(name.split()[1]) if name.startswith("seed") else 100) + (1000 if tuning else 0)
+    cache = Path(".cache") / ("robustness_tuning" if tuning else "robustness") / slug_of(name)
+    return overrides + [f"synthetic.seed={seed}", f"synthetic.frames={frames}",
+                        f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
+                        {"frames": f"input.background={cache}/background/*.png", "auto": "input.background=auto",
+                         "floor": "input.background=null"}[background],
+                        f"evaluation.ground_truth={cache}/ground_truth.json", "output.images=false"]
+
+
 def run_variant(args):
     name, overrides, frames, out, background, extra = args[:6]
     tuning = len(args) > 6 and args[6]
@@ -73,15 +88,8 @@ def run_variant(args):
     from dpom_warp.config import load_config
     from dpom_warp.pipeline import run
 
-    seed = (int(name.split()[1]) if name.startswith("seed") else 100) + (1000 if tuning else 0)
-    slug = name.replace(" ", "_").replace(",", "").replace(".", "")
-    cache = Path(".cache") / ("robustness_tuning" if tuning else "robustness") / slug
-    sets = overrides + [f"synthetic.seed={seed}", f"synthetic.frames={frames}",
-                        f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
-                        {"frames": f"input.background={cache}/background/*.png", "auto": "input.background=auto",
-                         "floor": "input.background=null"}[background],
-                        f"evaluation.ground_truth={cache}/ground_truth.json", "output.images=false"]
-    sets += list(extra)
+    slug = slug_of(name)
+    sets = scene_sets(name, overrides, frames, background, tuning) + list(extra)
     cfg = load_config("configs/demo_people.yaml", sets)
     tag = "_".join(x.replace("/", "-") for x in extra)
     summary = run(cfg, str(Path(out) / slug / ({"frames": "bg"}.get(background, background) + tag)), "cpu",

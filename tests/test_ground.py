@@ -320,3 +320,15 @@ def test_auto_up_warns_near_a_tie(tmp_path, capsys):
     assert past.ambiguity.startswith("camera.ground.up: auto took the floor 0.50 m below the camera")
     assert "the plane 2.90 m away is what a camera pitched 90.9 deg" in past.ambiguity
 
+
+def test_bench_ground_fits_a_robustness_ceiling_scene():
+    """`python -m bench.ground`'s scene fit: the held-out ceiling scene at pitch 90 (tables, 3 m)
+    with up: auto comes back within a millimetre; the image's-up prior finds no floor there."""
+    from bench.ground import fit_scene
+    from bench.robustness import VARIANTS
+
+    name = "ceiling 3.0 m, pitch 90"
+    auto = fit_scene(name, VARIANTS[name], tuning=False)
+    assert abs(auto["height_error_m"]) < 0.001 and auto["normal_error_deg"] < 0.1 and not auto["ambiguity"]
+    image_up = fit_scene(name, VARIANTS[name], tuning=False, up=(0.0, -1.0, 0.0))
+    assert "no floor plane found" in image_up["error"]
