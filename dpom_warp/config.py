@@ -410,6 +410,9 @@ class ObjectSection(Node):
                                                "height, metres (null: the body reaches the floor)")
     hip: Num = Field(_d(ObjectBox, "hip"), gt=0, lt=1,
                      description="solid: where the legs end, share of the height")
+    depth_radius: Num | None = Field(_d(ObjectBox, "depth_radius"), gt=0,
+                                     description="solid, ground grids: the body's half-depth along the line of sight, "
+                                                 "metres (an ellipse facing the camera; null: = radius)")
 
 
 class ModelSection(Node):

@@ -191,7 +191,7 @@ class Engine:
             solid = [float(x) for x in geometry.solid]
             g.solid = int(solid[0] > 0)
             g.body_radius, g.head_radius, g.bottom, g.shoulder, g.top, g.height_spread = solid[1:7]
-            g.leg_radius, g.hip = solid[7:9]
+            g.leg_radius, g.hip, g.depth_radius = solid[7:10]
             self.geo = g
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)

@@ -6,6 +6,7 @@ engine and the NumPy reference, so both paths see exactly the same geometry.
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -189,6 +190,11 @@ class ObjectBox:
             one of this radius (the legs, metres) goes down to the floor; None (or the body
             radius): the body reaches the floor (README, How it works: measured, off).
         hip: where the legs end, share of the height.
+        depth_radius: ground mode: the body's half-depth along the line of sight: its
+            cross-section is an ellipse of semi-axes `radius` across the line of sight and
+            this along it, facing the camera (a torso is narrower front to back than across,
+            and the visible front of a person seen from any side is nearer its centre than
+            the body's radius); None: a circle of `radius`.
     """
 
     width: float
@@ -201,6 +207,7 @@ class ObjectBox:
     height_spread: float = 0.12
     leg_radius: float | None = None
     hip: float = 0.45
+    depth_radius: float | None = 0.12
 
     @property
     def body_radius(self) -> float:
@@ -219,8 +226,9 @@ class ObjectBox:
 
     def solid(self, mode: str) -> np.ndarray:
         """The solid as (solid, body radius, head radius, bottom, shoulder, top, height
-        spread, leg radius, hip): heights relative to the location centre, the body from hip
-        to shoulder, the legs below it (hip = bottom: none); solid = 0 for the plane model."""
+        spread, leg radius, hip, body depth radius): heights relative to the location centre,
+        the body from hip to shoulder, the legs below it (hip = bottom: none); solid = 0 for
+        the plane model."""
         r, h = self.body_radius, self.height
         if mode == "ground":
             head = self.head_radius > 0 and self.shoulder < 1
@@ -231,15 +239,24 @@ class ObjectBox:
         rl = r if self.leg_radius is None else float(self.leg_radius)
         legs = mode == "ground" and rl != r and 0 < self.hip * h < z1
         rl, zh = (rl, self.hip * h) if legs else (r, z0)
-        return np.array([float(self.shape == "solid"), r, rh, z0, z1, z2, self.height_spread, rl, zh])
+        rd = r if self.depth_radius is None or mode != "ground" else float(self.depth_radius)
+        return np.array([float(self.shape == "solid"), r, rh, z0, z1, z2, self.height_spread, rl, zh, rd])
 
 
 MIN_TOP_SLOPE = 0.3  # a top's depth spread is at most height_spread / MIN_TOP_SLOPE
 
 
-def cylinder_entry(centre, rays, axis, radius, z0, z1, spread):
+def cylinder_entry(centre, rays, axis, radius, z0, z1, spread, depth_radius=None):
     """Where each ray enters the vertical cylinder of `radius` about `axis` (x, y) between
-    heights z0 and z1 (the camera outside it), and the variance of that depth.
+    heights z0 and z1 (the camera outside it), and the variance of that depth. With
+    `depth_radius` the cross-section is an ellipse facing the camera: semi-axis `radius`
+    across the horizontal line from the axis to the camera, `depth_radius` along it (a
+    circle when the camera is right above the axis).
+
+    In the ellipse's frame scaled to the unit circle, with u the horizontal unit vector from
+    the axis to the camera, L the camera's horizontal distance and v across: the camera sits
+    at (0, L / rd), a ray d at (d.v / r, d.u / rd); a circle is rd = r (the same quadratic,
+    divided by r^2).
 
     Args:
         centre: camera centre (3,); rays: (..., 3) directions, ray parameter = z-depth.
@@ -252,12 +269,20 @@ def cylinder_entry(centre, rays, axis, radius, z0, z1, spread):
     d = np.asarray(rays, np.float64)
     dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
     ox, oy, cz = centre[0] - axis[0], centre[1] - axis[1], centre[2]
-    a = dx * dx + dy * dy
-    b = ox * dx + oy * dy
-    c = ox * ox + oy * oy - radius * radius
-    disc = b * b - a * c
+    rd = radius if depth_radius is None else depth_radius
+    dist = math.hypot(ox, oy)
+    ux, uy = (ox / dist, oy / dist) if dist > 1e-9 else (1.0, 0.0)
+    if dist <= 1e-9:
+        rd = radius
+    du, dv = (dx * ux + dy * uy) / rd, (dy * ux - dx * uy) / radius  # the ray, scaled
+    ou = dist / rd  # the camera, scaled (its v is 0)
+    a = dx * dx + dy * dy  # the ray's horizontal share, for the top's slope
+    a2 = du * du + dv * dv
+    b = ou * du
+    c = ou * ou - 1.0
+    disc = b * b - a2 * c
     with np.errstate(divide="ignore", invalid="ignore"):
-        ts = (-b - np.sqrt(np.maximum(disc, 0.0))) / a
+        ts = (-b - np.sqrt(np.maximum(disc, 0.0))) / a2
         hs = cz + ts * dz
         side = (c > 0) & (a > 1e-18) & (disc >= 0) & (ts > 0) & (hs >= z0) & (hs <= z1)
         t = np.where(side, ts, np.inf)
@@ -267,8 +292,8 @@ def cylinder_entry(centre, rays, axis, radius, z0, z1, spread):
             if not facing:
                 continue
             tc = (zc - cz) / dz
-            px, py = ox + tc * dx, oy + tc * dy
-            cap = (np.abs(dz) > 1e-18) & (tc > 0) & (px * px + py * py <= radius * radius) & (tc < t)
+            pu, pv = ou + tc * du, tc * dv
+            cap = (np.abs(dz) > 1e-18) & (tc > 0) & (pu * pu + pv * pv <= 1.0) & (tc < t)
             t = np.where(cap, tc, t)
             var = np.where(cap, (spread / slope) ** 2, var)
     hit = np.isfinite(t)
@@ -278,9 +303,9 @@ def cylinder_entry(centre, rays, axis, radius, z0, z1, spread):
 def solid_depth(centre, rays, location, solid):
     """Entry depth (-1: miss) and its variance of each ray into the solid (ObjectBox.solid)
     standing on, or centred at, `location` (3,): the nearest of legs, body and head."""
-    _, rb, rh, z0, z1, z2, spread, rl, zh = solid
+    _, rb, rh, z0, z1, z2, spread, rl, zh, rd = solid
     lz = location[2]
-    t, var = cylinder_entry(centre, rays, location, rb, lz + zh, lz + z1, spread)
+    t, var = cylinder_entry(centre, rays, location, rb, lz + zh, lz + z1, spread, rd)
     if zh > z0:  # the legs, below the body
         tl, vl = cylinder_entry(centre, rays, location, rl, lz + z0, lz + zh, spread)
         legs = (tl > 0) & ((t < 0) | (tl < t))
@@ -310,7 +335,7 @@ class Geometry:
             outside can belong to no object.
         height: the height of the boxes standing on the floor (ground mode); 0 for boxes
             centred on voxels, where the top-band test of the soft threshold does not apply.
-        solid: (9,) the object's solid (ObjectBox.solid); solid[0] = 0: the facing-plane
+        solid: (10,) the object's solid (ObjectBox.solid); solid[0] = 0: the facing-plane
             model.
         area: |S_k| (property): the rectangle's area for the facing plane; with a solid, the
             pixels of the rectangle whose rays enter it, counted on first use (seconds at
@@ -326,7 +351,7 @@ class Geometry:
     plane: np.ndarray
     bounds: np.ndarray
     height: float = 0.0
-    solid: np.ndarray = field(default_factory=lambda: np.zeros(9))
+    solid: np.ndarray = field(default_factory=lambda: np.zeros(10))
 
     @cached_property
     def area(self) -> np.ndarray:

@@ -26,6 +26,7 @@ class GeometryArrays:
     height_spread: wp.float64
     leg_radius: wp.float64  # the legs, from bottom to hip (hip = bottom: none)
     hip: wp.float64
+    depth_radius: wp.float64  # the body's semi-axis along the line of sight (= body_radius: a circle)
 
 
 @wp.struct
@@ -95,21 +96,36 @@ MIN_TOP_SLOPE = wp.constant(wp.float64(0.3))  # geometry.MIN_TOP_SLOPE
 
 @wp.func
 def cylinder_entry(c: wp.vec3d, d: wp.vec3d, axis: wp.vec3d, radius: wp.float64, z0: wp.float64,
-                   z1: wp.float64, spread: wp.float64) -> wp.vec2d:
+                   z1: wp.float64, spread: wp.float64, depth_radius: wp.float64) -> wp.vec2d:
     """(z-depth where ray d from c enters the vertical cylinder of `radius` about axis
     (x, y) between heights z0 and z1, -1 on a miss; the variance of that depth: through a
-    flat top or bottom (spread / max(|d_z|, MIN_TOP_SLOPE |d|))^2, through the side 0).
-    geometry.cylinder_entry."""
+    flat top or bottom (spread / max(|d_z|, MIN_TOP_SLOPE |d|))^2, through the side 0). Its
+    cross-section is the ellipse facing the camera of semi-axes `radius` across and
+    `depth_radius` along the line from the axis to the camera (a circle: depth_radius =
+    radius, or the camera right above the axis). geometry.cylinder_entry."""
     ox = c[0] - axis[0]
     oy = c[1] - axis[1]
+    dist = wp.sqrt(ox * ox + oy * oy)
+    ux = f64(1.0)
+    uy = f64(0.0)
+    rd = depth_radius
+    if dist > f64(1.0e-9):
+        ux = ox / dist
+        uy = oy / dist
+    else:
+        rd = radius
+    du = (d[0] * ux + d[1] * uy) / rd  # the ray in the ellipse's frame scaled to the unit circle
+    dv = (d[1] * ux - d[0] * uy) / radius
+    ou = dist / rd  # the camera there (v = 0)
     a = d[0] * d[0] + d[1] * d[1]
-    b = ox * d[0] + oy * d[1]
-    q = ox * ox + oy * oy - radius * radius
-    disc = b * b - a * q
+    a2 = du * du + dv * dv
+    b = ou * du
+    q = ou * ou - f64(1.0)
+    disc = b * b - a2 * q
     t = f64(-1.0)
     var = f64(0.0)
     if q > f64(0.0) and a > f64(1.0e-18) and disc >= f64(0.0):
-        ts = (-b - wp.sqrt(disc)) / a
+        ts = (-b - wp.sqrt(disc)) / a2
         hs = c[2] + ts * d[2]
         if ts > f64(0.0) and hs >= z0 and hs <= z1:
             t = ts
@@ -123,9 +139,9 @@ def cylinder_entry(c: wp.vec3d, d: wp.vec3d, axis: wp.vec3d, radius: wp.float64,
                 facing = c[2] < z0
             if facing:
                 tc = (zc - c[2]) / d[2]
-                px = ox + tc * d[0]
-                py = oy + tc * d[1]
-                if tc > f64(0.0) and px * px + py * py <= radius * radius and (t < f64(0.0) or tc < t):
+                pu = ou + tc * du
+                pv = tc * dv
+                if tc > f64(0.0) and pu * pu + pv * pv <= f64(1.0) and (t < f64(0.0) or tc < t):
                     t = tc
                     var = (spread / slope) * (spread / slope)
     return wp.vec2d(t, var)
@@ -140,15 +156,15 @@ def object_depth(geo: GeometryArrays, k: int, d: wp.vec3d) -> wp.vec2d:
         return wp.vec2d(facing_plane_depth(d, geo.normal[k], geo.plane[k]), f64(0.0))
     p = geo.location[k]
     body = cylinder_entry(geo.centre, d, p, geo.body_radius, p[2] + geo.hip, p[2] + geo.shoulder,
-                          geo.height_spread)
+                          geo.height_spread, geo.depth_radius)
     if geo.hip > geo.bottom:
         legs = cylinder_entry(geo.centre, d, p, geo.leg_radius, p[2] + geo.bottom, p[2] + geo.hip,
-                              geo.height_spread)
+                              geo.height_spread, geo.leg_radius)
         if legs[0] > f64(0.0) and (body[0] < f64(0.0) or legs[0] < body[0]):
             body = legs
     if geo.head_radius > f64(0.0) and geo.top > geo.shoulder:
         head = cylinder_entry(geo.centre, d, p, geo.head_radius, p[2] + geo.shoulder, p[2] + geo.top,
-                              geo.height_spread)
+                              geo.height_spread, geo.head_radius)
         if head[0] > f64(0.0) and (body[0] < f64(0.0) or head[0] < body[0]):
             return head
     return body

@@ -41,7 +41,7 @@ def random_scene(seed: int, width=48, height=40, shape="plane"):
                         head_radius=extra.choice([0.0, extra.uniform(0.08, 0.14)]),
                         shoulder=extra.uniform(0.75, 0.85), height_spread=extra.uniform(0.0, 0.2),
                         leg_radius=extra.choice([None, extra.uniform(0.08, 0.3)]),
-                        hip=extra.uniform(0.4, 0.6))
+                        hip=extra.uniform(0.4, 0.6), depth_radius=extra.choice([None, extra.uniform(0.08, 0.3)]))
     cam = Camera(width, height, 0.8 * width, 0.8 * width, (width - 1) / 2, (height - 1) / 2, pose)
     grid = Grid(x=(-1.5, 1.5, 0.3), y=(1.5, 5.0, 0.3))
     geom = build_geometry(cam, grid, obj)

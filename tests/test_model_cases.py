@@ -169,12 +169,12 @@ def test_empty_scene_stays_at_or_below_prior(device):
 
 @pytest.mark.parametrize("legs, leg_radius", [(None, 0.2), (0.14, 0.14), (0.2, 0.2)])
 def test_solid_depth_of_legs_body_and_head(legs, leg_radius):
-    """Where rays enter the people solid standing at (0, 3): 1.8 m high, body radius 0.2 m up
+    """Where rays enter the people solid standing at (0, 3): 1.8 m high, a round body of radius 0.2 m up
     to the shoulders (0.8 x 1.8 = 1.44 m), head radius 0.11 m above; below the hip (0.45 x 1.8
     = 0.81 m) legs of `leg_radius` (None, the default, or 0.2: the body reaches the floor)."""
     from dpom_warp.geometry import ObjectBox, solid_depth
 
-    solid = ObjectBox(0.4, 1.8, leg_radius=legs).solid("ground")
+    solid = ObjectBox(0.4, 1.8, leg_radius=legs, depth_radius=None).solid("ground")  # round body
     at = np.array([0.0, 3.0, 0.0])
     level = np.array([[0.0, 1.0, 0.0]])
     down = np.array([[0.0, 0.0, -1.0]])
@@ -189,3 +189,33 @@ def test_solid_depth_of_legs_body_and_head(legs, leg_radius):
     # a ray that passes beside the legs but would have hit the body's radius
     t, _ = solid_depth(np.array([0.17, 0.0, 0.4]), level, at, solid)
     assert (t[0] < 0) == (leg_radius < 0.17)
+
+
+def test_solid_depth_of_an_elliptic_body_facing_the_camera():
+    """object.depth_radius 0.12: the body at (0, 3) is an ellipse 0.2 m across the line of
+    sight and 0.12 m along it, facing the camera wherever the camera is. From (0, 0, 1.2),
+    level rays (s, 1, 0) meet x^2 / 0.2^2 + (y - 3)^2 / 0.12^2 = 1 where (s t)^2 / 0.04 +
+    (t - 3)^2 / 0.0144 = 1 (the smaller root; the axis' ray at 3 - 0.12); s = 0.07 misses
+    (inside the circle's rect). From (3, 3, 1.2), looking along -x: the same narrow depth."""
+    from dpom_warp.geometry import ObjectBox, solid_depth
+
+    solid = ObjectBox(0.4, 1.8, head_radius=0.0, depth_radius=0.12).solid("ground")
+    assert ObjectBox(0.4, 1.8, depth_radius=0.12).solid("voxel")[9] == 0.2  # a drone stays a disc
+    at = np.array([0.0, 3.0, 0.0])
+    for s in (0.0, 0.03, 0.06, 0.07):
+        roots = np.roots([s * s / 0.04 + 1 / 0.0144, -6 / 0.0144, 9 / 0.0144 - 1])
+        want = min(roots.real) if np.isreal(roots).all() else -1.0
+        t, var = solid_depth(np.array([0.0, 0.0, 1.2]), np.array([[s, 1.0, 0.0]]), at, solid)
+        assert t[0] == pytest.approx(want, abs=1e-9) and var[0] == 0.0, s
+        assert (want < 0) == (s == 0.07)
+    t, _ = solid_depth(np.array([3.0, 3.0, 1.2]), np.array([[-1.0, 0.0, 0.0]]), at, solid)
+    assert t[0] == pytest.approx(3.0 - 0.12, abs=1e-9)
+    # from (0, 0, 3), rays d = P - C to the top (z = 1.8) 0.15 m from the axis: across the line
+    # of sight inside the 0.2 m semi-axis (the top, at t = 1), along it beyond the 0.12 m one:
+    # the ray goes on to the front side, y = 2.88, at t = 2.88 / 2.85 (the circle's top at t = 1)
+    centre = np.array([0.0, 0.0, 3.0])
+    circle = ObjectBox(0.4, 1.8, head_radius=0.0, depth_radius=None).solid("ground")
+    for p, want, want_circle in (((0.15, 3.0, 1.8), 1.0, 1.0), ((0.0, 2.85, 1.8), 2.88 / 2.85, 1.0)):
+        d = np.array([p]) - centre
+        assert solid_depth(centre, d, at, solid)[0][0] == pytest.approx(want, abs=1e-9), p
+        assert solid_depth(centre, d, at, circle)[0][0] == pytest.approx(want_circle, abs=1e-9), p
