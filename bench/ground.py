@@ -1,13 +1,14 @@
 """Does `extrinsics: auto` find the floor at every mounting of the robustness tables?
 
 For each robustness scene (both draws: held-out and tuning), fits the floor on the scene's
-empty-room frames with the default `camera.ground` (up: auto) and compares the pose with the
-one the scene was rendered from.
+first empty-room frames with the default `camera.ground` but `up`, once per `--up` (default:
+auto, and 0,-1,0, the image's up, the default before auto), and compares the pose with the one
+the scene was rendered from.
 
-    python -m bench.ground [--up auto|X,Y,Z] [--output runs/ground]
+    python -m bench.ground [--up auto|X,Y,Z ...] [--output runs/ground]
 
-Prints one row per scene (height and normal errors; the warning or the error, if any) and
-writes OUTPUT/ground.json. `--up 0,-1,0` is the floor fit's default before up: auto.
+Prints one row per scene (height and normal errors; the warning or the error, if any) and a
+summary per `up`, and writes OUTPUT/ground.json and ground.md (the README's ground block).
 """
 
 from __future__ import annotations
