@@ -269,11 +269,11 @@ def cylinder_entry(centre, rays, axis, radius, z0, z1, spread, depth_radius=None
     d = np.asarray(rays, np.float64)
     dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
     ox, oy, cz = centre[0] - axis[0], centre[1] - axis[1], centre[2]
-    rd = radius if depth_radius is None else depth_radius
     dist = math.hypot(ox, oy)
-    ux, uy = (ox / dist, oy / dist) if dist > 1e-9 else (1.0, 0.0)
-    if dist <= 1e-9:
-        rd = radius
+    if dist > 1e-9:
+        ux, uy, rd = ox / dist, oy / dist, radius if depth_radius is None else depth_radius
+    else:  # right above the axis: a circle
+        ux, uy, rd = 1.0, 0.0, radius
     du, dv = (dx * ux + dy * uy) / rd, (dy * ux - dx * uy) / radius  # the ray, scaled
     ou = dist / rd  # the camera, scaled (its v is 0)
     a = dx * dx + dy * dy  # the ray's horizontal share, for the top's slope

@@ -218,27 +218,29 @@ def _perpendicular(a: np.ndarray, b: np.ndarray) -> bool:
     return abs(float(a @ b)) < math.cos(math.radians(45))
 
 
-def _choose(candidates, auto: bool):
-    """The floor among candidates (penalty, d, normal), and with auto a warning or None.
+HINT = ("set camera.ground.up ([0, -1, 0]: the floor towards the image's bottom, [0, 0, -1]: a camera "
+        "looking down)")
 
-    Given `up`: the lowest (largest camera height), so table tops lose. With auto: of the
-    candidates with the least penalty, the most level reading's plane and those parallel to it
-    compete, and the lowest of them wins. Two perpendicular planes that are both within `AUTO_TIE_DEG` of a usual
-    mounting (one a level camera's floor, the other a floor seen from straight down: a level
-    camera facing a wall, or a camera looking straight down beside a wall along the image's
-    bottom) are an error: the depth is the same for both. A perpendicular plane that a camera
-    within `AUTO_WARN_DEG` of level or of straight down would see as its floor is a warning.
+
+def _choose(candidates):
+    """up: auto. The floor among candidates (penalty, d, normal, ...), and a warning or None.
+
+    Of the candidates with the least penalty, the most level reading's plane and those
+    parallel to it compete, and the lowest (largest camera height) wins, so table tops lose.
+    Two perpendicular planes that are both within `AUTO_TIE_DEG` of a usual mounting (one a
+    level camera's floor, the other a floor seen from straight down: a level camera facing a
+    wall, or a camera looking straight down beside a wall along the image's bottom) are an
+    error: the depth is the same for both. A perpendicular plane that a camera within
+    `AUTO_WARN_DEG` of level or of straight down would see as its floor is a warning.
 
     Raises:
         GroundFitError: the two readings tie.
     """
-    if not auto:  # every candidate is within max_angle_deg of up: the lowest
-        _, d, n = max(candidates, key=lambda c: c[1])
-        return d, n, None
     best = min(c[0] for c in candidates)
     pool = [c for c in candidates if c[0] == best]
     level = min(pool, key=lambda c: implied_pitch_roll(c[2])[0])
-    penalty, d, n = max((c for c in pool if not _perpendicular(c[2], level[2])), key=lambda c: c[1])
+    chosen = max((c for c in pool if not _perpendicular(c[2], level[2])), key=lambda c: c[1])
+    d, n = chosen[1], chosen[2]
 
     def near(normal, tolerance):  # read as a camera within `tolerance` of level or of straight down
         pitch = implied_pitch_roll(normal)[0]
@@ -246,20 +248,18 @@ def _choose(candidates, auto: bool):
 
     rivals = [c for c in candidates if _perpendicular(c[2], n) and near(c[2], AUTO_WARN_DEG)]
     if not rivals:
-        return d, n, None
-    _, rd, rn = max(rivals, key=lambda c: c[1])
+        return chosen, None
+    rival = max(rivals, key=lambda c: c[1])
+    rd, rn = rival[1], rival[2]
     (p, r), (rp, rr) = implied_pitch_roll(n), implied_pitch_roll(rn)
-    readings = (f"the plane {d:.2f} m away is the floor of a camera pitched {p:.1f} deg (roll {r:.1f} "
-                f"deg), the plane {rd:.2f} m away that of a camera pitched {rp:.1f} deg (roll {rr:.1f} deg)")
     if near(n, AUTO_TIE_DEG) and any(near(c[2], AUTO_TIE_DEG) for c in rivals):
-        raise GroundFitError(f"two planes could be the floor and the depth cannot tell which: {readings}; "
-                             f"set camera.ground.up ([0, -1, 0]: the floor towards the image's bottom, "
-                             f"[0, 0, -1]: a camera looking down)")
-    return d, n, (f"camera.ground.up: auto took the floor {d:.2f} m below the camera (pitch {p:.1f} deg, "
-                  f"roll {r:.1f} deg), but the plane {rd:.2f} m away is what a camera pitched {rp:.1f} "
-                  f"deg (roll {rr:.1f} deg) sees of its floor; set camera.ground.up ([0, -1, 0]: the "
-                  f"floor towards the image's bottom, [0, 0, -1]: a camera looking down) if the pose "
-                  f"is wrong")
+        raise GroundFitError(
+            f"two planes could be the floor and the depth cannot tell which: the plane {d:.2f} m away is "
+            f"the floor of a camera pitched {p:.1f} deg (roll {r:.1f} deg), the plane {rd:.2f} m away that "
+            f"of a camera pitched {rp:.1f} deg (roll {rr:.1f} deg); {HINT}")
+    return chosen, (f"camera.ground.up: auto took the floor {d:.2f} m below the camera (pitch {p:.1f} "
+                    f"deg, roll {r:.1f} deg), but the plane {rd:.2f} m away is what a camera pitched "
+                    f"{rp:.1f} deg (roll {rr:.1f} deg) sees of its floor; {HINT} if the pose is wrong")
 
 
 def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), seed: int = 0) -> GroundFit:
@@ -270,7 +270,7 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
     `max_angle_deg` of `up`, or with `up: auto` a normal that a camera pitched -10 to 100
     degrees (roll up to `max_angle_deg`, any near straight down) would see as its floor's;
     among them the lowest (largest camera height) wins, so table tops and shelves lose to the
-    floor (`_choose`). With auto, a wall is such a candidate only for a camera near level (a
+    floor. With auto (`_choose`), a wall is such a candidate only for a camera near level (a
     wall ahead is the floor of a camera looking straight down) or near straight down (the wall
     behind it, along the image's bottom, is the floor of a level camera): the reading whose
     pitch is within 0 to 90 degrees wins (so a level camera tilted down facing a wall, and one
@@ -324,21 +324,21 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
             f"camera {which} (largest other plane: {best_other} points); is enough floor in view?")
     if auto:  # judge each candidate by its refined plane: a raw RANSAC plane can be a layer of
         # a far wall's quantised depths, exactly square to the optical axis
-        refined = {}
-        for penalty, d, n in candidates:
+        refined = []
+        for _, d, n in candidates:
             n, d, count, rms = _refine(pts, n, d, options, max_turn_deg=AUTO_TURN_DEG)
             penalty = _auto_penalty(n, options)
             if penalty is not None:
-                refined[d] = (penalty, d, n), (n, d, count, rms)
+                refined.append((penalty, d, n, count, rms))
         if not refined:
             raise GroundFitError(f"no floor plane found: the planes below the camera, fitted on all the "
                                  f"points, are the floor of no camera pitched {-AUTO_MARGIN_DEG:g} to "
                                  f"{90 + AUTO_MARGIN_DEG:g} deg; is enough floor in view?")
-        d, n, ambiguity = _choose([c for c, _ in refined.values()], auto)
-        n, d, count, rms = refined[d][1]
-    else:
-        d, n, ambiguity = _choose(candidates, auto)
+        (_, d, n, count, rms), ambiguity = _choose(refined)
+    else:  # every candidate is within max_angle_deg of up: the lowest
+        _, d, n = max(candidates, key=lambda c: c[1])
         n, d, count, rms = _refine(pts, n, d, options)
+        ambiguity = None
     pitch, roll = implied_pitch_roll(n)
     return GroundFit(normal=n, offset=d, T_world_from_camera=pose_from_plane(n, d),
                      camera_height=d, pitch_deg=pitch, roll_deg=roll, inlier_count=count, rms_m=rms,
