@@ -1,8 +1,9 @@
 """Warp kernels of DPOM, one file per step (installed as `dpom_warp.kernels`).
 
 - `pixel_model`: the pixel distributions of eq. 11 as `@wp.func`s and the parameter structs.
-- `masks`: masks M_k and Delta_ki (eq. 12) through a static tile index, counted then filled
-  into per-pixel lists kept in depth order (location id breaking ties).
+- `masks`: masks M_k and Delta_ki (eq. 12) through a static index (the pixel table, or image
+  tiles where it would not fit), counted then filled into per-pixel lists kept in depth order
+  (location id breaking ties).
 - `mean_field`: the exclusive-form mean-field evidence pass, the exclusion prior's pass, damped
   update, on-device convergence check (batches, graphs), soft threshold with the top-band test.
 - `sparse`: the pruning bound, and the per-pixel lists compacted to the live locations
@@ -13,16 +14,16 @@
 
 from .background import (background_delta, background_from_frames, cluster_background, cluster_frames,
                          floor_background)
-from .masks import TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once
+from .masks import PixelTable, TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once, table_pairs
 from .mean_field import (check_converged, evidence_pass, exclusion_pass, soft_threshold, top_band,
                          transparency_pass, update_rho)
 from .pixel_model import GeometryArrays, PixelModel
-from .sparse import (IDLE, PRUNED, bound_pass, count_iteration, count_live, fill_live,
+from .sparse import (IDLE, PRUNED, bound_pass, compact_once, count_iteration, count_live, fill_live,
                      gather_live, mark_idle, prune, prune_lists, update_bound)
 
 __all__ = [
-    "GeometryArrays", "IDLE", "PRUNED", "PixelModel", "TileIndex", "background_delta", "background_from_frames",
-    "bound_pass", "check_converged", "count_iteration", "gather_live", "mark_idle", "cluster_background", "cluster_frames", "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background",
-    "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "prune", "prune_lists", "soft_threshold", "top_band", "transparency_pass",
+    "GeometryArrays", "IDLE", "PRUNED", "PixelModel", "PixelTable", "TileIndex", "background_delta", "background_from_frames",
+    "bound_pass", "check_converged", "compact_once", "count_iteration", "gather_live", "mark_idle", "cluster_background", "cluster_frames", "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background",
+    "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "table_pairs", "prune", "prune_lists", "soft_threshold", "top_band", "transparency_pass",
     "update_bound", "update_rho",
 ]

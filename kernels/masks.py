@@ -21,11 +21,20 @@ it goes (insertion, no atomics). On the CPU `pixel_entries_once` does both in on
 mask test once). Frames of a batch are blocks of pixels and of locations: the
 entries of frame b name location b * n_locations + k. With `background_occludes`, a location
 does not claim a pixel whose known background is clearly in front of it.
+
+Where its memory allows (engine.Engine's `table`), a finer static index replaces the tiles:
+the pixel table holds every (pixel, location) pair of the silhouettes where some reading can
+pass the mask test (mu > 0, W > 0), with the pair's mu, object sigma s and W (rounded up),
+per pixel sorted by (float32 mu, location id), the lists' order. Per frame a pixel finds by
+binary search the pairs with float32 mu in [z - R, z + R] (R: the pixel's largest W; rounding
+is monotonic, so every pair with |z - mu| < W is inside), skips those with |z - mu| >= W and
+runs the mask test of the tile path on the others, from the stored mu and s: the same
+arithmetic, so the same entries, already in order (no object_depth per frame, no sorting).
 """
 
 import warp as wp
 
-from .pixel_model import LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, is_reading, logaddexp
+from .pixel_model import LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, gaussian_logpdf, is_reading, logaddexp
 from .pixel_model import object_depth, object_log_inlier, object_sigma
 
 EMPTY = wp.constant(wp.float64(1.0e300))
@@ -42,6 +51,22 @@ class TileIndex:
     lo: wp.array(dtype=wp.float64)  # a reading below lo cannot pass the pair's mask test
     hi: wp.array(dtype=wp.float64)  # nor one above hi
     span: wp.array(dtype=wp.float64)  # longest hi - lo of each tile
+
+
+@wp.struct
+class PixelTable:
+    """Per pixel, the silhouette pairs where a reading can pass the mask test (module doc);
+    use = 0: empty, the tile index serves."""
+
+    use: int
+    width: int  # image width, pixels (p = v * width + u within a frame)
+    start: wp.array(dtype=wp.int32)  # first pair of each pixel (n_pixels + 1)
+    loc: wp.array(dtype=wp.int32)  # location of each pair, per pixel sorted by (mu32, loc)
+    mu32: wp.array(dtype=wp.float32)  # float32 of mu: the sort and search key
+    mu: wp.array(dtype=wp.float64)  # the object depth (object_depth)
+    sigma: wp.array(dtype=wp.float64)  # its object sigma (object_sigma)
+    half: wp.array(dtype=wp.float32)  # the test's half-width W, rounded up
+    reach: wp.array(dtype=wp.float64)  # the largest half of each pixel's pairs
 
 
 @wp.func
@@ -98,6 +123,106 @@ def pair_depth_bounds(
         hi[i] = hi_max + slack
 
 
+@wp.kernel(enable_backward=False)
+def table_pairs(
+    geo: GeometryArrays,
+    pm: PixelModel,
+    width: int,
+    fill: int,
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    pixel: wp.array(dtype=wp.int32),
+    loc: wp.array(dtype=wp.int32),
+    mu: wp.array(dtype=wp.float64),
+    sigma: wp.array(dtype=wp.float64),
+    half: wp.array(dtype=wp.float32),
+):
+    """The pixel table's pairs of location k, scanned over its silhouette rectangle: their
+    count (fill 0), or the pairs written from offsets[k] in scan order (fill 1)."""
+    k = wp.tid()
+    r = geo.rect[k]
+    n = int(0)
+    for v in range(r[1], r[3] + 1):
+        for u in range(r[0], r[2] + 1):
+            o = object_depth(geo, k, geo.rays[v, u])
+            if o[0] > f64(0.0):
+                s = object_sigma(pm, o[0], o[1])
+                w = test_half_width(pm, s)
+                if w > f64(0.0):
+                    if fill == 1:
+                        e = offsets[k] + n
+                        pixel[e] = v * width + u
+                        loc[e] = k
+                        mu[e] = o[0]
+                        sigma[e] = s
+                        # rounded up past float32's rounding and the square roots' last bits
+                        half[e] = wp.float32(w * f64(1.00001) + f64(1.0e-6) * (f64(1.0) + o[0]))
+                    n += 1
+    if fill == 0:
+        counts[k] = n
+
+
+@wp.func
+def table_first(table: PixelTable, p: int, key: wp.float32) -> int:
+    """The first pair of pixel p with mu32 >= key (binary search)."""
+    first = table.start[p]
+    last = table.start[p + 1]
+    while first < last:
+        mid = (first + last) / 2
+        if table.mu32[mid] < key:
+            first = mid + 1
+        else:
+            last = mid
+    return first
+
+
+@wp.func
+def table_entry(pm: PixelModel, bg: wp.array2d(dtype=wp.float64), table: PixelTable, j: int, p: int,
+                z: wp.float64) -> wp.vec2d:
+    """pair_entry from the pixel table's pair j: (mu, Delta) or mu = -1."""
+    mu = table.mu[j]
+    if wp.abs(z - mu) < wp.float64(table.half[j]):
+        inlier = pm.log_inlier_weight + gaussian_logpdf(z, mu, table.sigma[j])  # object_log_inlier
+        if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
+            return wp.vec2d(mu, pm.log_reading + logaddexp(pm.log_outlier, inlier))
+    return wp.vec2d(f64(-1.0), f64(0.0))
+
+
+@wp.func
+def candidates(tiles: TileIndex, table: PixelTable, u: int, v: int, z: wp.float64) -> wp.vec2i:
+    """[first, last) of the pairs that pixel (u, v) with reading z scans: its table pairs from
+    z - reach on, or its tile's from z - span on (each stops earlier, see `more`)."""
+    if table.use == 1:
+        p = v * table.width + u
+        return wp.vec2i(table_first(table, p, wp.float32(z - table.reach[p])), table.start[p + 1])
+    t = (v / tiles.size) * tiles.tiles_x + u / tiles.size
+    return wp.vec2i(first_pair(tiles, t, z), tiles.start[t + 1])
+
+
+@wp.func
+def more(tiles: TileIndex, table: PixelTable, j: int, u: int, v: int, z: wp.float64) -> bool:
+    """Pair j can still hold an entry for reading z (the pairs are in ascending order of it)."""
+    if table.use == 1:
+        return table.mu32[j] <= wp.float32(z + table.reach[v * table.width + u])
+    return tiles.lo[j] <= z
+
+
+@wp.func
+def candidate_entry(geo: GeometryArrays, pm: PixelModel, bg: wp.array2d(dtype=wp.float64),
+                    tiles: TileIndex, table: PixelTable, j: int, p: int, u: int, v: int, d: wp.vec3d,
+                    z: wp.float64) -> wp.vec2d:
+    if table.use == 1:
+        return table_entry(pm, bg, table, j, p, z)
+    return pair_entry(geo, pm, bg, tiles, j, p, u, v, d, z)
+
+
+@wp.func
+def candidate_loc(tiles: TileIndex, table: PixelTable, j: int) -> wp.int32:
+    if table.use == 1:
+        return table.loc[j]
+    return tiles.loc[j]
+
+
 @wp.func
 def entry_before(mu_a: wp.float32, k_a: wp.int32, mu_b: wp.float32, k_b: wp.int32) -> bool:
     return mu_a < mu_b or (mu_a == mu_b and k_a < k_b)
@@ -143,6 +268,7 @@ def pixel_entries(
     pm: PixelModel,
     bg: wp.array2d(dtype=wp.float64),
     tiles: TileIndex,
+    table: PixelTable,
     n_locations: int,
     fill: int,
     offsets: wp.array(dtype=wp.int32),
@@ -160,19 +286,18 @@ def pixel_entries(
     z = f64(depth[b, v, u])
     n = int(0)
     if is_reading(pm, z):
-        t = (v / tiles.size) * tiles.tiles_x + u / tiles.size
-        last = tiles.start[t + 1]
         d = geo.rays[v, u]
         e0 = int(0)
         if fill == 1:
             e0 = offsets[p]
-        j = first_pair(tiles, t, z)
-        while j < last and tiles.lo[j] <= z:
-            m = pair_entry(geo, pm, bg, tiles, j, p, u, v, d, z)
+        span = candidates(tiles, table, u, v, z)
+        j = span[0]
+        while j < span[1] and more(tiles, table, j, u, v, z):
+            m = candidate_entry(geo, pm, bg, tiles, table, j, p, u, v, d, z)
             if m[0] > f64(0.0):
                 if fill == 1 and e0 + n < capacity:
                     mu32 = wp.float32(m[0])
-                    kb = b * n_locations + tiles.loc[j]
+                    kb = b * n_locations + candidate_loc(tiles, table, j)
                     e = e0 + n
                     while e > e0 and entry_before(mu32, kb, entry_mu[e - 1], entry_loc[e - 1]):
                         entry_loc[e] = entry_loc[e - 1]
@@ -200,6 +325,7 @@ def pixel_entries_once(
     pm: PixelModel,
     bg: wp.array2d(dtype=wp.float64),
     tiles: TileIndex,
+    table: PixelTable,
     n_locations: int,
     offsets: wp.array(dtype=wp.int32),
     counts: wp.array(dtype=wp.int32),
@@ -222,16 +348,15 @@ def pixel_entries_once(
     mus = LocalValues()
     deltas = LocalValues()
     if is_reading(pm, z):
-        t = (v / tiles.size) * tiles.tiles_x + u / tiles.size
-        last = tiles.start[t + 1]
         d = geo.rays[v, u]
-        j = first_pair(tiles, t, z)
-        while j < last and tiles.lo[j] <= z:
-            m = pair_entry(geo, pm, bg, tiles, j, p, u, v, d, z)
+        span = candidates(tiles, table, u, v, z)
+        j = span[0]
+        while j < span[1] and more(tiles, table, j, u, v, z):
+            m = candidate_entry(geo, pm, bg, tiles, table, j, p, u, v, d, z)
             if m[0] > f64(0.0):
                 if n < LOCAL_MATCHES:
                     mu32 = wp.float32(m[0])
-                    kb = b * n_locations + tiles.loc[j]
+                    kb = b * n_locations + candidate_loc(tiles, table, j)
                     e = n
                     while e > 0 and entry_before(mu32, kb, mus[e - 1], locs[e - 1]):
                         locs[e] = locs[e - 1]

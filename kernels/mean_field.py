@@ -51,12 +51,16 @@ def evidence_pass(
     pixels: int,
     done: wp.array(dtype=wp.int32),
     local: int,
+    active: wp.array(dtype=wp.int32),
 ):
-    """One thread per pixel of the batch, frame after frame, skipping frames that are done.
+    """One thread per pixel of the batch, frame after frame, skipping frames that are done;
+    with a non-empty `active`, one per pixel it lists (kernels.sparse.compact_once).
     With `local` (CPU), lists of up to LOCAL_ENTRIES keep D_j - B_j and 1 - r_j on the stack,
     in cache, instead of the global scratch `behind` (~15 % faster on one CPU thread); longer
     lists, and every list on a GPU (where a big stack spills), use `behind`."""
     p = wp.tid()
+    if active.shape[0] > 0:
+        p = active[p]
     n = counts[p]
     if n == 0:
         return
@@ -122,7 +126,7 @@ def update_rho(
     max_change[frame, iteration] = max |rho_new - rho|; iterations[frame] counts the updates.
     One thread per location of the batch, skipping frames that are done; with a non-empty
     `index`, one thread per location it names (a sparse pass's live ones: kernels.sparse
-    gather_live), and kernels.sparse.count_iteration counts the iteration.
+    gather_live), the first of which counts the iteration of every frame not done.
 
     Sparse iterations (kernels.sparse): after a full pass (`full` = 1, the evidence of every
     location) a location whose rho and rho_new are both below `epsilon` is marked dead
@@ -137,6 +141,10 @@ def update_rho(
     i = wp.tid()
     indexed = index.shape[0] > 0
     if indexed:
+        if i == 0:
+            for g in range(done.shape[0]):
+                if done[g] == 0:
+                    iterations[g] = iteration + 1
         i = index[i]
     f = frame_of(i, locations)
     if done[f] != 0:
@@ -179,15 +187,19 @@ def exclusion_pass(
     done: wp.array(dtype=wp.int32),
     full: int,
     live: wp.array(dtype=wp.int32),
+    index: wp.array(dtype=wp.int32),
 ):
     """Two objects cannot stand closer than the exclusion radius: each location l with rho_l
     above the gate subtracts strength x (rho_l - gate) / (1 - gate) from the evidence of its
     neighbours (the locations within the radius) that update_rho will update in this pass
     (`moves`), so each gets strength x the sum over its
     neighbours. Launched between the evidence pass and update_rho: it reads rho before the
-    update and writes only the evidence. One thread per location of the batch; the few
-    above the gate do the work."""
+    update and writes only the evidence. One thread per location of the batch, or per location
+    update_rho's `index` names (every location above the gate moves in the pass: its rho is
+    above epsilon); the few above the gate do the work."""
     i = wp.tid()
+    if index.shape[0] > 0:
+        i = index[i]
     f = frame_of(i, locations)
     r = rho[i]
     if done[f] != 0 or r <= gate:

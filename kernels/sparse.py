@@ -7,7 +7,8 @@ those whose undamped target rho_new is below epsilon, setting rho = rho_new ther
 only slows the approach to a fixed point, and a location with strongly negative evidence has
 nothing to compete for). These kernels then copy each pixel's list, in order, keeping only
 the live locations: `count_live` counts, an exclusive scan gives the offsets, `fill_live`
-copies. The passes in between run the ordinary evidence pass on the compact lists and update
+copies (on the CPU, driven from the host, `compact_once` does all three and lists the pixels
+with live entries, over which alone the sparse evidence passes run). The passes in between run the ordinary evidence pass on the compact lists and update
 only live locations. Frames that are done get empty compact lists.
 
 The pruning bound, before the first pass (`bound_pass`, `update_bound`, `prune`,
@@ -156,6 +157,45 @@ def prune_lists(
             wp.atomic_add(per_location, k, 1)
             e += 1
     counts[p] = e - start
+
+
+@wp.kernel(enable_backward=False)
+def compact_once(
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    entry_loc: wp.array(dtype=wp.int32),
+    entry_delta: wp.array(dtype=wp.float32),
+    live: wp.array(dtype=wp.int32),
+    pixels: int,
+    done: wp.array(dtype=wp.int32),
+    live_offsets: wp.array(dtype=wp.int32),
+    live_counts: wp.array(dtype=wp.int32),
+    live_loc: wp.array(dtype=wp.int32),
+    live_delta: wp.array(dtype=wp.float32),
+    active: wp.array(dtype=wp.int32),
+    totals: wp.array(dtype=wp.int32),
+):
+    """count_live, the scan and fill_live in one pass (CPU, host-driven): each pixel with live
+    entries takes its slice at totals[1] and its place in `active` at totals[2] with atomic
+    adds, in pixel order on one CPU thread; the sparse evidence passes then run over the
+    active pixels alone, in the same order (the same sums)."""
+    p = wp.tid()
+    n = int(0)
+    start = offsets[p]
+    if done[frame_of(p, pixels)] == 0:
+        for j in range(start, start + counts[p]):
+            n += live[entry_loc[j]]
+    live_counts[p] = n
+    if n > 0:
+        e = wp.atomic_add(totals, 1, n)
+        live_offsets[p] = e
+        active[wp.atomic_add(totals, 2, 1)] = p
+        for j in range(start, start + counts[p]):
+            k = entry_loc[j]
+            if live[k] != 0:
+                live_loc[e] = k
+                live_delta[e] = entry_delta[j]
+                e += 1
 
 
 @wp.kernel(enable_backward=False)

@@ -62,14 +62,18 @@ def distorted_voxel_scene(seed, shape="plane"):
 
 
 @pytest.mark.parametrize("one_pass", [False, True])
-@pytest.mark.parametrize("tile", [1, 5, 8, 64])
+@pytest.mark.parametrize("tile", [1, 5, 8, 64, "table"])
 def test_sorted_lists_match_reference(device, tile, one_pass):
-    """The tile index finds exactly the reference's masks, in its order, whatever the tile,
-    with the lists built in two passes (count, scan, fill) or in one (the CPU's)."""
-    for geom, params, depth, bg in [random_scene(11)[:3] + (None,), distorted_voxel_scene(tile) + (None,),
-                                    random_scene(11 + tile, shape="solid")[:3] + (None,),
-                                    distorted_voxel_scene(tile, "solid") + (None,)]:
-        engine = Engine(geom, params, device, tile=tile)
+    """The static index (the tile index whatever the tile, or the pixel table) finds exactly
+    the reference's masks, in its order, with the lists built in two passes (count, scan,
+    fill) or in one (the CPU's)."""
+    table = tile == "table"
+    seed = 3 if table else tile
+    for geom, params, depth, bg in [random_scene(11)[:3] + (None,), distorted_voxel_scene(seed) + (None,),
+                                    random_scene(11 + seed, shape="solid")[:3] + (None,),
+                                    distorted_voxel_scene(seed, "solid") + (None,)]:
+        engine = Engine(geom, params, device, tile=8 if table else tile, table=table)
+        assert engine.use_table == table and (engine.n_table > 0) == table
         engine.one_pass_lists = one_pass
         if params.background_occludes:
             frames = np.stack([np.roll(depth, 3 * i, axis=1) for i in range(3)])
@@ -115,16 +119,39 @@ def test_lists_longer_than_the_one_pass_buffer(device):
     want = ref.mask_entries(depth, geom, params, None)
     lists = []
     for one_pass in (False, True):
-        engine = Engine(geom, params, device, entries_per_pixel=1.0)
-        engine.one_pass_lists = one_pass
-        assert engine.build_lists(depth) == len(want[0])
-        lists.append(lists_as_entries(engine))
+        for table in (False, True):
+            engine = Engine(geom, params, device, entries_per_pixel=1.0, table=table)
+            engine.one_pass_lists = one_pass
+            assert engine.build_lists(depth) == len(want[0])
+            lists.append(lists_as_entries(engine))
     counts = np.bincount(want[0])
     assert counts.max() > LOCAL_MATCHES >= counts[counts > 0].min()  # both kinds of pixel
     for got in lists:
         for a, b in zip(got[:3], want[:3]):
             np.testing.assert_array_equal(a, b)
         np.testing.assert_allclose(got[3], want[3], rtol=1e-6, atol=1e-6)
+
+
+def test_static_index_choice_and_memory(device):
+    """table=None takes the pixel table where it fits the budget and the tiles where it does
+    not; memory_bytes counts whichever is held, and both give the same result."""
+    from dpom_warp.engine import TABLE_BYTES, TABLE_PIXEL_BYTES, memory_estimate
+
+    geom, params, depth, _ = random_scene(2, shape="solid")
+    table = Engine(geom, params, device)
+    assert table.use_table and 0 < table.n_table < geom.rect_area.sum()
+    tiles = Engine(geom, params, device, table=False)
+    assert not tiles.use_table and tiles.n_table == 0 and tiles.n_pairs > 0
+    held = table.n_table * TABLE_BYTES + table.n_pixels * TABLE_PIXEL_BYTES
+    assert table.memory_bytes() - held == tiles.memory_bytes() - tiles.n_pairs * memory_estimate(0, 0, 0, 1)
+    # a budget the lists and the tile index fit, but not the pixel table at its largest
+    need = tiles.memory_bytes() + geom.rect_area.sum() * TABLE_BYTES // 2
+    small = Engine(geom, params, device, memory_gb=need / 2**30)
+    assert not small.use_table
+    a, b = table.infer(depth), small.infer(depth)
+    assert a.entries == b.entries > 100 and a.iterations == b.iterations
+    np.testing.assert_array_equal(a.rho, b.rho)
+    np.testing.assert_array_equal(a.rho_star, b.rho_star)
 
 
 @pytest.mark.parametrize("one_pass", [False, True])
