@@ -56,7 +56,7 @@ LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 32 + 4  # rect, n
 # whole-silhouette counts (four each), the damping streak
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
-TABLE_BYTES = 4 + 4 + 8 + 8 + 4  # pixel table: location, float32 mu, mu, sigma, half-width
+TABLE_BYTES = 4 + 4 + 8 + 8 + 8 + 4  # pixel table: location, float32 mu, mu, sigma, log sigma, half-width
 TABLE_PIXEL_BYTES = 4 + 8  # its start and reach
 TABLE_BUDGET = 256 * 2**20  # table=None: the pixel table where it holds at most this
 
@@ -292,14 +292,15 @@ class Engine:
                 counts = wp.zeros(self.n_locations, dtype=wp.int32)
                 offsets = wp.zeros(self.n_locations, dtype=wp.int32)
                 wp.launch(K.table_pairs, dim=self.n_locations,
-                          inputs=[self.geo, self.pm, self.width, 0, offsets, counts] + [None] * 5)
+                          inputs=[self.geo, self.pm, self.width, 0, offsets, counts] + [None] * 6)
                 c = counts.numpy()
                 n = int(c.sum())
                 offsets.assign(np.concatenate([[0], np.cumsum(c)[:-1]]).astype(np.int32))
-                out = [wp.zeros(n, dtype=d) for d in (wp.int32, wp.int32, wp.float64, wp.float64, wp.float32)]
+                out = [wp.zeros(n, dtype=d) for d in (wp.int32, wp.int32, wp.float64, wp.float64, wp.float64,
+                                                       wp.float32)]
                 wp.launch(K.table_pairs, dim=self.n_locations,
                           inputs=[self.geo, self.pm, self.width, 1, offsets, counts] + out)
-                pixel, loc, mu, sigma, half = (a.numpy() for a in out)
+                pixel, loc, mu, sigma, log_sigma, half = (a.numpy() for a in out)
                 mu32 = mu.astype(np.float32)
                 order = np.lexsort((loc, mu32, pixel))
                 pixel, half = pixel[order], half[order]
@@ -310,11 +311,11 @@ class Engine:
                     reach[held] = np.maximum.reduceat(half, start[held]).astype(np.float64)
                 t.start, t.reach = wp.array(start), wp.array(reach, dtype=wp.float64)
                 t.loc, t.mu32 = wp.array(loc[order]), wp.array(mu32[order])
-                t.mu, t.sigma = wp.array(mu[order]), wp.array(sigma[order])
+                t.mu, t.sigma, t.log_sigma = (wp.array(a[order]) for a in (mu, sigma, log_sigma))
                 t.half = wp.array(half)
             else:
                 t.start = wp.zeros(1, dtype=wp.int32)
-                t.reach, t.mu, t.sigma = (wp.zeros(0, dtype=wp.float64) for _ in range(3))
+                t.reach, t.mu, t.sigma, t.log_sigma = (wp.zeros(0, dtype=wp.float64) for _ in range(4))
                 t.loc, t.mu32, t.half = (wp.zeros(0, dtype=d) for d in (wp.int32, wp.float32, wp.float32))
         self.n_table = n
         return t

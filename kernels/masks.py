@@ -24,7 +24,7 @@ does not claim a pixel whose known background is clearly in front of it.
 
 Where its memory allows (engine.Engine's `table`), a finer static index replaces the tiles:
 the pixel table holds every (pixel, location) pair of the silhouettes where some reading can
-pass the mask test (mu > 0, W > 0), with the pair's mu, object sigma s and W (rounded up),
+pass the mask test (mu > 0, W > 0), with the pair's mu, object sigma s, log s and W (rounded up),
 per pixel sorted by (float32 mu, location id), the lists' order. Per frame a pixel finds by
 binary search the pairs with float32 mu in [z - R, z + R] (R: the pixel's largest W; rounding
 is monotonic, so every pair with |z - mu| < W is inside), skips those with |z - mu| >= W and
@@ -34,7 +34,8 @@ arithmetic, so the same entries, already in order (no object_depth per frame, no
 
 import warp as wp
 
-from .pixel_model import LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, gaussian_logpdf, is_reading, logaddexp
+from .pixel_model import (LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, gaussian_logpdf_from_log, is_reading,
+                          object_delta)
 from .pixel_model import object_depth, object_log_inlier, object_sigma
 
 EMPTY = wp.constant(wp.float64(1.0e300))
@@ -65,6 +66,7 @@ class PixelTable:
     mu32: wp.array(dtype=wp.float32)  # float32 of mu: the sort and search key
     mu: wp.array(dtype=wp.float64)  # the object depth (object_depth)
     sigma: wp.array(dtype=wp.float64)  # its object sigma (object_sigma)
+    log_sigma: wp.array(dtype=wp.float64)  # wp.log of it
     half: wp.array(dtype=wp.float32)  # the test's half-width W, rounded up
     reach: wp.array(dtype=wp.float64)  # the largest half of each pixel's pairs
 
@@ -135,6 +137,7 @@ def table_pairs(
     loc: wp.array(dtype=wp.int32),
     mu: wp.array(dtype=wp.float64),
     sigma: wp.array(dtype=wp.float64),
+    log_sigma: wp.array(dtype=wp.float64),
     half: wp.array(dtype=wp.float32),
 ):
     """The pixel table's pairs of location k, scanned over its silhouette rectangle: their
@@ -155,6 +158,7 @@ def table_pairs(
                         loc[e] = k
                         mu[e] = o[0]
                         sigma[e] = s
+                        log_sigma[e] = wp.log(s)
                         # rounded up past float32's rounding and the square roots' last bits
                         half[e] = wp.float32(w * f64(1.00001) + f64(1.0e-6) * (f64(1.0) + o[0]))
                     n += 1
@@ -182,9 +186,9 @@ def table_entry(pm: PixelModel, bg: wp.array2d(dtype=wp.float64), table: PixelTa
     """pair_entry from the pixel table's pair j: (mu, Delta) or mu = -1."""
     mu = table.mu[j]
     if wp.abs(z - mu) < wp.float64(table.half[j]):
-        inlier = pm.log_inlier_weight + gaussian_logpdf(z, mu, table.sigma[j])  # object_log_inlier
+        inlier = pm.log_inlier_weight + gaussian_logpdf_from_log(z, mu, table.sigma[j], table.log_sigma[j])
         if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
-            return wp.vec2d(mu, pm.log_reading + logaddexp(pm.log_outlier, inlier))
+            return wp.vec2d(mu, object_delta(pm, inlier))
     return wp.vec2d(f64(-1.0), f64(0.0))
 
 
@@ -257,7 +261,7 @@ def pair_entry(geo: GeometryArrays, pm: PixelModel, bg: wp.array2d(dtype=wp.floa
             if mu > f64(0.0):
                 inlier = object_log_inlier(pm, z, mu, o[1])
                 if inlier > pm.log_outlier and not hidden_by_background(pm, bg, p, mu):
-                    return wp.vec2d(mu, pm.log_reading + logaddexp(pm.log_outlier, inlier))
+                    return wp.vec2d(mu, object_delta(pm, inlier))
     return wp.vec2d(f64(-1.0), f64(0.0))
 
 

@@ -54,9 +54,15 @@ def logaddexp(a: wp.float64, b: wp.float64) -> wp.float64:
 
 
 @wp.func
-def gaussian_logpdf(z: wp.float64, mu: wp.float64, sigma: wp.float64) -> wp.float64:
+def gaussian_logpdf_from_log(z: wp.float64, mu: wp.float64, sigma: wp.float64, log_sigma: wp.float64) -> wp.float64:
+    """gaussian_logpdf with log(sigma) given (kernels.masks' pixel table stores it)."""
     r = (z - mu) / sigma
-    return f64(-0.5) * r * r - wp.log(sigma) - LOG_SQRT_2PI
+    return f64(-0.5) * r * r - log_sigma - LOG_SQRT_2PI
+
+
+@wp.func
+def gaussian_logpdf(z: wp.float64, mu: wp.float64, sigma: wp.float64) -> wp.float64:
+    return gaussian_logpdf_from_log(z, mu, sigma, wp.log(sigma))
 
 
 @wp.func
@@ -75,6 +81,14 @@ def object_log_inlier(pm: PixelModel, z: wp.float64, mu: wp.float64, shape_var: 
     """log((1 - pi_out) N(z | mu, s^2)) of an object at depth mu whose shape adds shape_var
     to the variance; the mask test (eq. 12) is that it beats pm.log_outlier."""
     return pm.log_inlier_weight + gaussian_logpdf(z, mu, object_sigma(pm, mu, shape_var))
+
+
+@wp.func
+def object_delta(pm: PixelModel, inlier: wp.float64) -> wp.float64:
+    """Delta of a mask entry (eq. 11), log(1 - pi_inf) + logaddexp(log_outlier, inlier), for an
+    inlier above log_outlier (the mask test passed): logaddexp with its larger term known,
+    exp(0) = 1 not computed (the same bits)."""
+    return pm.log_reading + (inlier + wp.log(wp.exp(pm.log_outlier - inlier) + f64(1.0)))
 
 
 @wp.func
