@@ -11,16 +11,18 @@ Scenes (rendered once into .cache/bench/, seeded):
 - drones: 512x424, 4 x 4.5 x 2.4 m voxel grid at 0.1 m (the drone demo's room).
 Each scene runs two ways: the fast defaults (input.stride auto, sparse iterations) and the
 exact path (engine.exact: full resolution, every pass full), each scored for MODA over the
-first --moda-frames frames of the scene's sequence; the sparse iterations alone are measured
-against full passes at the same stride (time and max |rho* difference|). Each Warp figure is
+first --moda-frames frames of the scene's sequence; the sparse iterations, the pruning bound and
+the pixel table are measured against full passes, no bound and the tile index at the same
+stride (time and max |rho* difference|). Each Warp figure is
 the median of `--repeats` runs after a warm-up run (which compiles the kernels and sizes the
 lists); the NumPy reference, with --reference, runs once on kinect_v2 and kinect_v2_far (full
 resolution).
 Whole frames are timed three ways: the iteration loop driven from Python (a host check every
 check_every iterations), the loop replayed as a captured graph (no host sync), and `--batch`
 different frames of the scene in one engine call (time per frame = batch time / batch).
---sweep also times whole frames against the number of locations (grid step) and the image
-resolution on kinect_v2, and plots both.
+--whole-run times `dpom-warp run` with pictures on kinect_v2 and kinect_v2_far (12 frames against
+2: the marginal frame). --sweep also times whole frames against the number of locations (grid
+step) and the image resolution on kinect_v2, and plots both.
 """
 
 from __future__ import annotations
@@ -144,6 +146,7 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
               "entries_after_bound": warm.kept_entries, "pruned_locations": warm.pruned,
               "live_locations_at_end": warm.live, "iterations": warm.iterations,
               "engine_setup_s": setup, "engine_memory_mb": engine.memory_bytes() / 2**20,
+              "mask_index": "table" if engine.use_table else "tiles",
               "median_s": stages, "graph_error": graph_error}
     if batch > 1:
         del engine
@@ -158,13 +161,15 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     return result, warm
 
 
-INGREDIENTS = {"full_passes": ["model.sparse_epsilon=0"], "no_bound": ["model.bound_rounds=0"], "fast": []}
+INGREDIENTS = {"full_passes": ["model.sparse_epsilon=0"], "no_bound": ["model.bound_rounds=0"],
+               "tiles": ["engine.mask_index=tiles"], "fast": []}
 
 
 def ingredient_times(name, stride, device, repeats):
-    """{ingredient: (median whole-frame seconds, rho*)} at the fast path's stride: every pass
-    full, sparse iterations without the pruning bound, and the fast path; the three engines
-    are timed in turn, `repeats` rounds, so each median sees the same machine."""
+    """{ingredient: (median whole-frame seconds, rho*, median lists seconds)} at the fast
+    path's stride: every pass full, sparse iterations without the pruning bound, the lists
+    from the tile index instead of the pixel table, and the fast path; the engines are timed
+    in turn, `repeats` rounds, so each median sees the same machine."""
     import dataclasses as dc
 
     from dpom_warp.pipeline import make_engine
@@ -175,13 +180,15 @@ def ingredient_times(name, stride, device, repeats):
         cfg = dc.replace(cfg, engine=dc.replace(cfg.engine, graph="off"))
         engine = make_engine(cfg, cfg.camera, device, 1)
         engine.set_background_frames(engine.resolution.frames(bg))
-        engines[key] = (engine, depth, engine.infer(engine.resolution.frames(depth)).rho_star, [])
+        engines[key] = (engine, depth, engine.infer(engine.resolution.frames(depth)).rho_star, [], [])
     for _ in range(repeats):
-        for engine, depth, _, times in engines.values():
+        for engine, depth, _, times, lists in engines.values():
             t = time.perf_counter()
-            engine.infer(engine.resolution.frames(depth))
+            r = engine.infer(engine.resolution.frames(depth))
             times.append(time.perf_counter() - t)
-    return {key: (statistics.median(times), rho_star) for key, (_, _, rho_star, times) in engines.items()}
+            lists.append(r.timings["lists_s"])
+    return {key: (statistics.median(times), rho_star, statistics.median(lists))
+            for key, (_, _, rho_star, times, lists) in engines.items()}
 
 
 def score_scene(cfg, device, seq, n):
@@ -211,27 +218,30 @@ def score_scene(cfg, device, seq, n):
     return {k: s[k] for k in ("moda", "precision", "recall", "mean_error_m", "n_gt")}, maps
 
 
-def whole_run_marginal(repeats):
-    """Marginal per-frame time of `dpom-warp run` on the people demo with pictures on, the
-    defaults otherwise: (time for 12 frames - time for 2) / 10, medians of `repeats` runs."""
+def whole_run_marginal(repeats, name="kinect_v2"):
+    """Marginal per-frame time of `dpom-warp run` on a people scene with pictures on, the
+    defaults otherwise: (time for 12 frames - time for 2) / 10, medians of `repeats` runs
+    after an untimed round."""
     import tempfile
 
     from dpom_warp.config import load_config
     from dpom_warp.pipeline import run
 
-    cache = ".cache/bench/run12"
+    path, sets = SCENES[name]
+    cache = ".cache/bench/run12" + ("" if name == "kinect_v2" else f"_{name}")
     times = {2: [], 12: []}
-    for _ in range(repeats):
+    for i in range(repeats + 1):  # the first round renders the frames and compiles: untimed
         for n in (2, 12):
             frames = f"{cache}/frames/*.png" if n == 12 else f"{cache}/frames/000[01].png"
-            cfg = load_config("configs/demo_people.yaml", [
+            cfg = load_config(path, list(sets) + [
                 f"synthetic.cache={cache}", "synthetic.frames=12", f"input.frames={frames}",
                 f"input.background={cache}/background/*.png", "evaluation.ground_truth=null",
                 "output.images=true"])
             with tempfile.TemporaryDirectory() as out:
                 t = time.perf_counter()
                 run(cfg, out, "cpu", progress=False, log=lambda *_: None)
-                times[n].append(time.perf_counter() - t)
+                if i:
+                    times[n].append(time.perf_counter() - t)
     t2, t12 = statistics.median(times[2]), statistics.median(times[12])
     return {"two_frames_s": t2, "twelve_frames_s": t12, "marginal_per_frame_s": (t12 - t2) / 10}
 
@@ -277,6 +287,7 @@ def sweep(device, repeats, out):
 
 
 PATHS = {"fast": [], "exact": ["engine.exact=true"]}
+WHOLE_RUN_SCENES = ("kinect_v2", "kinect_v2_far")  # --whole-run: the people scenes
 REFERENCE_SCENES = ("kinect_v2", "kinect_v2_far")
 
 
@@ -291,7 +302,7 @@ def main():
     ap.add_argument("--reference", action="store_true",
                     help=f"also time the NumPy reference on {' and '.join(REFERENCE_SCENES)} (slow)")
     ap.add_argument("--whole-run", action="store_true",
-                    help="marginal per-frame time of dpom-warp run on the demo, pictures on (CPU)")
+                    help="marginal per-frame time of dpom-warp run on the people scenes given, pictures on (CPU)")
     ap.add_argument("--sweep", action="store_true", help="time against locations and resolution, with a plot")
     ap.add_argument("--output", default="runs/bench")
     a = ap.parse_args()
@@ -335,8 +346,9 @@ def main():
         # what the sparse iterations and the pruning bound contribute, at the fast path's stride:
         # every pass full, then sparse iterations without the bound
         ingredients = ingredient_times(name, fast["stride"], device, max(5, a.repeats))
-        for key, (seconds, rho_star) in ingredients.items():
+        for key, (seconds, rho_star, lists) in ingredients.items():
             fast[f"{key}_same_stride_whole_frame_s"] = seconds
+            fast[f"{key}_same_stride_lists_s"] = lists
             if key != "fast":
                 fast[f"{key}_vs_fast_max_rho_star_difference"] = float(np.abs(ingredients["fast"][1] - rho_star).max())
         fast["fast_vs_exact_max_rho_star_difference"] = float(np.abs(fast["rho_star"] - exact["rho_star"]).max())
@@ -369,6 +381,12 @@ def main():
                      f"pruned, {f['entries_after_bound']} of {f['mask_entries']} entries left); max |rho* difference| "
                      f"against every pass full {f['full_passes_vs_fast_max_rho_star_difference']:.1e}, against no bound "
                      f"{f['no_bound_vs_fast_max_rho_star_difference']:.1e} (epsilon {f['sparse_epsilon']:g}); "
+                     + (f"lists from the tile index {1000 * f['tiles_same_stride_lists_s']:.1f} ms against the "
+                        f"pixel table's {1000 * f['fast_same_stride_lists_s']:.1f} ms (whole frame "
+                        f"{1000 * f['tiles_same_stride_whole_frame_s']:.1f} ms; the same lists: max |rho* "
+                        f"difference| {f['tiles_vs_fast_max_rho_star_difference']:.0e}); " if f["mask_index"] == "table"
+                        else "lists from the tile index (facing planes: no pixel table); ")
+                     + 
                      f"fast vs exact max |rho* difference| {f['fast_vs_exact_max_rho_star_difference']:.2f} "
                      "(another resolution: judged by MODA)")
     for name, rows in result["scenes"].items():
@@ -382,9 +400,13 @@ def main():
                      f"{rows['exact']['speedup_vs_reference']:.1f}x (exact rho vs reference: max difference "
                      f"{rows['exact']['reference_max_rho_difference']:.1e})")
     if a.whole_run:
-        result["whole_run"] = w = whole_run_marginal(max(1, min(a.repeats, 3)))
-        notes.append(f"dpom-warp run, people demo, pictures on: 2 frames {w['two_frames_s']:.2f} s, 12 frames "
-                     f"{w['twelve_frames_s']:.2f} s: **{1000 * w['marginal_per_frame_s']:.0f} ms per extra frame**")
+        result["whole_run"] = {}
+        for name in [n for n in a.scenes if n in WHOLE_RUN_SCENES]:
+            result["whole_run"][name] = w = whole_run_marginal(max(1, min(a.repeats, 3)), name)
+            notes.append(f"dpom-warp run, {name}, pictures on: 2 frames {w['two_frames_s']:.2f} s, 12 frames "
+                         f"{w['twelve_frames_s']:.2f} s: **{1000 * w['marginal_per_frame_s']:.0f} ms per extra "
+                         f"frame** (fast path; the frame's inference alone: "
+                         f"{1000 * result['scenes'][name]['fast']['median_s']['whole frame']:.0f} ms above)")
     lines += [""] + notes
     if a.sweep:
         result["sweep"] = sweep(device, a.repeats, out)

@@ -585,6 +585,11 @@ class EngineSection(Node):
                                                                     "captured graph; auto: on CUDA only")
     exact: Bool = Field(False, description="the exact path: full resolution, every pass full, no warm "
                                            "start (the NumPy reference's results to 1e-6)")
+    mask_index: Literal["auto", "table", "tiles"] = Field(
+        "auto", description="the static index the mask lists are built from (the same lists): table: "
+                            "every silhouette pixel's object depth stored; tiles: image tiles, less "
+                            "memory; auto: the table with a solid where it takes <= 256 MiB and fits "
+                            "memory_gb")
 
 
 def _sd(name):
@@ -774,6 +779,7 @@ class EngineOptions:
     batch: int = 1
     graph: str = "auto"
     exact: bool = False
+    mask_index: str = "auto"
 
 
 @dataclass

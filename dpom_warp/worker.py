@@ -92,6 +92,7 @@ def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engi
     return Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel, cfg.engine.max_entries,
                   cfg.engine.memory_gb, tile=tile, batch=batch,
                   graph={"auto": None, "on": True, "off": False}[cfg.engine.graph],
+                  table={"auto": None, "table": True, "tiles": False}[cfg.engine.mask_index],
                   resolution=resolution,
                   background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
 
