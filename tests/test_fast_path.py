@@ -212,6 +212,34 @@ def test_sparse_path_within_bound_on_rendered_people(tmp_path):
         assert len(a) == len(b) > 0 and gap.min(1).max() <= cell and gap.min(0).max() <= cell
 
 
+def test_mask_index_option_gives_the_same_results(tmp_path):
+    """engine.mask_index: the run's engine takes the pixel table with a solid on auto, the
+    tiles when told (and with facing planes), and both give the same rho* on rendered people;
+    an unknown index is a one-line config error."""
+    from dpom_warp.pipeline import expand, make_engine, read_frame
+    from dpom_warp.synthetic import generate
+
+    from test_cli import small_config
+
+    cfg = load_config(small_config(tmp_path))
+    generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
+    depth = read_frame(cfg, expand(cfg.inputs.frames, "input.frames")[0])
+    results = {}
+    for index, want in [("auto", True), ("table", True), ("tiles", False)]:
+        c = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, mask_index=index))
+        engine = make_engine(c, cfg.camera, "cpu", 1)
+        assert engine.use_table == want
+        results[index] = engine.infer(engine.resolution.frames(depth))
+    assert results["auto"].entries > 1000
+    for index in ("table", "tiles"):
+        np.testing.assert_array_equal(results[index].rho_star, results["auto"].rho_star)
+    plane = dataclasses.replace(cfg, obj=dataclasses.replace(cfg.obj, shape="plane"))
+    assert not make_engine(plane, cfg.camera, "cpu", 1).use_table
+    with pytest.raises(ConfigError) as e:
+        load_config(small_config(tmp_path), ["engine.mask_index=grid"])
+    assert "engine.mask_index: expected one of auto, table, tiles, found 'grid'" in str(e.value)
+
+
 def test_warm_start_starts_from_the_previous_frame_capped_at_the_prior(device):
     geom, params, depth, bg_frames = random_scene(2)
     params = dataclasses.replace(params, warm_start=True)
