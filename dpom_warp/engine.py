@@ -302,7 +302,11 @@ class Engine:
                           inputs=[self.geo, self.pm, self.width, 1, offsets, counts] + out)
                 pixel, loc, mu, sigma, log_sigma, half = (a.numpy() for a in out)
                 mu32 = mu.astype(np.float32)
-                order = np.lexsort((loc, mu32, pixel))
+                # sorted by (pixel, mu32, loc): the pairs come location by location, so a stable
+                # sort on (pixel, mu32) keeps loc ascending among ties; a positive float32's bits
+                # sort as its value (mu > 0 here). np.lexsort of the three: ~2x slower
+                key = (pixel.astype(np.int64) << 32) | mu32.view(np.int32).astype(np.int64)
+                order = np.argsort(key, kind="stable")
                 pixel, half = pixel[order], half[order]
                 start = np.searchsorted(pixel, np.arange(self.n_pixels + 1)).astype(np.int32)
                 reach = np.zeros(self.n_pixels)
