@@ -32,6 +32,8 @@ runs the mask test of the tile path on the others, from the stored mu and s: the
 arithmetic, so the same entries, already in order (no object_depth per frame, no sorting).
 """
 
+from typing import Any
+
 import warp as wp
 
 from .pixel_model import (LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, gaussian_logpdf_from_log, is_reading,
@@ -169,15 +171,7 @@ def table_pairs(
 @wp.func
 def table_first(table: PixelTable, p: int, key: wp.float32) -> int:
     """The first pair of pixel p with mu32 >= key (binary search)."""
-    first = table.start[p]
-    last = table.start[p + 1]
-    while first < last:
-        mid = (first + last) / 2
-        if table.mu32[mid] < key:
-            first = mid + 1
-        else:
-            last = mid
-    return first
+    return lower_bound(table.mu32, table.start[p], table.start[p + 1], key)
 
 
 @wp.func
@@ -233,18 +227,21 @@ def entry_before(mu_a: wp.float32, k_a: wp.int32, mu_b: wp.float32, k_b: wp.int3
 
 
 @wp.func
-def first_pair(tiles: TileIndex, t: int, z: wp.float64) -> int:
-    """The first pair of tile t with lo >= z - span (binary search): earlier ones end before z."""
-    first = tiles.start[t]
-    last = tiles.start[t + 1]
-    key = z - tiles.span[t]
+def lower_bound(values: wp.array(dtype=Any), first: int, last: int, key: Any) -> int:
+    """The first index in [first, last) of the ascending `values` with values[i] >= key."""
     while first < last:
         mid = (first + last) / 2
-        if tiles.lo[mid] < key:
+        if values[mid] < key:
             first = mid + 1
         else:
             last = mid
     return first
+
+
+@wp.func
+def first_pair(tiles: TileIndex, t: int, z: wp.float64) -> int:
+    """The first pair of tile t with lo >= z - span (binary search): earlier ones end before z."""
+    return lower_bound(tiles.lo, tiles.start[t], tiles.start[t + 1], z - tiles.span[t])
 
 
 @wp.func

@@ -159,6 +159,33 @@ def prune_lists(
     counts[p] = e - start
 
 
+@wp.func
+def live_entries(offsets: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32),
+                 entry_loc: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32), pixels: int,
+                 done: wp.array(dtype=wp.int32), p: int) -> int:
+    """Pixel p's entries of live locations (none when its frame is done; the lists hold no
+    pruned location, so live is 0 or 1 there)."""
+    n = int(0)
+    if done[frame_of(p, pixels)] == 0:
+        start = offsets[p]
+        for j in range(start, start + counts[p]):
+            n += live[entry_loc[j]]
+    return n
+
+
+@wp.func
+def copy_live(start: int, n: int, entry_loc: wp.array(dtype=wp.int32), entry_delta: wp.array(dtype=wp.float32),
+              live: wp.array(dtype=wp.int32), e: int, live_loc: wp.array(dtype=wp.int32),
+              live_delta: wp.array(dtype=wp.float32)):
+    """The live entries of the list [start, start + n), in order, to the compact list from e."""
+    for j in range(start, start + n):
+        k = entry_loc[j]
+        if live[k] != 0:
+            live_loc[e] = k
+            live_delta[e] = entry_delta[j]
+            e += 1
+
+
 @wp.kernel(enable_backward=False)
 def compact_once(
     offsets: wp.array(dtype=wp.int32),
@@ -180,22 +207,13 @@ def compact_once(
     adds, in pixel order on one CPU thread; the sparse evidence passes then run over the
     active pixels alone, in the same order (the same sums)."""
     p = wp.tid()
-    n = int(0)
-    start = offsets[p]
-    if done[frame_of(p, pixels)] == 0:
-        for j in range(start, start + counts[p]):
-            n += live[entry_loc[j]]
+    n = live_entries(offsets, counts, entry_loc, live, pixels, done, p)
     live_counts[p] = n
     if n > 0:
         e = wp.atomic_add(totals, 1, n)
         live_offsets[p] = e
         active[wp.atomic_add(totals, 2, 1)] = p
-        for j in range(start, start + counts[p]):
-            k = entry_loc[j]
-            if live[k] != 0:
-                live_loc[e] = k
-                live_delta[e] = entry_delta[j]
-                e += 1
+        copy_live(offsets[p], counts[p], entry_loc, entry_delta, live, e, live_loc, live_delta)
 
 
 @wp.kernel(enable_backward=False)
@@ -209,12 +227,7 @@ def count_live(
     live_counts: wp.array(dtype=wp.int32),
 ):
     p = wp.tid()
-    n = int(0)
-    if done[frame_of(p, pixels)] == 0:
-        start = offsets[p]
-        for j in range(start, start + counts[p]):
-            n += live[entry_loc[j]]
-    live_counts[p] = n
+    live_counts[p] = live_entries(offsets, counts, entry_loc, live, pixels, done, p)
 
 
 @wp.kernel(enable_backward=False)
@@ -230,13 +243,5 @@ def fill_live(
     live_delta: wp.array(dtype=wp.float32),
 ):
     p = wp.tid()
-    if live_counts[p] == 0:
-        return
-    e = live_offsets[p]
-    start = offsets[p]
-    for j in range(start, start + counts[p]):
-        k = entry_loc[j]
-        if live[k] != 0:
-            live_loc[e] = k
-            live_delta[e] = entry_delta[j]
-            e += 1
+    if live_counts[p] > 0:
+        copy_live(offsets[p], counts[p], entry_loc, entry_delta, live, live_offsets[p], live_loc, live_delta)
