@@ -7,7 +7,7 @@ those whose undamped target rho_new is below epsilon, setting rho = rho_new ther
 only slows the approach to a fixed point, and a location with strongly negative evidence has
 nothing to compete for). These kernels then copy each pixel's list, in order, keeping only
 the live locations: `count_live` counts, an exclusive scan gives the offsets, `fill_live`
-copies (on the CPU, driven from the host, `compact_once` does all three and lists the pixels
+copies (driven from the host, `compact_once` does all three and lists the pixels
 with live entries, over which alone the sparse evidence passes run). The passes in between run the ordinary evidence pass on the compact lists and update
 only live locations. Frames that are done get empty compact lists.
 
@@ -202,10 +202,11 @@ def compact_once(
     active: wp.array(dtype=wp.int32),
     totals: wp.array(dtype=wp.int32),
 ):
-    """count_live, the scan and fill_live in one pass (CPU, host-driven): each pixel with live
-    entries takes its slice at totals[1] and its place in `active` at totals[2] with atomic
-    adds, in pixel order on one CPU thread; the sparse evidence passes then run over the
-    active pixels alone, in the same order (the same sums)."""
+    """count_live, the scan and fill_live in one pass (the loop driven from the host, no
+    graph): each pixel with live entries takes its slice at totals[1] and its place in
+    `active` at totals[2] with atomic adds, in pixel order on one CPU thread (in any order on
+    a GPU: each slice is still the pixel's own); the sparse evidence passes then run over the
+    active pixels alone, on the CPU in the same order as over every pixel (the same sums)."""
     p = wp.tid()
     n = live_entries(offsets, counts, entry_loc, live, pixels, done, p)
     live_counts[p] = n
