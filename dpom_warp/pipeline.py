@@ -239,7 +239,7 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
     if parallel and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers or --ray with it")
-    log("setting up the engine (tile index; Warp kernels compiled on first use, then cached) ...")
+    log("setting up the engine (mask index; Warp kernels compiled on first use, then cached) ...")
     try:
         engine = make_engine(cfg, camera, dev, cfg.engine.batch)
     except MemoryBudgetError as e:

@@ -1,6 +1,6 @@
 """The engine side of a run: the same in every process that infers frames.
 
-A FrameWorker holds one engine (geometry, tile index, compiled kernels), built once, and turns
+A FrameWorker holds one engine (geometry, mask index, compiled kernels), built once, and turns
 depth frames into FrameOutputs: the occupancy map, the picture and point-cloud files as bytes,
 and the frame's record. It runs in the run's own process, in `--workers` processes and in Ray
 actors (cluster.py); only the run's own process writes outputs (write_output), so the files
@@ -86,8 +86,8 @@ def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engi
     frames per call; it takes frames reduced by engine.resolution.frames."""
     resolution = resolution_of(cfg, camera)
     geometry = build_geometry(resolution.camera(camera), cfg.grid, cfg.obj)
-    # the tile index's tiles keep about 8 x 8 full-resolution pixels' worth of the scene
-    # (2 x 2 at stride 4: list building ~20 % faster than 8 x 8 there)
+    # the tile index's tiles (where the pixel table is not used) keep about 8 x 8 full-resolution
+    # pixels' worth of the scene (2 x 2 at stride 4: list building ~20 % faster than 8 x 8 there)
     tile = max(2, round(8 / resolution.stride))
     return Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel, cfg.engine.max_entries,
                   cfg.engine.memory_gb, tile=tile, batch=batch,

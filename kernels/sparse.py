@@ -16,8 +16,8 @@ The pruning bound, before the first pass (`bound_pass`, `update_bound`, `prune`,
 iterations can reach; a location whose bound is below epsilon can never matter and leaves
 every list for the whole frame (rho = 0, transparent), so every pass walks less from the start.
 A location left in no list is idle (`mark_idle`): it keeps its start. Driven from the host,
-the updates run over an index of the locations that can move (`gather_live`;
-`count_iteration` then counts the iteration).
+the updates run over an index of the locations that can move (`gather_live`; update_rho's first
+thread then counts the iteration, `count_iteration` when no location moves).
 """
 
 import warp as wp
@@ -55,8 +55,8 @@ def gather_live(
 
 @wp.kernel(enable_backward=False)
 def count_iteration(iteration: int, done: wp.array(dtype=wp.int32), iterations: wp.array(dtype=wp.int32)):
-    """iterations[frame] = iteration + 1 for the frames not done (update_rho does it when it
-    runs over every location)."""
+    """iterations[frame] = iteration + 1 for the frames not done, in an iteration where no
+    location moves (update_rho counts it otherwise)."""
     f = wp.tid()
     if done[f] == 0:
         iterations[f] = iteration + 1
