@@ -166,6 +166,7 @@ class Engine:
         self._last_rho = None  # the last frame's rho, for params.warm_start
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
+        self.sparse_on_lists = False  # the sparse passes walk the lists (nothing has died yet)
         self.n_kept = None  # locations neither pruned nor idle, for the full passes' updates
         self.tile, tiles_x = tile, -(-self.width // tile)
         self.n_tiles = tiles_x * -(-self.height // tile)
@@ -245,7 +246,8 @@ class Engine:
             self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.prune_lists
             self.live_count = wp.zeros(3, dtype=wp.int32)  # live locations, compact entries, active pixels
             self.active = wp.zeros(P, dtype=wp.int32)  # pixels with live entries (kernels.sparse.compact_once)
-            self.live_changed = wp.zeros(1, dtype=wp.int32)
+            self.live_changed = wp.zeros(2, dtype=wp.int32)  # live set changed, a location revived
+            self.active_next = wp.zeros(P, dtype=wp.int32)  # kernels.sparse.compact_again's output
             self.no_index = wp.zeros(0, dtype=wp.int32)
             self.reserved = wp.zeros(2, dtype=wp.int32)  # kernels.masks.pixel_entries_once
             self.no_reserved = wp.zeros(0, dtype=wp.int32)
@@ -472,10 +474,11 @@ class Engine:
         max |rho_new - rho| as max_change[frame, it]) of the frames not done. A full pass
         walks every list and updates every location; otherwise the compact lists of the live
         locations (see `compact`) and only those move (kernels.sparse)."""
-        lists = ((self.offsets, self.counts, self.entry_loc, self.entry_delta) if full else
+        full_lists = full or self.sparse_on_lists
+        lists = ((self.offsets, self.counts, self.entry_loc, self.entry_delta) if full_lists else
                  (self.live_offsets, self.live_counts, self.live_loc, self.live_delta))
         pixels, active = self.batch * self.n_pixels, self.no_index
-        if not full and self.n_active is not None:  # the pixels with live entries alone
+        if not full_lists and self.n_active is not None:  # the pixels with live entries alone
             pixels, active = self.n_active, self.active
         launch, p = self._launch, self.params
         if pixels:
@@ -554,18 +557,23 @@ class Engine:
                           self.live, self.per_location])
         wp.launch(K.mark_idle, dim=len(self.live), device=dev, inputs=[self.per_location, self.live])
 
-    def _gather(self, index, compact: bool = False) -> int:
+    def _gather(self, index, compact: str | None = None) -> int:
         """The live locations of the frames not done into `index` (kernels.sparse.gather_live);
-        returns how many (a host sync). With `compact`, the compact lists first, in one pass
-        (kernels.sparse.compact_once; n_active: the pixels with live entries, read back in the
-        same sync)."""
+        returns how many (a host sync). With `compact`, the compact lists first: "lists" from
+        the lists in one pass (kernels.sparse.compact_once), "again" from the compact lists
+        themselves (compact_again: only deaths since); n_active, the pixels with live
+        entries, is read back in the same sync."""
         self.live_count.zero_()
-        if compact:
-            dim = self.batch * self.n_pixels
-            wp.launch(K.compact_once, dim=dim, device=self.device,
+        if compact == "lists":
+            wp.launch(K.compact_once, dim=self.batch * self.n_pixels, device=self.device,
                       inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta, self.live,
                               self.n_pixels, self.done, self.live_offsets, self.live_counts,
                               self.live_loc, self.live_delta, self.active, self.live_count])
+        elif compact == "again" and self.n_active:
+            wp.launch(K.compact_again, dim=self.n_active, device=self.device,
+                      inputs=[self.active, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
+                              self.live, self.n_pixels, self.done, self.active_next, self.live_count])
+            self.active, self.active_next = self.active_next, self.active
         wp.launch(K.gather_live, dim=len(self.live), device=self.device,
                   inputs=[self.live, self.n_locations, self.done, index, self.live_count])
         counts = self.live_count.numpy()
@@ -581,10 +589,19 @@ class Engine:
         if self.graph:
             self.compact()
             return
-        if self.n_live is not None and not int(self.live_changed.numpy()[0]):
+        changed, revived = (int(x) for x in self.live_changed.numpy())
+        if self.n_live is not None and not changed:
             return  # the same live locations: the compact lists and the index still hold
         self.live_changed.zero_()
-        self.n_live = self._gather(self.live_index, compact=True)
+        if self.n_live is None and not changed and self.n_kept is not None:
+            # the first full pass killed nothing: the compact lists would be the lists, copied
+            self.sparse_on_lists = True
+            wp.copy(self.live_index, self.kept_index, count=self.n_kept)
+            self.n_live = self.n_kept
+            return
+        again = self.n_live is not None and not revived and not self.sparse_on_lists
+        self.sparse_on_lists = False
+        self.n_live = self._gather(self.live_index, compact="again" if again else "lists")
 
     def _check(self, it: int):
         self._launch(K.check_converged, self.batch, [it, self.params.tolerance, self.max_change, self.done])
@@ -595,7 +612,8 @@ class Engine:
         sparse iterations the checked iterations are full passes, so a frame stops only when
         a pass over every location has found nothing to revive."""
         p = self.params
-        full, self.n_live, self.n_active = True, None, None
+        full, self.n_live, self.n_active, self.sparse_on_lists = True, None, None, False
+        self.live_changed.zero_()
         for it in range(p.max_iterations):
             was_full, full = full, p.full_pass(it)
             if not full and was_full:

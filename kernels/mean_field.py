@@ -131,7 +131,8 @@ def update_rho(
     Sparse iterations (kernels.sparse): after a full pass (`full` = 1, the evidence of every
     location) a location whose rho and rho_new are both below `epsilon` is marked dead
     (live = 0), any other live, and changed[0] = 1 where that differs from before; after a
-    pass over the compact lists (`full` = 0) only live locations move. With epsilon = 0 and
+    pass over the compact lists (`full` = 0) only live locations move; changed[1] = 1 where a
+    dead location comes back to life. With epsilon = 0 and
     every pass full this is the exact damped update.
 
     Per-location damping (ModelParams.damping_streak, `streak_growth` > 1): streak[i] is the
@@ -172,6 +173,8 @@ def update_rho(
         now = 0
     if now != live[i]:
         changed[0] = 1
+        if now == 1:
+            changed[1] = 1  # revived (kernels.sparse.compact_again needs none)
     live[i] = now
 
 

@@ -218,6 +218,38 @@ def compact_once(
 
 
 @wp.kernel(enable_backward=False)
+def compact_again(
+    active: wp.array(dtype=wp.int32),
+    live_offsets: wp.array(dtype=wp.int32),
+    live_counts: wp.array(dtype=wp.int32),
+    live_loc: wp.array(dtype=wp.int32),
+    live_delta: wp.array(dtype=wp.float32),
+    live: wp.array(dtype=wp.int32),
+    pixels: int,
+    done: wp.array(dtype=wp.int32),
+    active_out: wp.array(dtype=wp.int32),
+    totals: wp.array(dtype=wp.int32),
+):
+    """compact_once from the compact lists themselves, when the full pass since they were made
+    only killed locations (none revived: every live one is still in them): each active pixel's
+    compact list loses its dead entries in place, in order, and the pixels still holding some
+    go to active_out at totals[2] (in order on one CPU thread)."""
+    p = active[wp.tid()]
+    start = live_offsets[p]
+    e = start
+    if done[frame_of(p, pixels)] == 0:
+        for j in range(start, start + live_counts[p]):
+            k = live_loc[j]
+            if live[k] != 0:
+                live_loc[e] = k
+                live_delta[e] = live_delta[j]
+                e += 1
+    live_counts[p] = e - start
+    if e > start:
+        active_out[wp.atomic_add(totals, 2, 1)] = p
+
+
+@wp.kernel(enable_backward=False)
 def count_live(
     offsets: wp.array(dtype=wp.int32),
     counts: wp.array(dtype=wp.int32),
