@@ -176,14 +176,16 @@ def live_entries(offsets: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.in
 @wp.func
 def copy_live(start: int, n: int, entry_loc: wp.array(dtype=wp.int32), entry_delta: wp.array(dtype=wp.float32),
               live: wp.array(dtype=wp.int32), e: int, live_loc: wp.array(dtype=wp.int32),
-              live_delta: wp.array(dtype=wp.float32)):
-    """The live entries of the list [start, start + n), in order, to the compact list from e."""
+              live_delta: wp.array(dtype=wp.float32)) -> int:
+    """The live entries of the list [start, start + n), in order, to the compact list from e
+    (in place when the arrays are the same and e <= start); returns where they end."""
     for j in range(start, start + n):
         k = entry_loc[j]
         if live[k] != 0:
             live_loc[e] = k
             live_delta[e] = entry_delta[j]
             e += 1
+    return e
 
 
 @wp.kernel(enable_backward=False)
@@ -238,12 +240,7 @@ def compact_again(
     start = live_offsets[p]
     e = start
     if done[frame_of(p, pixels)] == 0:
-        for j in range(start, start + live_counts[p]):
-            k = live_loc[j]
-            if live[k] != 0:
-                live_loc[e] = k
-                live_delta[e] = live_delta[j]
-                e += 1
+        e = copy_live(start, live_counts[p], live_loc, live_delta, live, start, live_loc, live_delta)
     live_counts[p] = e - start
     if e > start:
         active_out[wp.atomic_add(totals, 2, 1)] = p
