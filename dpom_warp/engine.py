@@ -284,25 +284,25 @@ class Engine:
         return t
 
     def _pixel_table(self, use: bool) -> K.PixelTable:
-        """The pixel table (kernels.masks; empty unless `use`): each location's pairs counted
-        and written by table_pairs, then sorted per pixel by (float32 mu, location)."""
+        """The pixel table (kernels.masks; empty unless `use`): each location's pairs written
+        by table_pairs into room for its rectangle's area, gathered, then sorted per pixel by
+        (float32 mu, location)."""
         t = K.PixelTable()
         t.use, t.width = int(use), self.width
         n = 0
         with wp.ScopedDevice(self.device):
             if use and self.n_locations:
+                room = self.geometry.rect_area.astype(np.int64)  # at most a pair per pixel
+                first = np.concatenate([[0], np.cumsum(room)[:-1]])
                 counts = wp.zeros(self.n_locations, dtype=wp.int32)
-                offsets = wp.zeros(self.n_locations, dtype=wp.int32)
+                out = [wp.zeros(int(room.sum()), dtype=d)
+                       for d in (wp.int32, wp.int32, wp.float64, wp.float64, wp.float64, wp.float32)]
                 wp.launch(K.table_pairs, dim=self.n_locations,
-                          inputs=[self.geo, self.pm, self.width, 0, offsets, counts] + [None] * 6)
+                          inputs=[self.geo, self.pm, self.width, wp.array(first.astype(np.int32)), counts] + out)
                 c = counts.numpy()
                 n = int(c.sum())
-                offsets.assign(np.concatenate([[0], np.cumsum(c)[:-1]]).astype(np.int32))
-                out = [wp.zeros(n, dtype=d) for d in (wp.int32, wp.int32, wp.float64, wp.float64, wp.float64,
-                                                       wp.float32)]
-                wp.launch(K.table_pairs, dim=self.n_locations,
-                          inputs=[self.geo, self.pm, self.width, 1, offsets, counts] + out)
-                pixel, loc, mu, sigma, log_sigma, half = (a.numpy() for a in out)
+                written = np.repeat(first, c) + (np.arange(n) - np.repeat(np.cumsum(c) - c, c))
+                pixel, loc, mu, sigma, log_sigma, half = (a.numpy()[written] for a in out)
                 mu32 = mu.astype(np.float32)
                 # sorted by (pixel, mu32, loc): the pairs come location by location, so a stable
                 # sort on (pixel, mu32) keeps loc ascending among ties; a positive float32's bits

@@ -88,6 +88,17 @@ def test_half_width(pm: PixelModel, s: wp.float64) -> wp.float64:
     return f64(0.0)
 
 
+@wp.func
+def pixel_reach(geo: GeometryArrays, pm: PixelModel, k: int, d: wp.vec3d) -> wp.vec3d:
+    """(mu, s, W) of location k at the pixel of ray d: its object depth, object sigma and the
+    mask test's half-width there; W = 0 where no reading can pass (mu <= 0: not the object's)."""
+    o = object_depth(geo, k, d)
+    if o[0] > f64(0.0):
+        s = object_sigma(pm, o[0], o[1])
+        return wp.vec3d(o[0], s, test_half_width(pm, s))
+    return wp.vec3d(o[0], f64(0.0), f64(0.0))
+
+
 @wp.kernel(enable_backward=False)
 def pair_depth_bounds(
     geo: GeometryArrays,
@@ -112,13 +123,10 @@ def pair_depth_bounds(
     hi_max = -EMPTY
     for v in range(v0, v1 + 1):
         for u in range(u0, u1 + 1):
-            o = object_depth(geo, k, geo.rays[v, u])
-            mu = o[0]
-            if mu > f64(0.0):
-                w = test_half_width(pm, object_sigma(pm, mu, o[1]))
-                if w > f64(0.0):
-                    lo_min = wp.min(lo_min, mu - w)
-                    hi_max = wp.max(hi_max, mu + w)
+            m = pixel_reach(geo, pm, k, geo.rays[v, u])
+            if m[2] > f64(0.0):
+                lo_min = wp.min(lo_min, m[0] - m[2])
+                hi_max = wp.max(hi_max, m[0] + m[2])
     lo[i] = EMPTY
     hi[i] = -EMPTY
     if lo_min < EMPTY:
@@ -132,7 +140,6 @@ def table_pairs(
     geo: GeometryArrays,
     pm: PixelModel,
     width: int,
-    fill: int,
     offsets: wp.array(dtype=wp.int32),
     counts: wp.array(dtype=wp.int32),
     pixel: wp.array(dtype=wp.int32),
@@ -142,30 +149,25 @@ def table_pairs(
     log_sigma: wp.array(dtype=wp.float64),
     half: wp.array(dtype=wp.float32),
 ):
-    """The pixel table's pairs of location k, scanned over its silhouette rectangle: their
-    count (fill 0), or the pairs written from offsets[k] in scan order (fill 1)."""
+    """The pixel table's pairs of location k, scanned over its silhouette rectangle, written
+    in scan order from offsets[k] (room for the rectangle's area); counts[k]: how many."""
     k = wp.tid()
     r = geo.rect[k]
     n = int(0)
     for v in range(r[1], r[3] + 1):
         for u in range(r[0], r[2] + 1):
-            o = object_depth(geo, k, geo.rays[v, u])
-            if o[0] > f64(0.0):
-                s = object_sigma(pm, o[0], o[1])
-                w = test_half_width(pm, s)
-                if w > f64(0.0):
-                    if fill == 1:
-                        e = offsets[k] + n
-                        pixel[e] = v * width + u
-                        loc[e] = k
-                        mu[e] = o[0]
-                        sigma[e] = s
-                        log_sigma[e] = wp.log(s)
-                        # rounded up past float32's rounding and the square roots' last bits
-                        half[e] = wp.float32(w * f64(1.00001) + f64(1.0e-6) * (f64(1.0) + o[0]))
-                    n += 1
-    if fill == 0:
-        counts[k] = n
+            m = pixel_reach(geo, pm, k, geo.rays[v, u])
+            if m[2] > f64(0.0):
+                e = offsets[k] + n
+                pixel[e] = v * width + u
+                loc[e] = k
+                mu[e] = m[0]
+                sigma[e] = m[1]
+                log_sigma[e] = wp.log(m[1])
+                # rounded up past float32's rounding and the square roots' last bits
+                half[e] = wp.float32(m[2] * f64(1.00001) + f64(1.0e-6) * (f64(1.0) + m[0]))
+                n += 1
+    counts[k] = n
 
 
 @wp.func
