@@ -21,8 +21,9 @@ Whole frames are timed three ways: the iteration loop driven from Python (a host
 check_every iterations), the loop replayed as a captured graph (no host sync), and `--batch`
 different frames of the scene in one engine call (time per frame = batch time / batch).
 --whole-run times `dpom-warp run` with pictures on kinect_v2 and kinect_v2_far (32 frames against
-2: the marginal frame; the engine's setup, ~2 s and noisy, cancels). --sweep also times whole frames against the number of locations (grid
-step) and the image resolution on kinect_v2, and plots both.
+2: the marginal frame; the engine's setup, ~2 s and noisy, cancels). --sweep also times whole
+frames against the number of locations (grid step) and the image resolution on kinect_v2, and
+plots both.
 """
 
 from __future__ import annotations
@@ -165,17 +166,20 @@ INGREDIENTS = {"full_passes": ["model.sparse_epsilon=0"], "no_bound": ["model.bo
                "tiles": ["engine.mask_index=tiles"], "fast": []}
 
 
-def ingredient_times(name, stride, device, repeats):
+def ingredient_times(name, stride, device, repeats, table=True):
     """{ingredient: (median whole-frame seconds, rho*, median lists seconds)} at the fast
     path's stride: every pass full, sparse iterations without the pruning bound, the lists
-    from the tile index instead of the pixel table, and the fast path; the engines are timed
-    in turn, `repeats` rounds, so each median sees the same machine."""
+    from the tile index instead of the pixel table (only where the fast path has a `table`),
+    and the fast path; the engines are timed in turn, `repeats` rounds, so each median sees
+    the same machine."""
     import dataclasses as dc
 
     from dpom_warp.pipeline import make_engine
 
     engines = {}
     for key, sets in INGREDIENTS.items():
+        if key == "tiles" and not table:  # the fast path's lists come from the tiles already
+            continue
         cfg, depth, bg = load_scene(name, [f"input.stride={stride}"] + sets)
         cfg = dc.replace(cfg, engine=dc.replace(cfg.engine, graph="off"))
         engine = make_engine(cfg, cfg.camera, device, 1)
@@ -224,8 +228,7 @@ LONG_RUN = 32  # whole_run_marginal: frames of the long run
 def whole_run_marginal(repeats, name="kinect_v2"):
     """Marginal per-frame time of `dpom-warp run` on a people scene with pictures on, the
     defaults otherwise: (time for LONG_RUN frames - time for 2) / (LONG_RUN - 2), medians of
-    `repeats` runs
-    after an untimed round."""
+    `repeats` runs after an untimed round."""
     import tempfile
 
     from dpom_warp.config import load_config
@@ -350,7 +353,8 @@ def main():
         fast, exact = rows["fast"], rows["exact"]
         # what the sparse iterations and the pruning bound contribute, at the fast path's stride:
         # every pass full, then sparse iterations without the bound
-        ingredients = ingredient_times(name, fast["stride"], device, max(5, a.repeats))
+        ingredients = ingredient_times(name, fast["stride"], device, max(5, a.repeats),
+                                       table=fast["mask_index"] == "table")
         for key, (seconds, rho_star, lists) in ingredients.items():
             fast[f"{key}_same_stride_whole_frame_s"] = seconds
             fast[f"{key}_same_stride_lists_s"] = lists

@@ -7,9 +7,10 @@ those whose undamped target rho_new is below epsilon, setting rho = rho_new ther
 only slows the approach to a fixed point, and a location with strongly negative evidence has
 nothing to compete for). These kernels then copy each pixel's list, in order, keeping only
 the live locations: `count_live` counts, an exclusive scan gives the offsets, `fill_live`
-copies (driven from the host, `compact_once` does all three and lists the pixels
-with live entries, over which alone the sparse evidence passes run). The passes in between run the ordinary evidence pass on the compact lists and update
-only live locations. Frames that are done get empty compact lists.
+copies (driven from the host, `compact_once` does all three and lists the pixels with live
+entries, over which alone the sparse evidence passes run; `compact_again` shrinks the compact
+lists in place when only deaths happened since). The passes in between run the ordinary
+evidence pass on the compact lists and update only live locations. Frames that are done get empty compact lists.
 
 The pruning bound, before the first pass (`bound_pass`, `update_bound`, `prune`,
 `prune_lists`): a few rounds bound every location's rho_new from above over every state the
