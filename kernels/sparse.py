@@ -3,9 +3,9 @@
 A location with rho = 0 is transparent (MODEL.md): it multiplies T by 1 and adds nothing to B,
 so leaving it out of every list leaves the other locations' evidence unchanged. A full pass
 (every check_every iterations, and the first and last) updates every location and marks dead
-those whose undamped target rho_new is below epsilon, setting rho = rho_new there (damping
-only slows the approach to a fixed point, and a location with strongly negative evidence has
-nothing to compete for). These kernels then copy each pixel's list, in order, keeping only
+those whose rho and undamped target rho_new are both below epsilon (kernels.mean_field
+update_rho; a dead location's rho still moves at every full pass, and it comes back to life
+when either rises above epsilon). These kernels then copy each pixel's list, in order, keeping only
 the live locations: `count_live` counts, an exclusive scan gives the offsets, `fill_live`
 copies (driven from the host, `compact_once` does all three and lists the pixels with live
 entries, over which alone the sparse evidence passes run; `compact_again` shrinks the compact
