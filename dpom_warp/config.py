@@ -493,6 +493,19 @@ class ModelSection(Node):
     exclusion_radius: Num = Field(_d(ModelParams, "exclusion_radius"), gt=0, description="metres")
     exclusion_gate: Num = Field(_d(ModelParams, "exclusion_gate"), ge=0, lt=1,
                                 description="neighbours' rho above it count")
+    behind_cost: Num | None = Field(None, ge=0,
+                                    description=f"evidence a location loses per pixel of its silhouette's "
+                                                f"core that reads behind its object (README, How it works); "
+                                                f"default {_d(ModelParams, 'behind_cost'):g} on ground grids, "
+                                                f"0 (off: the paper, such pixels say nothing) in voxel mode")
+    behind_side: Num = Field(_d(ModelParams, "behind_side"), ge=0, lt=0.5,
+                             description="share of each silhouette row left out at either end")
+    behind_low: Num = Field(_d(ModelParams, "behind_low"), ge=0, le=1,
+                            description="pixels whose object point lies below behind_low x the height "
+                                        "are left out (ground grids)")
+    behind_step: int = Field(_d(ModelParams, "behind_step"), ge=1,
+                             description="counted on every behind_step-th row and column, each pixel "
+                                         "standing for behind_step^2")
 
     @model_validator(mode="after")
     def _checks(self):
@@ -889,7 +902,9 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     m = c.model
     damping_max = m.damping_max if m.damping_max is not None else max(_d(ModelParams, "damping_max"), m.damping)
     exclusion = m.exclusion if m.exclusion is not None else (_d(ModelParams, "exclusion") if c.grid.mode == "ground" else 0.0)
-    model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion)
+    behind_cost = (m.behind_cost if m.behind_cost is not None else
+                   (_d(ModelParams, "behind_cost") if c.grid.mode == "ground" else 0.0))
+    model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost)
     detection = _fill(Detection, c.detection)
     evaluation = _fill(Evaluation, c.evaluation)
     output = _fill(Output, c.output)

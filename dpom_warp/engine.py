@@ -239,6 +239,7 @@ class Engine:
             self.iterations = wp.zeros(batch, dtype=wp.int32)
             self.live = wp.ones(L, dtype=wp.int32)
             self.streak = wp.zeros(L, dtype=wp.int32)  # per-location damping runs (update_rho)
+            self.n_behind = wp.zeros(L, dtype=wp.int32)  # silhouette pixels read behind (behind_count)
             self.live_counts = wp.zeros(P, dtype=wp.int32)
             self.live_offsets = wp.zeros(P, dtype=wp.int32)
             self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
@@ -500,7 +501,7 @@ class Engine:
         launch(K.update_rho, dim, [logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
                                    self.done, self.max_change, self.iterations, int(full), p.sparse_epsilon,
                                    self.live, index, self.live_changed, self.streak, p.damping_streak,
-                                   p.damping_streak_max])
+                                   p.damping_streak_max, p.behind_cost, self.n_behind])
 
     def _launch(self, kernel, dim: int, inputs: list):
         """wp.launch of one of the iteration's kernels, recorded at its first launch and replayed
@@ -672,6 +673,11 @@ class Engine:
             self.prune(logit_prior)
             if not self.graph:  # full passes update all but the pruned and idle ones
                 self.n_kept = self._gather(self.kept_index)
+        if p.behind_cost > 0:  # what the lists leave out: readings behind each moving location
+            low = p.behind_low * self.geometry.height if self.geometry.height > 0 else -BAND_ALL
+            wp.launch(K.behind_count, dim=len(self.live), device=dev,
+                      inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]), p.behind_side,
+                              low, p.behind_step, self.live, self.n_behind])
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()

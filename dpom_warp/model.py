@@ -104,6 +104,19 @@ class ModelParams:
             tuning draw's close neighbours on the fast path (README); 0: off (the paper's
             independent prior).
         exclusion_radius, exclusion_gate: see exclusion.
+        behind_cost: evidence a location loses for each pixel of its silhouette's core whose
+            reading lies behind its object beyond the mask test (kernels.mean_field
+            behind_count): were the object there, it would hide that reading. MODEL.md's
+            masks leave such pixels out, so a cell whose solid half covers a person and half
+            the room behind was as good as the person's own; the count does not depend on
+            the other locations (a nearer object can only make a reading nearer), so it is
+            counted once a frame. The core leaves out, in each image row of the silhouette,
+            behind_side of the row's run at each end (arms, a body narrower than the solid)
+            and the object points below behind_low x the height (the gap between the legs).
+            Counted on the pixels whose row and column are multiples of behind_step, each
+            standing for behind_step^2 pixels (a quarter of the work with 2).
+            3 on the tuning draw (README, How it works); 0: off (the paper).
+        behind_side, behind_low, behind_step: see behind_cost.
     """
 
     prior: float = 0.01
@@ -140,6 +153,10 @@ class ModelParams:
     exclusion: float = 10.0
     exclusion_radius: float = 0.45
     exclusion_gate: float = 0.5
+    behind_cost: float = 3.0
+    behind_side: float = 0.2
+    behind_low: float = 0.45
+    behind_step: int = 2
 
     def full_pass(self, iteration: int) -> bool:
         """Whether iteration `iteration` (0-based) is a full pass: always on the exact path;

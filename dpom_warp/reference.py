@@ -323,6 +323,8 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     if params.sparse_epsilon > 0:  # in no list (idle): rho_new is the prior; left at its start
         kept = kept & (np.bincount(L[valid], minlength=K) > 0)
     live = kept.copy()
+    # readings behind each moving location (its core), the evidence the lists leave out
+    behind = params.behind_cost * behind_count(depth_m, geom, params, kept) if params.behind_cost > 0 else 0.0
     if params.exclusion > 0:  # each location's neighbours within exclusion_radius
         start, neighbours = neighbour_lists(geom.locations, params.exclusion_radius)
         owner = np.repeat(np.arange(K), np.diff(start))
@@ -345,7 +347,7 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
             over = np.maximum(rho - params.exclusion_gate, 0.0) / (1.0 - params.exclusion_gate)
             # (not in place: bincount of an empty selection is an integer array)
             evidence = evidence - params.exclusion * np.bincount(owner, weights=over[neighbours], minlength=K)
-        rho_new = sigmoid(logit_prior + evidence)
+        rho_new = sigmoid(logit_prior + evidence - behind)
         if trace is not None:
             trace.append(rho_new)
         moving = kept if full else live
@@ -426,3 +428,37 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
         against[k] = np.sum(band & ~passes & (z > mu))
         hidden[k] = np.sum(band & ~passes & (z <= mu))
     return support, against, hidden, seen
+
+
+def behind_count(depth_m, geom: Geometry, params: ModelParams, which):
+    """For each location in `which` (bool (K,)), its silhouette pixels whose reading lies
+    behind its object beyond the mask test (z > mu_ki and not in M_k: the object would hide
+    them), counted in its core on the pixels whose row and column are multiples of
+    behind_step (each standing for behind_step^2): in each such row the lattice pixels whose
+    rays hit the solid run from column a to b, and those before a + behind_side (b - a) or
+    after b - behind_side (b - a) are left out, as are object points below behind_low x the
+    height (ground grids; kernels.mean_field.behind_count). Returns (K,) int64."""
+    n = np.zeros(len(geom.rect), np.int64)
+    z_img = np.asarray(depth_m, dtype=np.float64)
+    low = params.behind_low * geom.height if geom.height > 0 else -BAND_ALL
+    for k in np.flatnonzero(which):
+        sil = silhouette(z_img, geom, k, params)
+        if sil is None:
+            continue
+        (v0, u0), rays, z, mu, inlier = sil
+        s = params.behind_step  # the lattice: absolute rows and columns that are multiples of s
+        rs, cs = slice((-v0) % s, None, s), slice((-u0) % s, None, s)
+        rays, z, mu, inlier = rays[rs, cs], z[rs, cs], mu[rs, cs], inlier[rs, cs]
+        if mu.size == 0:
+            continue
+        cols = u0 + np.arange((-u0) % s, (-u0) % s + mu.shape[1] * s, s).astype(np.float64)
+        hit = mu > 0
+        rows = hit.any(axis=1)
+        first = cols[np.argmax(hit, axis=1)]
+        last = cols[hit.shape[1] - 1 - np.argmax(hit[:, ::-1], axis=1)]
+        trim = params.behind_side * (last - first)
+        core = (cols >= (first + trim)[:, None]) & (cols <= (last - trim)[:, None]) & rows[:, None] & hit
+        h = geom.centre[2] + mu * rays[..., 2]
+        behind = valid_reading(z, params) & ~(inlier > log_outlier(params)) & (z > mu)
+        n[k] = s * s * np.sum(core & (h >= low) & behind)
+    return n

@@ -121,8 +121,12 @@ def update_rho(
     streak: wp.array(dtype=wp.int32),
     streak_growth: wp.float64,
     streak_cap: wp.float64,
+    behind_cost: wp.float64,
+    behind: wp.array(dtype=wp.int32),
 ):
-    """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence); clears the evidence;
+    """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence - behind_cost x
+    behind), behind[i] the location's silhouette pixels that read behind its object (kernels
+    behind_count; the evidence they give, which the lists leave out); clears the evidence;
     max_change[frame, iteration] = max |rho_new - rho|; iterations[frame] counts the updates.
     One thread per location of the batch, skipping frames that are done; with a non-empty
     `index`, one thread per location it names (a sparse pass's live ones: kernels.sparse
@@ -154,7 +158,7 @@ def update_rho(
         iterations[f] = iteration + 1
     if not moves(live[i], full):  # pruned or idle (kernels.sparse); dead in a sparse pass
         return
-    rho_new = sigmoid(logit_prior + evidence[i])
+    rho_new = sigmoid(logit_prior + evidence[i] - behind_cost * f64(behind[i]))
     wp.atomic_max(max_change, f, iteration, wp.abs(rho_new - rho[i]))
     evidence[i] = f64(0.0)
     lam = damping
@@ -245,6 +249,84 @@ def transparency_pass(
         t = t * (f64(1.0) - rho[k])
 
 
+SUPPORTS = wp.constant(0)
+BEHIND = wp.constant(1)
+IN_FRONT = wp.constant(2)
+
+
+@wp.func
+def reading_class(pm: PixelModel, z: wp.float64, mu: wp.float64, var: wp.float64,
+                  support_sigmas: wp.float64) -> int:
+    """What reading z says of an object at depth mu (its extra variance var) in the pixel:
+    SUPPORTS (it passes the mask test, or with support_sigmas > 0 lies within that many sigma),
+    else BEHIND (z > mu: the object would hide it) or IN_FRONT (hidden by something nearer);
+    -1 for no reading."""
+    if not is_reading(pm, z):
+        return -1
+    passes = False
+    if support_sigmas > f64(0.0):
+        passes = wp.abs(z - mu) <= support_sigmas * object_sigma(pm, mu, var)
+    else:
+        passes = object_log_inlier(pm, z, mu, var) > pm.log_outlier
+    if passes:
+        return SUPPORTS
+    if z > mu:
+        return BEHIND
+    return IN_FRONT
+
+
+@wp.kernel(enable_backward=False)
+def behind_count(
+    depth: wp.array3d(dtype=wp.float32),
+    geo: GeometryArrays,
+    pm: PixelModel,
+    centre_z: wp.float64,
+    side: wp.float64,
+    low: wp.float64,
+    step: int,
+    live: wp.array(dtype=wp.int32),
+    behind: wp.array(dtype=wp.int32),
+):
+    """behind[i]: the pixels of location i's silhouette (its solid's projection) whose reading
+    lies behind its object beyond the mask test (reading_class BEHIND: were the object there it
+    would hide them), counted in its core on the lattice of pixels whose row and column are
+    multiples of `step`, each standing for step^2 pixels: in each lattice row, the lattice
+    pixels whose rays hit the solid run from column a to b, and the `side` share of that run
+    at each end is left out (arms, a narrower body than the solid), as are object points below
+    height `low` (the gap between the legs). One thread per location of the batch; 0 for the
+    locations that do not move in the frame (live < 0: pruned or idle, kernels.sparse)."""
+    i = wp.tid()
+    n_loc = geo.rect.shape[0]
+    b = i / n_loc
+    k = i - b * n_loc
+    n = int(0)
+    if live[i] >= 0:
+        r = geo.rect[k]
+        u0 = (r[0] + step - 1) / step * step  # the first lattice column and row in the rectangle
+        v0 = (r[1] + step - 1) / step * step
+        for v in range(v0, r[3] + 1, step):
+            first = int(-1)
+            for u in range(u0, r[2] + 1, step):
+                if object_depth(geo, k, geo.rays[v, u])[0] > f64(0.0):
+                    first = u
+                    break
+            last = int(-1)
+            if first >= 0:
+                for u in range(r[2] / step * step, first - 1, -step):
+                    if object_depth(geo, k, geo.rays[v, u])[0] > f64(0.0):
+                        last = u
+                        break
+                trim = side * f64(last - first)
+                for u in range(first, last + 1, step):
+                    if f64(u) >= f64(first) + trim and f64(u) <= f64(last) - trim:
+                        d = geo.rays[v, u]
+                        o = object_depth(geo, k, d)
+                        if o[0] > f64(0.0) and centre_z + o[0] * d[2] >= low:
+                            if reading_class(pm, f64(depth[b, v, u]), o[0], o[1], f64(0.0)) == BEHIND:
+                                n += step * step
+    behind[i] = n
+
+
 @wp.kernel(enable_backward=False)
 def top_band(
     depth: wp.array3d(dtype=wp.float32),
@@ -288,18 +370,13 @@ def top_band(
                     z = f64(depth[b, v, u])
                     if h >= lo and h <= hi:
                         n += 1
-                        if is_reading(pm, z):
-                            passes = False
-                            if support_sigmas > f64(0.0):
-                                passes = wp.abs(z - mu) <= support_sigmas * object_sigma(pm, mu, o[1])
-                            else:
-                                passes = object_log_inlier(pm, z, mu, o[1]) > pm.log_outlier
-                            if passes:
-                                s += 1
-                            elif z > mu:
-                                a += 1
-                            else:
-                                f += 1
+                        c = reading_class(pm, z, mu, o[1], support_sigmas)
+                        if c == SUPPORTS:
+                            s += 1
+                        elif c == BEHIND:
+                            a += 1
+                        elif c == IN_FRONT:
+                            f += 1
     support[i] = s
     against[i] = a
     hidden[i] = f

@@ -305,3 +305,33 @@ def test_neighbour_lists_are_the_locations_within_the_radius():
         np.testing.assert_array_equal(nbrs[start[k]:start[k + 1]], want)
     start, _ = neighbour_lists(locs, 0.0)
     assert start.shape == (61,) and not start.any()
+
+
+@pytest.mark.parametrize("path", ["exact", "sparse", "graph"])
+@pytest.mark.parametrize("shape", ["plane", "solid"])
+@pytest.mark.parametrize("seed", range(3))
+def test_behind_cost_matches_reference(device, seed, shape, path):
+    """model.behind_cost (each location loses evidence for the pixels of its silhouette's core
+    that read behind its object) on the Warp path equals the reference: the counts of every
+    location that moves, and rho / rho* after the iterations; the location with the most
+    such readings gets a lower first update than without the cost."""
+    geom, params, depth, bg_frames = random_scene(seed, shape=shape)
+    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4, behind_cost=3.0,
+                                 behind_side=0.2, behind_low=0.3, behind_step=1 + seed % 2)
+    engine = Engine(geom, params, device, graph=path == "graph")
+    engine.set_background_frames(bg_frames)
+    bg = ref.background_from_frames(bg_frames, params)
+    want = ref.mean_field(depth, geom, bg, params)
+    got = engine.infer(depth)
+    moving = engine.live.numpy() >= 0
+    counts = ref.behind_count(depth, geom, params, moving)
+    np.testing.assert_array_equal(engine.n_behind.numpy()[moving], counts[moving])
+    assert counts.max() > 0, "no reading behind any location: the count is not exercised"
+    assert got.iterations == want["iterations"]
+    np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    first, first_plain = [], []  # each iteration's rho_new: the first from the same start
+    ref.mean_field(depth, geom, bg, params, trace=first)
+    ref.mean_field(depth, geom, bg, dataclasses.replace(params, behind_cost=0.0), trace=first_plain)
+    k = int(np.argmax(np.where(moving, counts, -1)))
+    assert first[0][k] < first_plain[0][k], "the location with the most readings behind it lost nothing"
