@@ -496,13 +496,16 @@ class ModelSection(Node):
     behind_cost: Num | None = Field(None, ge=0,
                                     description=f"evidence a location loses per pixel of its silhouette's "
                                                 f"core that reads behind its object (README, How it works); "
-                                                f"default {_d(ModelParams, 'behind_cost'):g} on ground grids, "
-                                                f"0 (off: the paper, such pixels say nothing) in voxel mode")
+                                                f"default {_d(ModelParams, 'behind_cost'):g} with the solid on "
+                                                f"ground grids, else 0 (off: the paper, such pixels say nothing)")
     behind_side: Num = Field(_d(ModelParams, "behind_side"), ge=0, lt=0.5,
                              description="share of each silhouette row left out at either end")
     behind_low: Num = Field(_d(ModelParams, "behind_low"), ge=0, le=1,
                             description="pixels whose object point lies below behind_low x the height "
                                         "are left out (ground grids)")
+    behind_high: Num = Field(_d(ModelParams, "behind_high"), ge=0, le=1,
+                             description="pixels whose object point lies above behind_high x the height "
+                                         "are left out (ground grids)")
     behind_step: int = Field(_d(ModelParams, "behind_step"), ge=1,
                              description="counted on every behind_step-th row and column, each pixel "
                                          "standing for behind_step^2")
@@ -902,8 +905,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     m = c.model
     damping_max = m.damping_max if m.damping_max is not None else max(_d(ModelParams, "damping_max"), m.damping)
     exclusion = m.exclusion if m.exclusion is not None else (_d(ModelParams, "exclusion") if c.grid.mode == "ground" else 0.0)
-    behind_cost = (m.behind_cost if m.behind_cost is not None else
-                   (_d(ModelParams, "behind_cost") if c.grid.mode == "ground" else 0.0))
+    behind_cost = (m.behind_cost if m.behind_cost is not None else  # the core is the solid's
+                   (_d(ModelParams, "behind_cost") if c.grid.mode == "ground" and c.object.shape == "solid" else 0.0))
     model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost)
     detection = _fill(Detection, c.detection)
     evaluation = _fill(Evaluation, c.evaluation)

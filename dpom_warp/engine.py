@@ -674,10 +674,11 @@ class Engine:
             if not self.graph:  # full passes update all but the pruned and idle ones
                 self.n_kept = self._gather(self.kept_index)
         if p.behind_cost > 0:  # what the lists leave out: readings behind each moving location
-            low = p.behind_low * self.geometry.height if self.geometry.height > 0 else -BAND_ALL
+            h = self.geometry.height
+            low, high = (p.behind_low * h, p.behind_high * h) if h > 0 else (-BAND_ALL, BAND_ALL)
             wp.launch(K.behind_count, dim=len(self.live), device=dev,
                       inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]), p.behind_side,
-                              low, p.behind_step, self.live, self.n_behind])
+                              low, high, p.behind_step, self.live, self.n_behind])
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()

@@ -112,11 +112,13 @@ class ModelParams:
             the other locations (a nearer object can only make a reading nearer), so it is
             counted once a frame. The core leaves out, in each image row of the silhouette,
             behind_side of the row's run at each end (arms, a body narrower than the solid)
-            and the object points below behind_low x the height (the gap between the legs).
-            Counted on the pixels whose row and column are multiples of behind_step, each
-            standing for behind_step^2 pixels (a quarter of the work with 2).
-            3 on the tuning draw (README, How it works); 0: off (the paper).
-        behind_side, behind_low, behind_step: see behind_cost.
+            and the object points below behind_low x the height (the gap between the legs) or
+            above behind_high x the height (heads: people shorter than the solid read behind
+            its top; 0.85 x 1.8 m is below the shortest rendered person's head). Counted on the
+            pixels whose row and column are multiples of behind_step, each standing for
+            behind_step^2 pixels (a quarter of the work with 2). 2 with 0.85 on the tuning
+            draw (README, How it works); 0: off (the paper).
+        behind_side, behind_low, behind_high, behind_step: see behind_cost.
     """
 
     prior: float = 0.01
@@ -153,9 +155,10 @@ class ModelParams:
     exclusion: float = 10.0
     exclusion_radius: float = 0.45
     exclusion_gate: float = 0.5
-    behind_cost: float = 3.0
+    behind_cost: float = 2.0
     behind_side: float = 0.2
     behind_low: float = 0.45
+    behind_high: float = 0.85
     behind_step: int = 2
 
     def full_pass(self, iteration: int) -> bool:

@@ -436,11 +436,12 @@ def behind_count(depth_m, geom: Geometry, params: ModelParams, which):
     them), counted in its core on the pixels whose row and column are multiples of
     behind_step (each standing for behind_step^2): in each such row the lattice pixels whose
     rays hit the solid run from column a to b, and those before a + behind_side (b - a) or
-    after b - behind_side (b - a) are left out, as are object points below behind_low x the
-    height (ground grids; kernels.mean_field.behind_count). Returns (K,) int64."""
+    after b - behind_side (b - a) are left out, as are object points below behind_low or above
+    behind_high x the height (ground grids; kernels.mean_field.behind_count). Returns (K,) int64."""
     n = np.zeros(len(geom.rect), np.int64)
     z_img = np.asarray(depth_m, dtype=np.float64)
-    low = params.behind_low * geom.height if geom.height > 0 else -BAND_ALL
+    low, high = ((params.behind_low * geom.height, params.behind_high * geom.height) if geom.height > 0
+                 else (-BAND_ALL, BAND_ALL))
     for k in np.flatnonzero(which):
         sil = silhouette(z_img, geom, k, params)
         if sil is None:
@@ -460,5 +461,5 @@ def behind_count(depth_m, geom: Geometry, params: ModelParams, which):
         core = (cols >= (first + trim)[:, None]) & (cols <= (last - trim)[:, None]) & rows[:, None] & hit
         h = geom.centre[2] + mu * rays[..., 2]
         behind = valid_reading(z, params) & ~(inlier > log_outlier(params)) & (z > mu)
-        n[k] = s * s * np.sum(core & (h >= low) & behind)
+        n[k] = s * s * np.sum(core & (h >= low) & (h <= high) & behind)
     return n

@@ -283,6 +283,7 @@ def behind_count(
     centre_z: wp.float64,
     side: wp.float64,
     low: wp.float64,
+    high: wp.float64,
     step: int,
     live: wp.array(dtype=wp.int32),
     behind: wp.array(dtype=wp.int32),
@@ -293,7 +294,8 @@ def behind_count(
     multiples of `step`, each standing for step^2 pixels: in each lattice row, the lattice
     pixels whose rays hit the solid run from column a to b, and the `side` share of that run
     at each end is left out (arms, a narrower body than the solid), as are object points below
-    height `low` (the gap between the legs). One thread per location of the batch; 0 for the
+    height `low` (the gap between the legs) or above `high` (heads: people are shorter or taller
+    than the solid). One thread per location of the batch; 0 for the
     locations that do not move in the frame (live < 0: pruned or idle, kernels.sparse)."""
     i = wp.tid()
     n_loc = geo.rect.shape[0]
@@ -321,7 +323,8 @@ def behind_count(
                     if f64(u) >= f64(first) + trim and f64(u) <= f64(last) - trim:
                         d = geo.rays[v, u]
                         o = object_depth(geo, k, d)
-                        if o[0] > f64(0.0) and centre_z + o[0] * d[2] >= low:
+                        h = centre_z + o[0] * d[2]
+                        if o[0] > f64(0.0) and h >= low and h <= high:
                             if reading_class(pm, f64(depth[b, v, u]), o[0], o[1], f64(0.0)) == BEHIND:
                                 n += step * step
     behind[i] = n

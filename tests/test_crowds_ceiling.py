@@ -88,20 +88,10 @@ def test_person_hidden_but_for_head_and_shoulders_is_found():
     (beta -6.5: 0.065) cut them (README, Hidden people and eq. 13)."""
     from dpom_warp.detect import detect
     from dpom_warp.engine import Engine
-    from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
     from dpom_warp.model import ModelParams
-    from dpom_warp.synthetic import SceneSpec, _box, _scene, person_mesh, render, sensor_noise
 
-    cam = Camera(160, 120, 114.0, 114.0, 79.5, 59.5, pose_from_angles(2.2, 20.0))
-    room = [_box((12, 14, 0.1), (0, 3, -0.05)), _box((12, 0.1, 3), (0, 7.05, 1.5))]
-    empty = np.stack([sensor_noise(render(_scene(room)[0], cam)[0], SceneSpec(), np.random.default_rng(s))
-                      for s in range(5)]).astype(np.float32)
     people = np.array([(0.0, 3.0), (0.0, 3.7)])
-    meshes = room + [person_mesh(1.8, np.pi / 2 + 0.2 * i, 0.5 + i).translate((x, y, 0.0))
-                     for i, (x, y) in enumerate(people)]
-    depth = sensor_noise(render(_scene(meshes)[0], cam)[0], SceneSpec(), np.random.default_rng(7)).astype(np.float32)
-    grid = Grid(x=(-2.0, 2.0, 0.1), y=(1.5, 5.5, 0.1))
-    geom = build_geometry(cam, grid, ObjectBox(0.4, 1.8))
+    cam, grid, geom, empty, depth = rendered_people(people)
 
     def found(params):
         engine = Engine(geom, params, "cpu")
@@ -117,3 +107,51 @@ def test_person_hidden_but_for_head_and_shoulders_is_found():
     assert len(dets) == 2 and all(np.hypot(*(dets - p).T).min() < 0.5 for p in people), dets
     _, old = found(ModelParams(beta=-6.5))
     assert len(old) == 1 and np.hypot(*(old[0] - people[0])) < 0.5, old
+
+def rendered_people(people):
+    """People 1.8 m tall rendered at `people` ((n, 2) metres) in a room with a floor and a far
+    wall, seen by a 160 x 120 camera 2.2 m high at pitch 20, with sensor noise; five frames of
+    the empty room. Returns camera, grid, geometry (0.4 m solid), empty frames, depth."""
+    from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
+    from dpom_warp.synthetic import SceneSpec, _box, _scene, person_mesh, render, sensor_noise
+
+    cam = Camera(160, 120, 114.0, 114.0, 79.5, 59.5, pose_from_angles(2.2, 20.0))
+    room = [_box((12, 14, 0.1), (0, 3, -0.05)), _box((12, 0.1, 3), (0, 7.05, 1.5))]
+    empty = np.stack([sensor_noise(render(_scene(room)[0], cam)[0], SceneSpec(), np.random.default_rng(s))
+                      for s in range(5)]).astype(np.float32)
+    meshes = room + [person_mesh(1.8, np.pi / 2 + 0.2 * i, 0.5 + i).translate((x, y, 0.0))
+                     for i, (x, y) in enumerate(people)]
+    depth = sensor_noise(render(_scene(meshes)[0], cam)[0], SceneSpec(), np.random.default_rng(7)).astype(np.float32)
+    grid = Grid(x=(-2.0, 2.0, 0.1), y=(1.5, 5.5, 0.1))
+    return cam, grid, build_geometry(cam, grid, ObjectBox(0.4, 1.8)), empty, depth
+
+
+def test_readings_behind_count_against_a_cell_beside_a_person():
+    """model.behind_cost: in a rendered person's own cell few pixels of the silhouette's core
+    read behind the solid, in cells 0.2 to 0.3 m beside them (half over the person, half over
+    the room behind: what one person found as two cells looked like) four times as many or
+    more; with the default cost the person is still one detection, at its place."""
+    from dpom_warp import reference as ref
+    from dpom_warp.detect import detect
+    from dpom_warp.engine import Engine
+    from dpom_warp.model import ModelParams
+
+    person = np.array([0.0, 3.0])
+    _, grid, geom, empty, depth = rendered_people(person[None])
+    params = ModelParams()
+    dist = np.hypot(*(geom.locations[:, :2] - person).T)
+    own = int(np.argmin(dist))
+    beside = np.flatnonzero((np.abs(geom.locations[:, 1] - person[1]) < 0.05)
+                            & (np.abs(np.abs(geom.locations[:, 0] - person[0]) - 0.25) < 0.06))
+    counts = ref.behind_count(depth, geom, params, np.isin(np.arange(len(dist)), [own, *beside]))
+    assert len(beside) == 4 and counts[beside].min() > 4 * max(counts[own], 1), (counts[own], counts[beside])
+
+    def located(p):
+        engine = Engine(geom, p, "cpu")
+        engine.set_background_frames(empty)
+        res = engine.infer(depth)
+        dets = detect(res.rho_star.reshape(grid.shape), geom.locations, geom.rect, 0.5, 0.4)
+        return len(dets), dist[int(np.argmax(res.rho_star))]
+
+    n, err = located(params)
+    assert n == 1 and err < 0.2, (n, err)
