@@ -26,7 +26,7 @@ from pydantic_core import PydanticCustomError
 
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
 from .ground import GroundOptions
-from .model import AutoBackground, ModelParams
+from .model import BEHIND_COST, AutoBackground, ModelParams
 from .resolution import REDUCERS
 from .synthetic import SceneSpec
 from .tracking import TrackingOptions
@@ -496,7 +496,7 @@ class ModelSection(Node):
     behind_cost: Num | None = Field(None, ge=0,
                                     description=f"evidence a location loses per pixel of its silhouette's "
                                                 f"core that reads behind its object (README, How it works); "
-                                                f"default {_d(ModelParams, 'behind_cost'):g} with the solid on "
+                                                f"default {BEHIND_COST:g} with the solid on "
                                                 f"ground grids, else 0 (off: the paper, such pixels say nothing)")
     behind_side: Num = Field(_d(ModelParams, "behind_side"), ge=0, lt=0.5,
                              description="share of each silhouette row left out at either end")
@@ -906,7 +906,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     damping_max = m.damping_max if m.damping_max is not None else max(_d(ModelParams, "damping_max"), m.damping)
     exclusion = m.exclusion if m.exclusion is not None else (_d(ModelParams, "exclusion") if c.grid.mode == "ground" else 0.0)
     behind_cost = (m.behind_cost if m.behind_cost is not None else  # the core is the solid's
-                   (_d(ModelParams, "behind_cost") if c.grid.mode == "ground" and c.object.shape == "solid" else 0.0))
+                   (BEHIND_COST if c.grid.mode == "ground" and c.object.shape == "solid" else 0.0))
     model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost)
     detection = _fill(Detection, c.detection)
     evaluation = _fill(Evaluation, c.evaluation)

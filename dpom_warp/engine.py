@@ -673,12 +673,17 @@ class Engine:
             self.prune(logit_prior)
             if not self.graph:  # full passes update all but the pruned and idle ones
                 self.n_kept = self._gather(self.kept_index)
-        if p.behind_cost > 0:  # what the lists leave out: readings behind each moving location
+        if p.behind_cost > 0:  # what the lists leave out: readings behind each listed location
+            if p.sparse_epsilon <= 0:  # (prune counted each location's entries)
+                self.per_location.zero_()
+                wp.launch(K.prune_lists, dim=self.batch * self.n_pixels, device=dev,
+                          inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
+                                  self.live, self.per_location])
             h = self.geometry.height
             low, high = (p.behind_low * h, p.behind_high * h) if h > 0 else (-BAND_ALL, BAND_ALL)
             wp.launch(K.behind_count, dim=len(self.live), device=dev,
                       inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]), p.behind_side,
-                              low, high, p.behind_step, self.live, self.n_behind])
+                              low, high, p.behind_step, self.per_location, self.n_behind])
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()

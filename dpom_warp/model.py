@@ -8,6 +8,7 @@ import numpy as np
 
 
 TOP_MIN_RHO = 1e-3  # locations whose rho* is below it before the top-band test skip it (a factor <= 1)
+BEHIND_COST = 2.0  # model.behind_cost's default with the solid on ground grids (config)
 BAND_ALL = 1e30  # a height band that holds every pixel (the unhidden share of eq. 13)
 
 
@@ -116,8 +117,11 @@ class ModelParams:
             above behind_high x the height (heads: people shorter than the solid read behind
             its top; 0.85 x 1.8 m is below the shortest rendered person's head). Counted on the
             pixels whose row and column are multiples of behind_step, each standing for
-            behind_step^2 pixels (a quarter of the work with 2). 2 with 0.85 on the tuning
-            draw (README, How it works); 0: off (the paper).
+            behind_step^2 pixels (a quarter of the work with 2). Only the locations in some
+            list count (the others stay where they start, as before). 0 here (off: the
+            paper); the config's default is BEHIND_COST with the solid on ground grids (its
+            core is the solid's), chosen with behind_high 0.85 on the tuning draw (README, How
+            it works).
         behind_side, behind_low, behind_high, behind_step: see behind_cost.
     """
 
@@ -155,7 +159,7 @@ class ModelParams:
     exclusion: float = 10.0
     exclusion_radius: float = 0.45
     exclusion_gate: float = 0.5
-    behind_cost: float = 2.0
+    behind_cost: float = 0.0
     behind_side: float = 0.2
     behind_low: float = 0.45
     behind_high: float = 0.85

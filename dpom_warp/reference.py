@@ -323,8 +323,9 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     if params.sparse_epsilon > 0:  # in no list (idle): rho_new is the prior; left at its start
         kept = kept & (np.bincount(L[valid], minlength=K) > 0)
     live = kept.copy()
-    # readings behind each moving location (its core), the evidence the lists leave out
-    behind = params.behind_cost * behind_count(depth_m, geom, params, kept) if params.behind_cost > 0 else 0.0
+    # readings behind each location in a list (its core), the evidence the lists leave out
+    listed = np.bincount(L[valid], minlength=K) > 0
+    behind = params.behind_cost * behind_count(depth_m, geom, params, listed) if params.behind_cost > 0 else 0.0
     if params.exclusion > 0:  # each location's neighbours within exclusion_radius
         start, neighbours = neighbour_lists(geom.locations, params.exclusion_radius)
         owner = np.repeat(np.arange(K), np.diff(start))

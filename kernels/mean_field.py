@@ -285,7 +285,7 @@ def behind_count(
     low: wp.float64,
     high: wp.float64,
     step: int,
-    live: wp.array(dtype=wp.int32),
+    entries: wp.array(dtype=wp.int32),
     behind: wp.array(dtype=wp.int32),
 ):
     """behind[i]: the pixels of location i's silhouette (its solid's projection) whose reading
@@ -295,14 +295,15 @@ def behind_count(
     pixels whose rays hit the solid run from column a to b, and the `side` share of that run
     at each end is left out (arms, a narrower body than the solid), as are object points below
     height `low` (the gap between the legs) or above `high` (heads: people are shorter or taller
-    than the solid). One thread per location of the batch; 0 for the
-    locations that do not move in the frame (live < 0: pruned or idle, kernels.sparse)."""
+    than the solid). One thread per location of the batch; 0 for the locations in no list
+    (entries[i], their entries in the lists, 0: no reading supports them, and on the fast path
+    the pruned and idle ones, kernels.sparse), which stay where they start as before."""
     i = wp.tid()
     n_loc = geo.rect.shape[0]
     b = i / n_loc
     k = i - b * n_loc
     n = int(0)
-    if live[i] >= 0:
+    if entries[i] > 0:
         r = geo.rect[k]
         u0 = (r[0] + step - 1) / step * step  # the first lattice column and row in the rectangle
         v0 = (r[1] + step - 1) / step * step

@@ -88,7 +88,7 @@ def test_person_hidden_but_for_head_and_shoulders_is_found():
     (beta -6.5: 0.065) cut them (README, Hidden people and eq. 13)."""
     from dpom_warp.detect import detect
     from dpom_warp.engine import Engine
-    from dpom_warp.model import ModelParams
+    from dpom_warp.model import BEHIND_COST, ModelParams
 
     people = np.array([(0.0, 3.0), (0.0, 3.7)])
     cam, grid, geom, empty, depth = rendered_people(people)
@@ -100,12 +100,12 @@ def test_person_hidden_but_for_head_and_shoulders_is_found():
         dets = detect(res.rho_star.reshape(grid.shape), geom.locations, geom.rect, 0.5, 0.4)
         return res, np.array([[d.x, d.y] for d in dets]).reshape(-1, 2)
 
-    res, dets = found(ModelParams())
+    res, dets = found(ModelParams(behind_cost=BEHIND_COST))
     near_hidden = np.hypot(*(geom.locations[:, :2] - people[1]).T) < 0.3
     best = np.flatnonzero(near_hidden)[np.argmax(res.rho[near_hidden])]
     assert res.rho[best] > 0.99 and 0.045 < res.evidence_share[best] < 0.065, (res.rho[best], res.evidence_share[best])
     assert len(dets) == 2 and all(np.hypot(*(dets - p).T).min() < 0.5 for p in people), dets
-    _, old = found(ModelParams(beta=-6.5))
+    _, old = found(ModelParams(beta=-6.5, behind_cost=BEHIND_COST))
     assert len(old) == 1 and np.hypot(*(old[0] - people[0])) < 0.5, old
 
 def rendered_people(people):
@@ -130,15 +130,15 @@ def test_readings_behind_count_against_a_cell_beside_a_person():
     """model.behind_cost: in a rendered person's own cell few pixels of the silhouette's core
     read behind the solid, in cells 0.2 to 0.3 m beside them (half over the person, half over
     the room behind: what one person found as two cells looked like) four times as many or
-    more; with the default cost the person is still one detection, at its place."""
+    more; with the config's default cost the person is still one detection, at its place."""
     from dpom_warp import reference as ref
     from dpom_warp.detect import detect
     from dpom_warp.engine import Engine
-    from dpom_warp.model import ModelParams
+    from dpom_warp.model import BEHIND_COST, ModelParams
 
     person = np.array([0.0, 3.0])
     _, grid, geom, empty, depth = rendered_people(person[None])
-    params = ModelParams()
+    params = ModelParams(behind_cost=BEHIND_COST)
     dist = np.hypot(*(geom.locations[:, :2] - person).T)
     own = int(np.argmin(dist))
     beside = np.flatnonzero((np.abs(geom.locations[:, 1] - person[1]) < 0.05)
