@@ -320,11 +320,11 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         rho = np.where(kept, rho, 0.0)  # pruned: rho_new < epsilon at every iteration
         valid = valid & kept[L]
     pruned = int((~kept).sum())
+    listed = np.bincount(L[valid], minlength=K) > 0  # in some list (after the bound)
     if params.sparse_epsilon > 0:  # in no list (idle): rho_new is the prior; left at its start
-        kept = kept & (np.bincount(L[valid], minlength=K) > 0)
+        kept = kept & listed
     live = kept.copy()
     # readings behind each location in a list (its core), the evidence the lists leave out
-    listed = np.bincount(L[valid], minlength=K) > 0
     behind = params.behind_cost * behind_count(depth_m, geom, params, listed) if params.behind_cost > 0 else 0.0
     if params.exclusion > 0:  # each location's neighbours within exclusion_radius
         start, neighbours = neighbour_lists(geom.locations, params.exclusion_radius)
@@ -419,16 +419,24 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
         h = geom.centre[2] + mu * rays[..., 2]
         in_band = (mu > 0) & (h >= lo) & (h <= hi)
         seen[k] = np.sum(in_band)
-        band = in_band & valid_reading(z, params)
         if params.top_sigmas > 0 and not whole:  # within top_sigmas sigma instead of the mask test
             _, var = geom.object_depth(k, rays)
             passes = np.abs(z - mu) <= params.top_sigmas * object_sigma(mu, params, var)
         else:
             passes = inlier > log_outlier(params)
-        support[k] = np.sum(band & passes)
-        against[k] = np.sum(band & ~passes & (z > mu))
-        hidden[k] = np.sum(band & ~passes & (z <= mu))
+        supports, behind, in_front = reading_classes(z, mu, passes, params)
+        support[k] = np.sum(in_band & supports)
+        against[k] = np.sum(in_band & behind)
+        hidden[k] = np.sum(in_band & in_front)
     return support, against, hidden, seen
+
+
+def reading_classes(z, mu, passes, params: ModelParams):
+    """What each reading z says of an object at depth mu, given whether it passes the test:
+    (supports, behind: z > mu, the object would hide it, in front: hidden by something nearer),
+    three boolean arrays, all False without a reading (kernels.mean_field.reading_class)."""
+    valid = valid_reading(z, params)
+    return valid & passes, valid & ~passes & (z > mu), valid & ~passes & (z <= mu)
 
 
 def behind_count(depth_m, geom: Geometry, params: ModelParams, which):
@@ -461,6 +469,6 @@ def behind_count(depth_m, geom: Geometry, params: ModelParams, which):
         trim = params.behind_side * (last - first)
         core = (cols >= (first + trim)[:, None]) & (cols <= (last - trim)[:, None]) & rows[:, None] & hit
         h = geom.centre[2] + mu * rays[..., 2]
-        behind = valid_reading(z, params) & ~(inlier > log_outlier(params)) & (z > mu)
+        _, behind, _ = reading_classes(z, mu, inlier > log_outlier(params), params)
         n[k] = s * s * np.sum(core & (h >= low) & (h <= high) & behind)
     return n

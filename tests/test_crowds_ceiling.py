@@ -108,6 +108,7 @@ def test_person_hidden_but_for_head_and_shoulders_is_found():
     _, old = found(ModelParams(beta=-6.5, behind_cost=BEHIND_COST))
     assert len(old) == 1 and np.hypot(*(old[0] - people[0])) < 0.5, old
 
+
 def rendered_people(people):
     """People 1.8 m tall rendered at `people` ((n, 2) metres) in a room with a floor and a far
     wall, seen by a 160 x 120 camera 2.2 m high at pitch 20, with sensor noise; five frames of
