@@ -7,7 +7,8 @@ frame rates the pictures must not cost more than the inference.
 
 from __future__ import annotations
 
-import io
+import struct
+import zlib
 from functools import lru_cache
 
 import numpy as np
@@ -19,6 +20,26 @@ INK = (20, 20, 20)
 PANEL_H = 424  # height of every panel, pixels
 PAD = 36  # margin around panels (titles above, axis labels below)
 BAR_W = 14  # colour bar width
+
+
+def encode_png(rgb: np.ndarray, level: int = 1) -> bytes:
+    """A PNG file's bytes of an (H, W, 3) uint8 image: 8-bit RGB, every row unfiltered, one
+    zlib stream at `level`. Pillow's writer chooses a filter per row, which on these flat
+    plots costs more than it saves: a 1058 x 504 picture took 22 ms at compress_level 1 (247
+    KB), this 8 ms (188 KB), 2026-12-02, this VM. zlib releases the GIL while it compresses."""
+    rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
+    h, w, channels = rgb.shape
+    if channels != 3:
+        raise ValueError(f"encode_png: expected an (H, W, 3) image, found {rgb.shape}")
+    rows = np.zeros((h, 3 * w + 1), np.uint8)  # each row: filter type 0 (None), then its bytes
+    rows[:, 1:] = rgb.reshape(h, 3 * w)
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)  # 8 bits, RGB, deflate, no interlace
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
+            + chunk(b"IDAT", zlib.compress(rows.tobytes(), level)) + chunk(b"IEND", b""))
 
 
 @lru_cache(maxsize=None)
@@ -284,6 +305,4 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     for i, (c, text) in enumerate(legend):
         draw.text((PAD + 4 + 120 * i, height - 12), text, fill=tuple(int(v * 0.7) for v in c) if c != (255, 255, 255) else INK,
                   font=font(11), anchor="lm")
-    png = io.BytesIO()
-    canvas.save(png, format="PNG", compress_level=1)
-    return png.getvalue()
+    return encode_png(np.asarray(canvas))

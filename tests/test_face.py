@@ -229,6 +229,23 @@ def test_picture_legend_and_labels():
             assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1]
 
 
+def test_pictures_png_encoder_round_trips():
+    """render.encode_png: Pillow reads back exactly the image given (odd sizes, every value),
+    and anything but RGB is a clear error."""
+    import io
+
+    from dpom_warp.render import encode_png
+
+    rng = np.random.default_rng(3)
+    for h, w in ((1, 1), (7, 13), (106, 129)):
+        rgb = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        back = Image.open(io.BytesIO(encode_png(rgb)))
+        assert back.mode == "RGB" and back.size == (w, h)
+        assert np.array_equal(np.asarray(back), rgb)
+    with pytest.raises(ValueError, match="expected an \\(H, W, 3\\) image, found \\(4, 4, 4\\)"):
+        encode_png(np.zeros((4, 4, 4), np.uint8))
+
+
 def test_eval_compare_leaves_the_runs_untouched(tmp_path, capsys):
     path = small_config(tmp_path)
     assert main(["run", str(path), "--no-progress", "--set", "evaluation.plots=true"]) == 0
