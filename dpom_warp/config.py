@@ -26,7 +26,7 @@ from pydantic_core import PydanticCustomError
 
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
 from .ground import GroundOptions
-from .model import BEHIND_COST, AutoBackground, ModelParams
+from .model import BEHIND_COST, TOP_SHORTER, AutoBackground, ModelParams
 from .resolution import REDUCERS
 from .synthetic import SceneSpec
 from .tracking import TrackingOptions
@@ -96,6 +96,17 @@ def _lens(v):
 
 
 Lens = Annotated[tuple[float, ...], BeforeValidator(_lens)]
+
+
+def _heights(v):
+    """A list of heights in metres, each > 0 (model.top_heights)."""
+    if (not isinstance(v, (list, tuple))
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0 for x in v)):
+        raise _fail(f"expected a list of heights > 0 (metres), found {_fmt(v) if not isinstance(v, (list, tuple)) else list(v)}")
+    return tuple(float(x) for x in v)
+
+
+Heights = Annotated[tuple[float, ...], BeforeValidator(_heights)]
 
 
 class PathValue:
@@ -484,6 +495,11 @@ class ModelSection(Node):
     top_sigmas: Num = Field(_d(ModelParams, "top_sigmas"), ge=0,
                             description="a band pixel supports the object within this many sigma of "
                                         "its depth; 0: the mask test")
+    top_heights: Heights | None = Field(None, description=f"heights (metres, below object.height) of shorter people "
+                                                          f"whose top band is also tried, the best kept (README, How "
+                                                          f"it works); default [object.height - {TOP_SHORTER:g}] with "
+                                                          f"the solid on ground grids and objects taller than 1 m, "
+                                                          f"else []")
     exclusion: Num | None = Field(None, ge=0,
                                   description=f"two objects cannot stand within exclusion_radius: a "
                                               f"location's evidence loses exclusion x its neighbours' rho "
@@ -674,6 +690,13 @@ class ConfigFile(Node):
             if size > hi - lo:
                 raise _fail(f"expected at most the grid's {axis} extent {hi - lo:g} m, found {size:g}",
                             f"object.{key}")
+        heights = self.model.top_heights or ()
+        if grid.mode == "voxel" and heights:
+            raise _fail(f"expected [] in voxel mode (no top-band test there), found {list(heights)}",
+                        "model.top_heights")
+        if any(h >= obj.height for h in heights):
+            raise _fail(f"expected heights below object.height ({obj.height:g} m), found {list(heights)}",
+                        "model.top_heights")
         if self.synthetic is not None and self.camera.extrinsics == "auto":
             raise _fail("rendering needs a camera pose; expected camera.extrinsics given as "
                         "{height, pitch_deg, ...} or a matrix, found auto", "synthetic")
@@ -907,7 +930,11 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     exclusion = m.exclusion if m.exclusion is not None else (_d(ModelParams, "exclusion") if c.grid.mode == "ground" else 0.0)
     behind_cost = (m.behind_cost if m.behind_cost is not None else  # the core is the solid's
                    (BEHIND_COST if c.grid.mode == "ground" and c.object.shape == "solid" else 0.0))
-    model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost)
+    top_heights = (m.top_heights if m.top_heights is not None else  # a person shorter than the solid
+                   ((round(c.object.height - TOP_SHORTER, 6),) if c.grid.mode == "ground" and c.object.shape == "solid"
+                    and c.object.height > 1.0 else ()))
+    model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost,
+                  top_heights=top_heights)
     detection = _fill(Detection, c.detection)
     evaluation = _fill(Evaluation, c.evaluation)
     output = _fill(Output, c.output)

@@ -51,9 +51,10 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask, active pixels
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 32 + 4 + 4  # rect, normal, plane,
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 48 + 4 + 4  # rect, normal, plane,
 # centre, area, five accumulators and the pruning bound, live, live and kept indices, entries,
-# top-band and whole-silhouette counts (four each), the damping streak, the readings behind
+# top-band, whole-silhouette and shorter band's counts (four each), the damping streak, the
+# readings behind
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 TABLE_BYTES = 4 + 4 + 8 + 8 + 8 + 4  # pixel table: location, float32 mu, mu, sigma, log sigma, half-width
@@ -199,18 +200,7 @@ class Engine:
         self.grown: list[int] = []
         self.pm = pixel_model(params)
         with wp.ScopedDevice(device):
-            g = K.GeometryArrays()
-            g.rays = wp.array(geometry.rays, dtype=wp.vec3d)
-            g.rect = wp.array(geometry.rect, dtype=wp.vec4i)
-            g.normal = wp.array(geometry.normal, dtype=wp.vec3d)
-            g.plane = wp.array(geometry.plane, dtype=wp.float64)
-            g.location = wp.array(geometry.locations, dtype=wp.vec3d)
-            g.centre = wp.vec3d(*(float(c) for c in geometry.centre))
-            solid = [float(x) for x in geometry.solid]
-            g.solid = int(solid[0] > 0)
-            g.body_radius, g.head_radius, g.bottom, g.shoulder, g.top, g.height_spread = solid[1:7]
-            g.leg_radius, g.hip, g.depth_radius = solid[7:10]
-            self.geo = g
+            self.geo = self._geometry_arrays(geometry)
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
             self.centre = wp.vec3d(*(float(c) for c in geometry.centre))
@@ -229,6 +219,10 @@ class Engine:
             self.top_against = wp.zeros(L, dtype=wp.int32)
             self.top_hidden = wp.zeros(L, dtype=wp.int32)
             self.top_seen = wp.zeros(L, dtype=wp.int32)  # the band's pixels in the image (-1: not counted)
+            # a shorter solid's band (params.top_heights): its GeometryArrays and counts
+            self.shorter_top = [(h, self._geometry_arrays(geometry.shorter(h))) for h in params.top_heights
+                                if geometry.height > 0]
+            self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(4 if self.shorter_top else 0)]
             self.all_support = wp.zeros(L, dtype=wp.int32)  # the same counts, whole silhouette
             self.all_against = wp.zeros(L, dtype=wp.int32)
             self.all_hidden = wp.zeros(L, dtype=wp.int32)
@@ -258,6 +252,26 @@ class Engine:
         self.table = self._pixel_table(self.use_table)
         self._allocate_lists(int(entries_per_pixel * P))
         self.set_floor_background()
+
+    def _geometry_arrays(self, geometry: Geometry) -> K.GeometryArrays:
+        """The kernels' view of `geometry`; one that differs from self.geo only in the solid
+        (Geometry.shorter) shares its arrays."""
+        g, first = K.GeometryArrays(), getattr(self, "geo", None)
+        if first is None:
+            g.rays = wp.array(geometry.rays, dtype=wp.vec3d)
+            g.rect = wp.array(geometry.rect, dtype=wp.vec4i)
+            g.normal = wp.array(geometry.normal, dtype=wp.vec3d)
+            g.plane = wp.array(geometry.plane, dtype=wp.float64)
+            g.location = wp.array(geometry.locations, dtype=wp.vec3d)
+        else:
+            g.rays, g.rect, g.normal, g.plane, g.location = (first.rays, first.rect, first.normal, first.plane,
+                                                             first.location)
+        g.centre = wp.vec3d(*(float(c) for c in geometry.centre))
+        solid = [float(x) for x in geometry.solid]
+        g.solid = int(solid[0] > 0)
+        g.body_radius, g.head_radius, g.bottom, g.shoulder, g.top, g.height_spread = solid[1:7]
+        g.leg_radius, g.hip, g.depth_radius = solid[7:10]
+        return g
 
     def _tile_index(self, pair_loc, pair_tile, tiles_x) -> K.TileIndex:
         """Depth bounds of every (location, tile) pair, sorted by tile then lo (kernels.masks)."""
@@ -701,9 +715,9 @@ class Engine:
                               self.all_against,
                               self.share, self.rho_star])
 
-        def top_band(lo, hi, gate, counts, sigmas=0.0):
+        def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
             wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
-                      inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]), lo, hi,
+                      inputs=[self.depth, geo or self.geo, self.pm, float(self.geometry.centre[2]), lo, hi,
                               TOP_MIN_RHO, sigmas, gate, *counts])
 
         if unhidden:
@@ -714,9 +728,14 @@ class Engine:
             # silhouette walk is the threshold's whole cost, and most locations are far below
             if not unhidden:
                 soft_threshold(0.0)
-            h = self.geometry.height
-            top_band(p.top_band * h, h, self.rho if unhidden else self.rho_star,
-                     (self.top_support, self.top_against, self.top_hidden, self.top_seen), p.top_sigmas)
+            h, gate = self.geometry.height, self.rho if unhidden else self.rho_star
+            counts = (self.top_support, self.top_against, self.top_hidden, self.top_seen)
+            top_band(p.top_band * h, h, gate, counts, p.top_sigmas)
+            for short, geo in self.shorter_top:  # shorter people: the band whose factor is larger
+                top_band(p.top_band * short, short, gate, self.other_top, p.top_sigmas, geo)
+                wp.launch(K.keep_better_top, dim=self.batch * self.n_locations, device=dev,
+                          inputs=[*counts, *self.other_top, p.top_hidden, top, p.top_slope, p.top_min_pixels,
+                                  p.top_unseen])
         soft_threshold(top)
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))

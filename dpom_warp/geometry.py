@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -363,6 +363,22 @@ class Geometry:
             mu, _ = self.object_depth(k, self.rays[v0:v1 + 1, u0:u1 + 1])
             area[k] = np.count_nonzero(mu > 0)
         return area
+
+    def shorter(self, height: float) -> "Geometry":
+        """The same locations with an object of `height` (<= self.height, ground grids): the
+        solid's shoulder and top scaled by height / self.height above its bottom, its radii
+        and legs kept (the hip no higher than the new shoulder), so where the head is no
+        wider than the body its projection lies inside each silhouette rectangle, which is
+        kept (the band of the top-band test for people shorter than the solid,
+        ModelParams.top_heights)."""
+        if not 0 < height <= self.height:
+            raise ValueError(f"shorter: expected a height in (0, {self.height:g}], found {height:g}")
+        solid = np.array(self.solid, dtype=np.float64)
+        scale = height / self.height
+        for i in (4, 5):  # shoulder, top; bottom (3) stays
+            solid[i] = solid[3] + (solid[i] - solid[3]) * scale
+        solid[8] = min(solid[8], solid[4])  # the hip
+        return replace(self, height=float(height), solid=solid)
 
     def object_depth(self, k: int, rays: np.ndarray):
         """(mu, var): the depth each of `rays` (..., 3) expects of location k (-1: not the

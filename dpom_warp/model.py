@@ -9,6 +9,7 @@ import numpy as np
 
 TOP_MIN_RHO = 1e-3  # locations whose rho* is below it before the top-band test skip it (a factor <= 1)
 BEHIND_COST = 2.0  # model.behind_cost's default with the solid on ground grids (config)
+TOP_SHORTER = 0.15  # model.top_heights' default: [object.height - TOP_SHORTER] with the solid on ground grids
 BAND_ALL = 1e30  # a height band that holds every pixel (the unhidden share of eq. 13)
 
 
@@ -97,6 +98,15 @@ class ModelParams:
         top_sigmas: a band pixel supports the object when its reading is within this many
             sigma of the object's depth (0: when it passes the mask test, ~3.5 sigma with the
             defaults, which let a surface behind a cell's head support it).
+        top_heights: heights of people shorter than the object (metres, below its height)
+            whose top band is also tried: for each, the band from top_band x that height to
+            it on the solid scaled to it (Geometry.shorter), counted as above; a location keeps
+            the counts whose factor is the largest. A person of 1.56 m hidden to the head
+            fills a quarter of the 1.8 m solid's band (the rest reads the room behind: u ~ 0.1,
+            cut), while the band of a 1.65 m solid holds the head. Where the object's own band
+            is out of view (fewer than top_min_pixels in the image) top_unseen decides, as
+            without. () here; the config's default is one, object.height - TOP_SHORTER, with
+            the solid on ground grids, chosen on the tuning draw (README, How it works).
         exclusion: two objects cannot stand within exclusion_radius of each other: each
             location's evidence loses exclusion x sum over the locations within the radius
             of max(0, rho - exclusion_gate) / (1 - exclusion_gate) (kernels.mean_field
@@ -156,6 +166,7 @@ class ModelParams:
     top_min_pixels: int = 3
     top_unseen: float = 0.0
     top_sigmas: float = 2.0
+    top_heights: tuple[float, ...] = ()
     exclusion: float = 10.0
     exclusion_radius: float = 0.45
     exclusion_gate: float = 0.5

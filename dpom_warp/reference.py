@@ -380,19 +380,33 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     rho_star = np.where(geom.area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
     # the top band is counted where rho* can still reach TOP_MIN_RHO (its factor is <= 1)
     gate = rho if params.share_of == "unhidden" else rho_star
-    support, against, hidden, seen = top_band(depth_m, geom, params, gate)
+    counts = top_band(depth_m, geom, params, gate)
     if params.top_support > 0 and geom.height > 0:
-        n = support + against + hidden
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = (support + params.top_hidden * hidden) / n
-            factor = np.where(n >= max(params.top_min_pixels, 1),
-                              sigmoid(params.top_slope * (u - params.top_support)), 1.0)
-        # a band with too few pixels in the image (its top out of view): top_unseen
-        factor = np.where((seen >= 0) & (seen < params.top_min_pixels), params.top_unseen, factor)
-        rho_star = rho_star * factor
+        for height in params.top_heights:  # shorter people: the band whose factor is larger
+            shorter = top_band(depth_m, geom.shorter(height), params, gate)
+            seen = counts[3]
+            better = (top_factor(*shorter, params) > top_factor(*counts, params)) & ~(
+                (seen >= 0) & (seen < params.top_min_pixels))  # out of view: top_unseen decides
+            counts = tuple(np.where(better, b, a) for a, b in zip(counts, shorter))
+        rho_star = rho_star * top_factor(*counts, params)
+    support, against, hidden, seen = counts
     return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
                 entries=entries, live=int(live.sum()), pruned=pruned, top_support=support, top_against=against,
                 top_hidden=hidden, top_seen=seen)
+
+
+def top_factor(support, against, hidden, seen, params: ModelParams):
+    """The top-band factor of each location from its counts (top_band):
+    sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f); 1 with fewer
+    than top_min_pixels readings in the band, top_unseen with fewer than top_min_pixels of
+    its pixels in the image (kernels.mean_field.top_factor)."""
+    n = support + against + hidden
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (support + params.top_hidden * hidden) / n
+        factor = np.where(n >= max(params.top_min_pixels, 1),
+                          sigmoid(params.top_slope * (u - params.top_support)), 1.0)
+    # a band with too few pixels in the image (its top out of view): top_unseen
+    return np.where((seen >= 0) & (seen < params.top_min_pixels), params.top_unseen, factor)
 
 
 def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):

@@ -405,6 +405,39 @@ def top_factor(s: int, a: int, f: int, seen: int, weight: wp.float64, share: wp.
 
 
 @wp.kernel(enable_backward=False)
+def keep_better_top(
+    support: wp.array(dtype=wp.int32),
+    against: wp.array(dtype=wp.int32),
+    hidden: wp.array(dtype=wp.int32),
+    seen: wp.array(dtype=wp.int32),
+    other_support: wp.array(dtype=wp.int32),
+    other_against: wp.array(dtype=wp.int32),
+    other_hidden: wp.array(dtype=wp.int32),
+    other_seen: wp.array(dtype=wp.int32),
+    weight: wp.float64,
+    share: wp.float64,
+    slope: wp.float64,
+    min_pixels: int,
+    unseen: wp.float64,
+):
+    """A location's top-band counts become those of another band (a shorter solid's,
+    ModelParams.top_heights) where that band's top_factor is larger, except where its own band
+    is out of view (0 <= seen < min_pixels: top_unseen decides, as without). One thread per
+    location of the batch (reference.mean_field)."""
+    k = wp.tid()
+    if seen[k] >= 0 and seen[k] < min_pixels:
+        return
+    mine = top_factor(support[k], against[k], hidden[k], seen[k], weight, share, slope, min_pixels, unseen)
+    other = top_factor(other_support[k], other_against[k], other_hidden[k], other_seen[k], weight, share, slope,
+                       min_pixels, unseen)
+    if other > mine:
+        support[k] = other_support[k]
+        against[k] = other_against[k]
+        hidden[k] = other_hidden[k]
+        seen[k] = other_seen[k]
+
+
+@wp.kernel(enable_backward=False)
 def soft_threshold(
     alpha: wp.float64,
     beta: wp.float64,

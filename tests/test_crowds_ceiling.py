@@ -109,10 +109,11 @@ def test_person_hidden_but_for_head_and_shoulders_is_found():
     assert len(old) == 1 and np.hypot(*(old[0] - people[0])) < 0.5, old
 
 
-def rendered_people(people):
-    """People 1.8 m tall rendered at `people` ((n, 2) metres) in a room with a floor and a far
-    wall, seen by a 160 x 120 camera 2.2 m high at pitch 20, with sensor noise; five frames of
-    the empty room. Returns camera, grid, geometry (0.4 m solid), empty frames, depth."""
+def rendered_people(people, heights=None):
+    """People rendered at `people` ((n, 2) metres; `heights` metres, default 1.8 m each) in a
+    room with a floor and a far wall, seen by a 160 x 120 camera 2.2 m high at pitch 20, with
+    sensor noise; five frames of the empty room. Returns camera, grid, geometry (0.4 m x 1.8 m
+    solid), empty frames, depth."""
     from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
     from dpom_warp.synthetic import SceneSpec, _box, _scene, person_mesh, render, sensor_noise
 
@@ -120,11 +121,45 @@ def rendered_people(people):
     room = [_box((12, 14, 0.1), (0, 3, -0.05)), _box((12, 0.1, 3), (0, 7.05, 1.5))]
     empty = np.stack([sensor_noise(render(_scene(room)[0], cam)[0], SceneSpec(), np.random.default_rng(s))
                       for s in range(5)]).astype(np.float32)
-    meshes = room + [person_mesh(1.8, np.pi / 2 + 0.2 * i, 0.5 + i).translate((x, y, 0.0))
-                     for i, (x, y) in enumerate(people)]
+    heights = [1.8] * len(people) if heights is None else heights
+    meshes = room + [person_mesh(h, np.pi / 2 + 0.2 * i, 0.5 + i).translate((x, y, 0.0))
+                     for i, ((x, y), h) in enumerate(zip(people, heights))]
     depth = sensor_noise(render(_scene(meshes)[0], cam)[0], SceneSpec(), np.random.default_rng(7)).astype(np.float32)
     grid = Grid(x=(-2.0, 2.0, 0.1), y=(1.5, 5.5, 0.1))
     return cam, grid, build_geometry(cam, grid, ObjectBox(0.4, 1.8)), empty, depth
+
+
+def test_short_person_hidden_to_the_head_keeps_a_shorter_top_band():
+    """A person of 1.56 m 0.9 m behind one of 1.66 m (0.1 m aside), seen by the rendered
+    room's camera: the mean field finds them (rho 1, e of eq. 13 above its cut-off), but the
+    top band of the 1.8 m solid reads the room above their head (u under top_support: rho*
+    < 0.1) and they are lost without model.top_heights; with the config's default (a 1.65 m
+    solid's band, which holds the head) both people are found, and nothing more."""
+    from dpom_warp.detect import detect
+    from dpom_warp.engine import Engine
+    from dpom_warp.model import BEHIND_COST, ModelParams
+
+    people = np.array([(0.0, 4.3), (0.1, 5.2)])
+    _, grid, geom, empty, depth = rendered_people(people, [1.66, 1.56])
+    heights = load_config(CONFIGS / "demo_people.yaml").model.top_heights
+    assert heights == pytest.approx((1.65,))
+
+    def found(top_heights):
+        engine = Engine(geom, ModelParams(behind_cost=BEHIND_COST, top_heights=top_heights), "cpu")
+        engine.set_background_frames(empty)
+        res = engine.infer(depth)
+        dets = detect(res.rho_star.reshape(grid.shape), geom.locations, geom.rect, 0.5, 0.4)
+        near = np.hypot(*(geom.locations[:, :2] - people[1]).T) < 0.3
+        best = np.flatnonzero(near)[np.argmax(res.rho[near])]
+        return res, best, np.array([[d.x, d.y] for d in dets]).reshape(-1, 2)
+
+    res, best, dets = found(())
+    assert res.rho[best] > 0.99 and res.evidence_share[best] > 0.1 and res.rho_star[best] < 0.1, (
+        res.rho[best], res.evidence_share[best], res.rho_star[best])
+    assert len(dets) == 1 and np.hypot(*(dets[0] - people[0])) < 0.5, dets
+    res, best, dets = found(heights)
+    assert res.rho_star[best] > 0.9
+    assert len(dets) == 2 and all(np.hypot(*(dets - p).T).min() < 0.5 for p in people), dets
 
 
 def test_readings_behind_count_against_a_cell_beside_a_person():

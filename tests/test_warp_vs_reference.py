@@ -335,3 +335,58 @@ def test_behind_cost_matches_reference(device, seed, shape, path):
     ref.mean_field(depth, geom, bg, dataclasses.replace(params, behind_cost=0.0), trace=first_plain)
     k = int(np.argmax(np.where(moving, counts, -1)))
     assert first[0][k] < first_plain[0][k], "the location with the most readings behind it lost nothing"
+
+
+@pytest.mark.parametrize("path", ["exact", "sparse"])
+@pytest.mark.parametrize("shape", ["plane", "solid"])
+@pytest.mark.parametrize("seed", [2, 3, 4])  # (0 and 1: the solid's bands are out of view)
+def test_shorter_top_bands_match_reference(device, seed, shape, path):
+    """model.top_heights (the top band of shorter solids, the largest factor kept) on the Warp
+    path equals the reference: each location's kept counts and rho*; on a scene with an
+    object shorter than the rest, somewhere a shorter band is kept and raises rho*."""
+    from scenes import draw_slab
+
+    geom, params, depth, bg_frames = random_scene(seed, shape=shape)
+    heights = (0.85 * geom.height, 0.7 * geom.height)
+    seen = np.flatnonzero(geom.rect_area > 0)
+    for k in seen[len(seen) // 4::len(seen) // 4]:  # short people, in front of what is there
+        draw_slab(depth, geom, k, below=0.72 * geom.height)
+    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4, top_heights=heights)
+    engine = Engine(geom, params, device)
+    engine.set_background_frames(bg_frames)
+    bg = ref.background_from_frames(bg_frames, params)
+    want = ref.mean_field(depth, geom, bg, params)
+    got = engine.infer(depth)
+    for key in ("top_support", "top_against", "top_hidden", "top_seen"):
+        np.testing.assert_array_equal(getattr(engine, key).numpy(), want[key], err_msg=key)
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, top_heights=()))
+    kept_shorter = np.any([want[k] != plain[k] for k in ("top_support", "top_against", "top_hidden")], axis=0)
+    assert kept_shorter.any(), "no location kept a shorter band: the choice is not exercised"
+    assert np.all(want["rho_star"] >= plain["rho_star"] - 1e-12)
+    assert np.any(want["rho_star"] > plain["rho_star"] + 1e-6)
+
+
+def test_shorter_solid_lies_inside_the_silhouettes():
+    """Geometry.shorter: shoulder and top scaled above the bottom, the radii and legs kept, so
+    the shorter solid's projection lies inside each silhouette rectangle (the kernels walk
+    only the rectangle) where its head is no wider than its body; a height above the
+    object's is refused."""
+    cam = Camera(64, 48, 50.0, 50.0, 31.5, 23.5, pose_from_angles(2.6, 35.0, 2.0))
+    geom = build_geometry(cam, Grid(x=(-1.5, 1.5, 0.3), y=(1.5, 5.0, 0.3)),
+                          ObjectBox(0.4, 1.8, shape="solid", head_radius=0.11, depth_radius=0.12,
+                                    leg_radius=0.14, hip=0.45))
+    short = geom.shorter(1.5)
+    assert short.height == 1.5
+    np.testing.assert_allclose(short.solid[[4, 5]], [0.8 * 1.5, 1.5])
+    np.testing.assert_array_equal(np.delete(short.solid, [4, 5]), np.delete(geom.solid, [4, 5]))
+    inside = 0
+    for k in np.flatnonzero(geom.rect_area > 0):
+        mu_short, _ = short.object_depth(k, geom.rays)
+        u0, v0, u1, v1 = geom.rect[k]
+        hit = np.argwhere(mu_short > 0)
+        assert np.all((hit[:, 0] >= v0) & (hit[:, 0] <= v1) & (hit[:, 1] >= u0) & (hit[:, 1] <= u1))
+        inside += len(hit)
+    assert inside > 0
+    with pytest.raises(ValueError, match="expected a height in"):
+        geom.shorter(1.9)
