@@ -498,8 +498,9 @@ class ModelSection(Node):
     top_heights: Heights | None = Field(None, description=f"heights (metres, below object.height) of shorter people "
                                                           f"whose top band is also tried, the best kept (README, How "
                                                           f"it works); default [object.height - {TOP_SHORTER:g}] with "
-                                                          f"the solid on ground grids and objects taller than 1 m, "
-                                                          f"else []")
+                                                          f"the solid on ground grids, objects taller than 1 m and a "
+                                                          f"background (frames or auto), else [] (floor-only: "
+                                                          f"furniture that tall would pass)")
     exclusion: Num | None = Field(None, ge=0,
                                   description=f"two objects cannot stand within exclusion_radius: a "
                                               f"location's evidence loses exclusion x its neighbours' rho "
@@ -930,9 +931,11 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     exclusion = m.exclusion if m.exclusion is not None else (_d(ModelParams, "exclusion") if c.grid.mode == "ground" else 0.0)
     behind_cost = (m.behind_cost if m.behind_cost is not None else  # the core is the solid's
                    (BEHIND_COST if c.grid.mode == "ground" and c.object.shape == "solid" else 0.0))
-    top_heights = (m.top_heights if m.top_heights is not None else  # a person shorter than the solid
+    # a person shorter than the solid; not floor-only, where the band is what tells furniture
+    # from people and a shorter one lets a cabinet of that height through
+    top_heights = (m.top_heights if m.top_heights is not None else
                    ((round(c.object.height - TOP_SHORTER, 6),) if c.grid.mode == "ground" and c.object.shape == "solid"
-                    and c.object.height > 1.0 else ()))
+                    and c.object.height > 1.0 and c.input.background is not None else ()))
     model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost,
                   top_heights=top_heights)
     detection = _fill(Detection, c.detection)

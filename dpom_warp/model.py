@@ -106,7 +106,9 @@ class ModelParams:
             cut), while the band of a 1.65 m solid holds the head. Where the object's own band
             is out of view (fewer than top_min_pixels in the image) top_unseen decides, as
             without. () here; the config's default is one, object.height - TOP_SHORTER, with
-            the solid on ground grids, chosen on the tuning draw (README, How it works).
+            the solid on ground grids and a background (frames or auto), chosen on the tuning
+            draw (README, How it works); floor-only it is off: there the band is what tells
+            furniture from people, and a cabinet as tall as the shorter solid passes it.
         exclusion: two objects cannot stand within exclusion_radius of each other: each
             location's evidence loses exclusion x sum over the locations within the radius
             of max(0, rho - exclusion_gate) / (1 - exclusion_gate) (kernels.mean_field

@@ -134,7 +134,8 @@ def test_short_person_hidden_to_the_head_keeps_a_shorter_top_band():
     room's camera: the mean field finds them (rho 1, e of eq. 13 above its cut-off), but the
     top band of the 1.8 m solid reads the room above their head (u under top_support: rho*
     < 0.1) and they are lost without model.top_heights; with the config's default (a 1.65 m
-    solid's band, which holds the head) both people are found, and nothing more."""
+    solid's band, which holds the head; with a background only) both people are found, and
+    nothing more."""
     from dpom_warp.detect import detect
     from dpom_warp.engine import Engine
     from dpom_warp.model import BEHIND_COST, ModelParams
@@ -142,7 +143,8 @@ def test_short_person_hidden_to_the_head_keeps_a_shorter_top_band():
     people = np.array([(0.0, 4.3), (0.1, 5.2)])
     _, grid, geom, empty, depth = rendered_people(people, [1.66, 1.56])
     heights = load_config(CONFIGS / "demo_people.yaml").model.top_heights
-    assert heights == pytest.approx((1.65,))
+    assert heights == pytest.approx((1.65,))  # and off floor-only, where it lets furniture through
+    assert load_config(CONFIGS / "demo_people.yaml", ["input.background=null"]).model.top_heights == ()
 
     def found(top_heights):
         engine = Engine(geom, ModelParams(behind_cost=BEHIND_COST, top_heights=top_heights), "cpu")
