@@ -102,7 +102,8 @@ def _heights(v):
     """A list of heights in metres, each > 0 (model.top_heights)."""
     if (not isinstance(v, (list, tuple))
             or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0 for x in v)):
-        raise _fail(f"expected a list of heights > 0 (metres), found {_fmt(v) if not isinstance(v, (list, tuple)) else list(v)}")
+        found = list(v) if isinstance(v, (list, tuple)) else _fmt(v)
+        raise _fail(f"expected a list of heights > 0 (metres), found {found}")
     return tuple(float(x) for x in v)
 
 

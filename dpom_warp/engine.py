@@ -717,8 +717,8 @@ class Engine:
 
         def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
             wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
-                      inputs=[self.depth, geo or self.geo, self.pm, float(self.geometry.centre[2]), lo, hi,
-                              TOP_MIN_RHO, sigmas, gate, *counts])
+                      inputs=[self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]),
+                              lo, hi, TOP_MIN_RHO, sigmas, gate, *counts])
 
         if unhidden:
             top_band(-BAND_ALL, BAND_ALL, self.rho,
