@@ -474,6 +474,9 @@ class ModelSection(Node):
     sparse_epsilon: Num = Field(_d(ModelParams, "sparse_epsilon"), ge=0, le=0.5,
                                 description="sparse iterations: cells whose rho and rho_new are below "
                                             "it leave the lists until a full pass; 0: every pass full")
+    sparse_drop: Num = Field(_d(ModelParams, "sparse_drop"), ge=0, le=1,
+                             description="sparse iterations: a full pass also drops, setting its rho to 0, a cell "
+                                         "whose rho_new is below sparse_epsilon and rho below this; 0: off")
     bound_rounds: Int = Field(_d(ModelParams, "bound_rounds"), ge=0,
                               description="with sparse iterations: rounds of the pruning bound, which "
                                           "removes before the first pass the cells whose rho_new can "

@@ -515,7 +515,7 @@ class Engine:
         launch(K.update_rho, dim, [logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
                                    self.done, self.max_change, self.iterations, int(full), p.sparse_epsilon,
                                    self.live, index, self.live_changed, self.streak, p.damping_streak,
-                                   p.damping_streak_max, p.behind_cost, self.n_behind])
+                                   p.damping_streak_max, p.behind_cost, self.n_behind, p.sparse_drop])
 
     def _launch(self, kernel, dim: int, inputs: list):
         """wp.launch of one of the iteration's kernels, recorded at its first launch and replayed

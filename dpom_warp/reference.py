@@ -363,6 +363,8 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         if full:
             live = kept & ((rho_new >= params.sparse_epsilon) | (damped >= params.sparse_epsilon))
             rho = np.where(kept, damped, rho)  # pruned ones hold 0, idle ones their start
+            drop = live & (rho_new < params.sparse_epsilon) & (damped < params.sparse_drop)
+            live, rho = live & ~drop, np.where(drop, 0.0, rho)  # (ModelParams.sparse_drop)
         else:
             rho = np.where(live, damped, rho)
         iterations = it + 1

@@ -123,6 +123,7 @@ def update_rho(
     streak_cap: wp.float64,
     behind_cost: wp.float64,
     behind: wp.array(dtype=wp.int32),
+    drop: wp.float64,
 ):
     """rho <- (1 - lambda) rho + lambda sigmoid(logit(prior) + evidence - behind_cost x
     behind), behind[i] the location's silhouette pixels that read behind its object (kernels
@@ -136,8 +137,10 @@ def update_rho(
     location) a location whose rho and rho_new are both below `epsilon` is marked dead
     (live = 0), any other live, and changed[0] = 1 where that differs from before; after a
     pass over the compact lists (`full` = 0) only live locations move; changed[1] = 1 where a
-    dead location comes back to life. With epsilon = 0 and
-    every pass full this is the exact damped update.
+    dead location comes back to life. With `drop` > 0 a full pass also marks dead, with rho =
+    0, a location whose rho_new is below epsilon and whose damped rho is below `drop`
+    (ModelParams.sparse_drop). With epsilon = 0 and every pass full this is the exact damped
+    update.
 
     Per-location damping (ModelParams.damping_streak, `streak_growth` > 1): streak[i] is the
     signed count of the location's last updates whose target rho_new lay on the same side of
@@ -173,8 +176,12 @@ def update_rho(
         streak[i] = step * (run + 1)
     rho[i] = (f64(1.0) - lam) * rho[i] + lam * rho_new
     now = int(1)
-    if full != 0 and rho_new < epsilon and rho[i] < epsilon:
-        now = 0
+    if full != 0 and rho_new < epsilon:
+        if rho[i] < epsilon:
+            now = 0
+        elif rho[i] < drop:
+            rho[i] = f64(0.0)
+            now = 0
     if now != live[i]:
         changed[0] = 1
         if now == 1:

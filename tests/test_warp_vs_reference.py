@@ -390,3 +390,24 @@ def test_shorter_solid_lies_inside_the_silhouettes():
     assert inside > 0
     with pytest.raises(ValueError, match="expected a height in"):
         geom.shorter(1.9)
+
+
+@pytest.mark.parametrize("graph", [False, True])
+@pytest.mark.parametrize("shape", ["plane", "solid"])
+@pytest.mark.parametrize("seed", range(3))
+def test_sparse_drop_matches_reference(device, seed, shape, graph):
+    """model.sparse_drop (a full pass sets to 0 and drops the locations whose rho_new is below
+    sparse_epsilon and whose rho is below sparse_drop) on the Warp path, driven from the host
+    or as a graph, equals the reference; it changes the iterations' course somewhere."""
+    geom, params, depth, bg_frames = random_scene(seed, shape=shape)
+    params = dataclasses.replace(params, sparse_epsilon=1e-4, sparse_drop=0.5)
+    engine = Engine(geom, params, device, graph=graph)
+    engine.set_background_frames(bg_frames)
+    bg = ref.background_from_frames(bg_frames, params)
+    want = ref.mean_field(depth, geom, bg, params)
+    got = engine.infer(depth)
+    assert got.iterations == want["iterations"]
+    np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, sparse_drop=0.0))
+    assert np.abs(plain["rho"] - want["rho"]).max() > 1e-9, "nothing was dropped: the option is not exercised"
