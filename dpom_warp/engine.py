@@ -201,6 +201,9 @@ class Engine:
         self.pm = pixel_model(params)
         with wp.ScopedDevice(device):
             self.geo = self._geometry_arrays(geometry)
+            # the optical axis: every ray's parameter is its z-depth, d . forward = 1
+            rays = geometry.rays.reshape(-1, 3)
+            self.forward = wp.vec3d(*(float(x) for x in np.linalg.lstsq(rays, np.ones(len(rays)), rcond=None)[0]))
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
             self.centre = wp.vec3d(*(float(c) for c in geometry.centre))
@@ -697,7 +700,7 @@ class Engine:
             low, high = (p.behind_low * h, p.behind_high * h) if h > 0 else (-BAND_ALL, BAND_ALL)
             wp.launch(K.behind_count, dim=len(self.live), device=dev,
                       inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]), p.behind_side,
-                              low, high, p.behind_step, self.per_location, self.n_behind])
+                              low, high, p.behind_step, self.forward, self.per_location, self.n_behind])
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()

@@ -292,6 +292,7 @@ def behind_count(
     low: wp.float64,
     high: wp.float64,
     step: int,
+    forward: wp.vec3d,
     entries: wp.array(dtype=wp.int32),
     behind: wp.array(dtype=wp.int32),
 ):
@@ -304,7 +305,11 @@ def behind_count(
     height `low` (the gap between the legs) or above `high` (heads: people are shorter or taller
     than the solid). One thread per location of the batch; 0 for the locations in no list
     (entries[i], their entries in the lists, 0: no reading supports them, and on the fast path
-    the pruned and idle ones, kernels.sparse), which stay where they start as before."""
+    the pruned and idle ones, kernels.sparse), which stay where they start as before.
+    `forward`: the camera's optical axis (a ray's parameter is its z-depth, d . forward = 1):
+    a lattice row none of whose points can lie between `low` and `high` on the solid (the
+    z-depths of the solid's bounding box times the row's vertical ray components) is skipped
+    without walking it, which changes no count."""
     i = wp.tid()
     n_loc = geo.rect.shape[0]
     b = i / n_loc
@@ -314,7 +319,35 @@ def behind_count(
         r = geo.rect[k]
         u0 = (r[0] + step - 1) / step * step  # the first lattice column and row in the rectangle
         v0 = (r[1] + step - 1) / step * step
+        # the z-depths (ray parameters) the solid's bounding box spans, floored at 0
+        p = geo.location[k]
+        reach = wp.max(wp.max(geo.body_radius, geo.depth_radius), wp.max(geo.head_radius, geo.leg_radius))
+        t_lo = f64(1.0e30)
+        t_hi = f64(0.0)
+        for corner in range(8):
+            dx = reach
+            if corner % 2 == 0:
+                dx = -reach
+            dy = reach
+            if (corner / 2) % 2 == 0:
+                dy = -reach
+            dz = geo.top
+            if corner / 4 == 0:
+                dz = geo.bottom
+            t = wp.dot(wp.vec3d(p[0] + dx, p[1] + dy, p[2] + dz) - geo.centre, forward)
+            t_lo = wp.min(t_lo, t)
+            t_hi = wp.max(t_hi, t)
+        t_lo = wp.max(t_lo, f64(0.0))
         for v in range(v0, r[3] + 1, step):
+            z_lo = f64(1.0e30)  # the row's vertical ray components
+            z_hi = f64(-1.0e30)
+            for u in range(u0, r[2] + 1, step):
+                z_lo = wp.min(z_lo, geo.rays[v, u][2])
+                z_hi = wp.max(z_hi, geo.rays[v, u][2])
+            h_lo = centre_z + wp.min(wp.min(t_lo * z_lo, t_lo * z_hi), wp.min(t_hi * z_lo, t_hi * z_hi))
+            h_hi = centre_z + wp.max(wp.max(t_lo * z_lo, t_lo * z_hi), wp.max(t_hi * z_lo, t_hi * z_hi))
+            if h_hi + f64(1.0e-9) < low or h_lo - f64(1.0e-9) > high:  # (a margin for rounding)
+                continue
             first = int(-1)
             for u in range(u0, r[2] + 1, step):
                 if object_depth(geo, k, geo.rays[v, u])[0] > f64(0.0):
