@@ -1,0 +1,91 @@
+"""Why each error of a robustness draw happens: every missed person and false detection,
+with what the model says at its place.
+
+Runs the people demo's config over bench.robustness's scenes (the tuning draw with --tuning)
+through the Python API and matches each frame's detections with its ground truth at 0.5 m.
+For a missed person: their height and visibility, the nearest other person, and at the cell
+within 0.3 m with the largest rho: rho (mean field), e (eq. 13's share), rho* before the
+top-band test (sigmoid(alpha e + beta) rho), the top band's counts (support / against /
+hidden / in view, the kept band's) and the readings behind the cell's core. For a false
+detection: its rho* and the nearest people, with the same at its cell.
+
+    python -m bench.errors [--tuning] [--background frames|auto|floor] [--set key=value ...]
+                           [--scenes NAME ...] [--frames 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from bench.robustness import VARIANTS, scene_sets
+
+
+def cell_state(detector, result, k: int) -> str:
+    """What the model says at location k of the frame just detected."""
+    engine, p = detector.engine, detector.engine.params
+    rho, e = float(result.rho.ravel()[k]), float(engine.share.numpy()[k])
+    before = rho / (1.0 + np.exp(-(p.alpha * e + p.beta)))
+    s, a, f, seen = (int(getattr(engine, n).numpy()[k]) for n in ("top_support", "top_against", "top_hidden",
+                                                                   "top_seen"))
+    return (f"rho {rho:.3f}, e {e:.3f}, rho* before the top band {before:.3f}, top band s/a/f/in view "
+            f"{s}/{a}/{f}/{seen}, readings behind {int(engine.n_behind.numpy()[k])}, rho* "
+            f"{float(result.rho_star.ravel()[k]):.3f}")
+
+
+def main():
+    from dpom_warp.api import Detector
+    from dpom_warp.evaluate import load_ground_truth, match
+    from dpom_warp.io import read_depth
+    from dpom_warp.pipeline import expand
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--tuning", action="store_true", help="the tuning draw (seeds + 1000)")
+    ap.add_argument("--background", choices=("frames", "auto", "floor"), default="frames")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
+    ap.add_argument("--scenes", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
+    ap.add_argument("--frames", type=int, default=10)
+    a = ap.parse_args()
+    false_total = missed_total = 0
+    for name in a.scenes:
+        sets = scene_sets(name, VARIANTS[name], a.frames, a.background, a.tuning) + a.set + ["device=cpu"]
+        detector = Detector.from_config("configs/demo_people.yaml", sets)
+        cfg = detector.config
+        truth = load_ground_truth(cfg.evaluation.ground_truth)
+        locations = detector.worker.geometry.locations[:, :2]
+        shape = (cfg.camera.height, cfg.camera.width)
+        for f in expand(cfg.inputs.frames, "input.frames")[:a.frames]:
+            result = detector.detect(read_depth(f, cfg.inputs.depth_scale, shape))
+            people = truth[f.name]
+            found = np.array([(d.x, d.y) for d in result.detections]).reshape(-1, 2)
+            where = np.array([(o["x"], o["y"]) for o in people]).reshape(-1, 2)
+            pairs = match(found, where, 0.5)
+            matched_found, matched_people = {i for i, _ in pairs}, {j for _, j in pairs}
+            for j, o in enumerate(people):
+                if j in matched_people:
+                    continue
+                missed_total += 1
+                others = np.delete(where, j, axis=0)
+                nearest = np.hypot(*(others - where[j]).T).min() if len(others) else float("inf")
+                near = np.flatnonzero(np.hypot(*(locations - where[j]).T) < 0.3)
+                state = cell_state(detector, result, int(near[np.argmax(result.rho.ravel()[near])])) if len(
+                    near) else "no cell within 0.3 m"
+                print(f"missed  {name} {f.name}: person at ({o['x']:.2f}, {o['y']:.2f}), {o['height']:.2f} m, "
+                      f"{100 * o['visibility']:.0f} % visible, nearest person {nearest:.2f} m; {state}")
+            for i, d in enumerate(result.detections):
+                if i in matched_found:
+                    continue
+                false_total += 1
+                dist = np.hypot(*(where - found[i]).T) if len(where) else np.array([])
+                close = ", ".join(f"{dist[j]:.2f} m ({people[j]['height']:.2f} m tall)" for j in np.argsort(dist)[:2])
+                k = int(np.argmin(np.hypot(*(locations - found[i]).T)))
+                print(f"false   {name} {f.name}: at ({d.x:.2f}, {d.y:.2f}), nearest people {close or 'none'}; "
+                      f"{cell_state(detector, result, k)}")
+    draw = "tuning draw" if a.tuning else "held-out draw"
+    print(f"{draw}, {len(a.scenes)} scenes x {a.frames} frames, background {a.background}"
+          f"{'; ' + ', '.join(a.set) if a.set else ''}: {false_total} false detections, {missed_total} missed")
+
+
+if __name__ == "__main__":
+    main()
