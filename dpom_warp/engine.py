@@ -223,7 +223,7 @@ class Engine:
             self.top_hidden = wp.zeros(L, dtype=wp.int32)
             self.top_seen = wp.zeros(L, dtype=wp.int32)  # the band's pixels in the image (-1: not counted)
             # a shorter solid's band (params.top_heights): its GeometryArrays and counts
-            self.shorter_top = [(h, self._geometry_arrays(geometry.shorter(h))) for h in params.top_heights
+            self.shorter_top = [(h, self._geometry_arrays(geometry.shorter(h), self.geo)) for h in params.top_heights
                                 if geometry.height > 0]
             self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(4 if self.shorter_top else 0)]
             self.all_support = wp.zeros(L, dtype=wp.int32)  # the same counts, whole silhouette
@@ -256,10 +256,11 @@ class Engine:
         self._allocate_lists(int(entries_per_pixel * P))
         self.set_floor_background()
 
-    def _geometry_arrays(self, geometry: Geometry) -> K.GeometryArrays:
-        """The kernels' view of `geometry`; one that differs from self.geo only in the solid
-        (Geometry.shorter) shares its arrays."""
-        g, first = K.GeometryArrays(), getattr(self, "geo", None)
+    @staticmethod
+    def _geometry_arrays(geometry: Geometry, first: K.GeometryArrays | None = None) -> K.GeometryArrays:
+        """The kernels' view of `geometry`; with `first`, the view of a geometry that differs
+        from it only in the solid (Geometry.shorter), sharing its arrays."""
+        g = K.GeometryArrays()
         if first is None:
             g.rays = wp.array(geometry.rays, dtype=wp.vec3d)
             g.rect = wp.array(geometry.rect, dtype=wp.vec4i)
