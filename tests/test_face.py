@@ -246,6 +246,39 @@ def test_pictures_png_encoder_round_trips():
         encode_png(np.zeros((4, 4, 4), np.uint8))
 
 
+def test_pictures_drawn_on_a_shared_template_are_those_drawn_from_scratch():
+    """render.frame_picture copies its unchanging parts from a template drawn once per layout:
+    a picture drawn after others (other depths, maps, detections, tracks, a voxel grid) is the
+    one drawn on a fresh template, and the template itself is never drawn on."""
+    import io
+
+    from dpom_warp.detect import Detected
+    from dpom_warp.geometry import Grid
+    from dpom_warp.render import frame_picture, picture_template
+
+    rng = np.random.default_rng(5)
+    ground, voxel = Grid(x=(-2, 2, 0.1), y=(0.5, 5, 0.1)), Grid(x=(-2, 2, 0.2), y=(0.5, 5, 0.2), mode="voxel", z=(0, 2.4, 0.2))
+
+    def picture(k, grid):
+        rho = rng.random(grid.shape) ** 8
+        depth = (rng.random((106, 128)) * 5).astype(np.float32)
+        dets = [Detected(i, -1 + 0.7 * i, 2 + 0.3 * i, 1.0, 0.5 + 0.1 * i, (5 + 30 * i, 10, 25 + 30 * i, 80))
+                for i in range(k % 3 + 1)]
+        tracks = [{"id": 3 + i, "box": d.box, "bridged": i == 1, "xyz": (d.x, d.y, d.z),
+                   "trail": [(d.x + 0.05 * j, d.y, d.z) for j in range(4)]} for i, d in enumerate(dets)]
+        return (depth, rho, grid, dets, (0.0, 0.0), [{"x": -1.0, "y": 2.0, "z": 1.0}] if k % 2 else None,
+                f"frame {k}"), {"tracks": tracks if k % 3 else None}
+
+    def rgb(png):
+        return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+    cases = [picture(k, voxel if k == 4 else ground) for k in range(6)]
+    warm = [rgb(frame_picture(*a, **kw)) for a, kw in cases]
+    for (a, kw), seen in zip(cases, warm):
+        picture_template.cache_clear()
+        assert np.array_equal(rgb(frame_picture(*a, **kw)), seen)
+    assert warm[4].shape[1] > warm[0].shape[1]  # the voxel grid's side view
+
 def test_eval_compare_leaves_the_runs_untouched(tmp_path, capsys):
     path = small_config(tmp_path)
     assert main(["run", str(path), "--no-progress", "--set", "evaluation.plots=true"]) == 0
