@@ -47,20 +47,35 @@ def reduce_loop(depth, s, how, z_max=np.inf, min_share=0.25):
 
 
 @pytest.mark.parametrize("how", REDUCERS)
-@pytest.mark.parametrize("stride", [2, 3, 4])
-def test_reduce_depth_matches_block_loop(how, stride, rng):
-    depth = rng.uniform(0.5, 9.0, (23, 30)).astype(np.float32)
+@pytest.mark.parametrize("stride", [2, 3, 4, 5, 6, 8])
+@pytest.mark.parametrize("network_max", [0, 64])  # every block sorted by np.sort / by the network
+def test_reduce_depth_matches_block_loop(how, stride, network_max, rng):
+    depth = rng.uniform(0.5, 9.0, (37, 43)).astype(np.float32)
     depth[rng.random(depth.shape) < 0.4] = 0  # many holes: some blocks fall under min_share
-    depth[:4, :4] = 0
+    depth[rng.random(depth.shape) < 0.2] = 3.0  # ties
     depth[rng.random(depth.shape) < 0.05] = 12.0  # beyond z_max: missing
-    got = reduce_depth(depth, stride, how, z_max=10.0)
+    depth[:8, :8] = 0  # a whole block without readings at every stride
+    got = reduce_depth(depth, stride, how, z_max=10.0, network_max=network_max)
     want = reduce_loop(depth, stride, how, z_max=10.0)
-    assert got.shape == (23 // stride, 30 // stride)
+    assert got.shape == (37 // stride, 43 // stride)
     np.testing.assert_array_equal(got, want)
     if how != "nearest":
         assert (got == 0).any() and (got > 0).any()
-    both = reduce_depth(np.stack([depth, depth[::-1].copy()]), stride, how, z_max=10.0)
+    both = reduce_depth(np.stack([depth, depth[::-1].copy()]), stride, how, z_max=10.0, network_max=network_max)
     np.testing.assert_array_equal(both[1], reduce_loop(depth[::-1], stride, how, 10.0))
+
+
+def test_sorting_networks_sort(rng):
+    """resolution.sorting_network(n) sorts any n keys (ties and +inf included) as np.sort does,
+    for every block size a stride up to 8 gives and the sizes between."""
+    from dpom_warp.resolution import sort_rows, sorting_network
+
+    for n in range(1, 65):
+        keys = rng.integers(0, 6, (n, 200)).astype(np.float32)
+        keys[rng.random(keys.shape) < 0.3] = np.inf
+        want = np.sort(keys, axis=0)
+        np.testing.assert_array_equal(sort_rows(keys.copy(), network_max=64), want)
+        assert all(0 <= a < b < n for a, b in sorting_network(n))
 
 
 @pytest.mark.parametrize("stride", [2, 3, 4])
