@@ -257,7 +257,8 @@ def test_pictures_drawn_on_a_shared_template_are_those_drawn_from_scratch():
     from dpom_warp.render import frame_picture, picture_template
 
     rng = np.random.default_rng(5)
-    ground, voxel = Grid(x=(-2, 2, 0.1), y=(0.5, 5, 0.1)), Grid(x=(-2, 2, 0.2), y=(0.5, 5, 0.2), mode="voxel", z=(0, 2.4, 0.2))
+    ground = Grid(x=(-2, 2, 0.1), y=(0.5, 5, 0.1))
+    voxel = Grid(x=(-2, 2, 0.2), y=(0.5, 5, 0.2), mode="voxel", z=(0, 2.4, 0.2))
 
     def picture(k, grid):
         rho = rng.random(grid.shape) ** 8
@@ -278,6 +279,7 @@ def test_pictures_drawn_on_a_shared_template_are_those_drawn_from_scratch():
         picture_template.cache_clear()
         assert np.array_equal(rgb(frame_picture(*a, **kw)), seen)
     assert warm[4].shape[1] > warm[0].shape[1]  # the voxel grid's side view
+
 
 def test_eval_compare_leaves_the_runs_untouched(tmp_path, capsys):
     path = small_config(tmp_path)
