@@ -231,17 +231,23 @@ def test_picture_legend_and_labels():
 
 def test_pictures_png_encoder_round_trips():
     """render.encode_png: Pillow reads back exactly the image given (odd sizes, every value),
-    and anything but RGB is a clear error."""
+    with ISA-L's deflate (a dependency: the default) and with zlib's, and anything but RGB is
+    a clear error."""
     import io
+    import zlib
 
+    from dpom_warp import render
     from dpom_warp.render import encode_png
 
+    assert render.DEFLATE_BY == "ISA-L"
     rng = np.random.default_rng(3)
     for h, w in ((1, 1), (7, 13), (106, 129)):
         rgb = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
-        back = Image.open(io.BytesIO(encode_png(rgb)))
-        assert back.mode == "RGB" and back.size == (w, h)
-        assert np.array_equal(np.asarray(back), rgb)
+        rgb[: h // 2] = 200  # flat rows, as the pictures have
+        for deflate in (None, zlib.compress):
+            back = Image.open(io.BytesIO(encode_png(rgb, deflate=deflate)))
+            assert back.mode == "RGB" and back.size == (w, h)
+            assert np.array_equal(np.asarray(back), rgb)
     with pytest.raises(ValueError, match="expected an \\(H, W, 3\\) image, found \\(4, 4, 4\\)"):
         encode_png(np.zeros((4, 4, 4), np.uint8))
 
