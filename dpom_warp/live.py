@@ -6,7 +6,9 @@ latency (a frame's arrival to its record written).
 
 The camera's frames arrive on the driver's thread into a one-frame slot; the loop here takes
 the newest, infers it with the run's engine and FrameWorker (the plain run's code), writes its
-map and record, and feeds its map to the online tracker. Stopping writes detections.csv,
+map and record, and feeds its map to the online tracker. With helper processes (`--workers`),
+a feeder thread hands each helper the newest frame as soon as it is free, while the loop
+infers its own; frames are written and tracked in the order they were taken. Stopping writes detections.csv,
 tracks.csv, track_table.csv and summary.json (with a `live` block) as a plain run does.
 
 A camera that stops sending (unplugged, or its stream stalled: no frame for STALL_S seconds)
@@ -21,7 +23,8 @@ import statistics
 import threading
 import time
 from collections import deque
-from concurrent.futures import Future
+from concurrent.futures import FIRST_COMPLETED, Future
+from concurrent.futures import wait as wait_futures
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
@@ -79,10 +82,10 @@ def _helper_infer(small: np.ndarray):
 
 
 class Helpers:
-    """`n` processes, each with its own engine, inferring the frames the main process hands
-    them while it infers others itself (Warp runs a CPU launch on one thread: this is how a
-    live run uses more cores). If one dies, its frames are inferred by the main process and
-    the run goes on without helpers."""
+    """`n` processes, each with its own engine, inferring the frames the main process's
+    feeder thread hands them while its loop infers others (Warp runs a CPU launch on one
+    thread: this is how a live run uses more cores). If one dies, its frames are inferred by
+    the main process and the run goes on without helpers."""
 
     def __init__(self, spec, engine, n: int):
         import multiprocessing
@@ -100,9 +103,10 @@ class Helpers:
         for w in warm:  # started, engines built: the first frames do not wait for them
             w.result()
 
-    def idle(self) -> bool:
+    def busy(self) -> list:
+        """The futures of the frames the helpers are inferring now."""
         self.running = [f for f in self.running if not f.done()]
-        return self.pool is not None and len(self.running) < self.n
+        return list(self.running)
 
     def submit(self, small: np.ndarray):
         """A future of the frame's result; a pool already broken by a helper's death (which
@@ -111,8 +115,7 @@ class Helpers:
         try:
             fut = self.pool.submit(_helper_infer, small)
         except BrokenProcessPool as e:
-            fut = Future()
-            fut.set_exception(e)
+            fut = _broken(e)
         self.running.append(fut)
         return fut
 
@@ -120,6 +123,20 @@ class Helpers:
         if self.pool is not None:
             self.pool.shutdown(wait=True, cancel_futures=True)
             self.pool = None
+
+
+def _broken(error: BrokenProcessPool | None = None) -> Future:
+    """A future holding a broken pool's error (a frame handed to helpers that have died)."""
+    fut = Future()
+    fut.set_exception(error or BrokenProcessPool("the helper processes are gone"))
+    return fut
+
+
+def stop_threads(thread: threading.Thread | None, stop: threading.Event) -> None:
+    """Stop the live run's feeder thread (if it was started) and wait for it."""
+    stop.set()
+    if thread is not None and thread.is_alive():
+        thread.join()
 
 
 def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None = None, log=print,
@@ -172,34 +189,95 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     slot = NewestFrame()
     records, names, latencies, infer_s = {}, [], [], []
     done, taken, t_first, last_line, track_s = 0, 0, None, time.perf_counter(), 0.0
-    pending: deque = deque()  # [frame, depth, small, FrameResult or future, inference s, process]
+    # [frame, depth, small, FrameResult, future or None (being inferred here), inference s,
+    # process], in the order the frames were taken
+    pending: deque = deque()
     helpers = Helpers(setup.spec, engine, workers - 1) if workers > 1 else None
+    # the frames are taken one taker at a time (this loop, and the feeder thread that hands
+    # the helpers theirs), each put in `pending` before the next is taken: stream order
+    taking, state = threading.Lock(), threading.Lock()
+    stop_feeding = threading.Event()
+
+    def reserve() -> bool:
+        """A place for one more frame under --max-frames (released by `unreserve`)."""
+        nonlocal taken
+        with state:
+            if max_frames is not None and taken >= max_frames:
+                return False
+            taken += 1
+            return True
+
+    def unreserve():
+        nonlocal taken
+        with state:
+            taken -= 1
+
+    def take(timeout: float, then):
+        """The newest frame (None after `timeout`), with `then(frame, depth, small)` (its item
+        in `pending`) done before any other frame is taken."""
+        with taking:
+            fr = slot.take(timeout)
+            if fr is None:
+                return None
+            depth = units_to_metres(fr.depth, cfg.inputs.depth_scale)
+            small = engine.resolution.frames(depth)
+            return then(fr, depth, small)
+
+    def feed():
+        """While the main loop infers, hand each helper that is free the newest frame."""
+        while not stop_feeding.is_set():
+            with state:
+                h = helpers
+            if h is None:
+                return
+            busy = h.busy()
+            if len(busy) >= h.n:
+                wait_futures(busy, timeout=0.05, return_when=FIRST_COMPLETED)
+                continue
+            if not reserve():
+                return
+            got = take(0.05, lambda fr, depth, small: submit(fr, depth, small))
+            if got is None:
+                unreserve()
+
+    def submit(fr, depth, small):
+        with state:  # a helper that died meanwhile: a future holding the pool's error
+            fut = helpers.submit(small) if helpers is not None else _broken()
+            item = [fr, depth, small, None, fut, None, None]
+            pending.append(item)
+        return item
 
     def result_of(item, wait: bool) -> bool:
         """Whether item's result is in (waiting for it with `wait`); a helper that died: the
         frame is inferred here, and the run goes on without helpers."""
         nonlocal helpers
-        if not isinstance(item[3], Future):
-            return True
-        if not (wait or item[3].done()):
+        fut = item[4]
+        if fut is None:
+            return item[3] is not None
+        if not (wait or fut.done()):
             return False
         try:
-            item[3], item[4], item[5] = item[3].result()
+            item[3], item[5], item[6] = fut.result()
         except BrokenProcessPool as e:
-            log(f"live: a helper process died ({e or 'no reason given'}); its frames are inferred here, "
-                f"the run goes on in one process")
-            helpers.close()
-            helpers = None
-            for other in pending:  # every frame it held
-                if isinstance(other[3], Future):
-                    t = time.perf_counter()
-                    other[3], other[5] = engine.infer(other[2]), worker.name
-                    other[4] = time.perf_counter() - t
+            with state:
+                h, helpers = helpers, None
+            if h is not None:
+                log(f"live: a helper process died ({e or 'no reason given'}); its frames are inferred here, "
+                    f"the run goes on in one process")
+                h.close()
+            with state:
+                held = [other for other in pending if other[4] is not None]
+            for other in held:  # every frame it held
+                t = time.perf_counter()
+                other[3], other[6] = engine.infer(other[2]), worker.name
+                other[5] = time.perf_counter() - t
+                other[4] = None
+        item[4] = None
         return True
 
     def finish(item):
         nonlocal done, track_s
-        fr, depth, _, res, infer, process = item
+        fr, depth, _, res, _, infer, process = item
         worker.pictures = cfg.output.images and done % cfg.output.images_every == 0
         name = f"{fr.index:06d}"
         _, output, _ = worker._finish(FrameItem(name), depth, res, 0.0, infer, [])
@@ -219,41 +297,61 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         done += 1
 
     def drain(wait: bool):
-        while pending and result_of(pending[0], wait):
-            finish(pending.popleft())
+        while True:
+            with state:
+                item = pending[0] if pending else None
+            if item is None or not result_of(item, wait):
+                return
+            with state:
+                pending.popleft()
+            finish(item)
+
+    def mine(fr, depth, small):
+        item = [fr, depth, small, None, None, None, worker.name]
+        with state:
+            pending.append(item)
+        return item
 
     source.start(slot.put)
+    feeder = threading.Thread(target=feed, daemon=True) if helpers is not None else None
     stopped_by, stop_error = "max_frames", None
     try:
-        while max_frames is None or taken < max_frames:
-            fr = slot.take(first_frame_timeout if taken == 0 else STALL_S)
-            if fr is None:
-                if taken == 0:
+        while reserve():
+            first = t_first is None
+            item = take(first_frame_timeout if first else STALL_S, mine)
+            if item is None:
+                unreserve()
+                if first:
                     raise ConfigError(f"input.frames: {cfg.inputs.frames}: no frame within "
                                       f"{first_frame_timeout:g} s of starting the camera")
                 stopped_by = "camera stopped sending"
                 break
-            t_first = t_first or fr.arrived
-            depth = units_to_metres(fr.depth, cfg.inputs.depth_scale)
-            small = engine.resolution.frames(depth)
-            taken += 1
-            if helpers is not None and helpers.idle():
-                pending.append([fr, depth, small, helpers.submit(small), None, None])
-            else:
-                t0 = time.perf_counter()
-                res = engine.infer(small)
-                pending.append([fr, depth, small, res, time.perf_counter() - t0, worker.name])
+            t_first = t_first or item[0].arrived
+            if feeder is not None and first:
+                feeder.start()  # the helpers' frames from now on, beside this loop's
+            t0 = time.perf_counter()
+            res = engine.infer(item[2])
+            item[5] = time.perf_counter() - t0
+            item[3] = res
             drain(wait=False)
             if latencies and time.perf_counter() - last_line >= 1.0:
                 last_line = time.perf_counter()
                 rate = done / max(1e-9, last_line - t_first)
                 log(f"live: {done} frames, {rate:.1f} frames/s, {slot.dropped} dropped, latency "
                     f"{1000 * statistics.median(latencies[-30:]):.0f} ms")
+        stop_threads(feeder, stop_feeding)
         drain(wait=True)
     except KeyboardInterrupt:
         stopped_by = "Ctrl-C"
+        stop_threads(feeder, stop_feeding)
+        for item in list(pending):  # one being inferred here when Ctrl-C came: again
+            if item[3] is None and item[4] is None:
+                t0 = time.perf_counter()
+                item[3] = engine.infer(item[2])
+                item[5] = time.perf_counter() - t0
         drain(wait=True)  # the frames taken are inferred and written: nothing is lost
     finally:
+        stop_threads(feeder, stop_feeding)
         try:
             source.stop()
         except RuntimeError as e:  # an unplugged camera's SDK may fail to stop it: keep the frames
