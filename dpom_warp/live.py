@@ -111,7 +111,7 @@ class Helpers:
     def submit(self, small: np.ndarray):
         """A future of the frame's result; a pool already broken by a helper's death (which
         the main process may learn of here first) gives a future holding that error, so the
-        frame is inferred where every other death is handled (run_live's result_of)."""
+        frame is inferred where every other death is handled (run_live's adopt)."""
         try:
             fut = self.pool.submit(_helper_infer, small)
         except BrokenProcessPool as e:
@@ -195,8 +195,13 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     helpers = Helpers(setup.spec, engine, workers - 1) if workers > 1 else None
     # the frames are taken one taker at a time (this loop, and the feeder thread that hands
     # the helpers theirs), each put in `pending` before the next is taken: stream order
-    taking, state = threading.Lock(), threading.Lock()
+    taking, state = threading.Lock(), threading.Condition()
     stop_feeding = threading.Event()
+    # a finisher thread writes and tracks the frames in order, beside the inference; a helper's
+    # death it finds is left to the main loop (`adopt`), the one thread that runs this engine
+    closing, broken, abandon = threading.Event(), threading.Event(), threading.Event()
+    died: list = []  # the error a helper's death gave
+    failure: list = []  # an error writing or tracking a frame: raised by the main loop
 
     def reserve() -> bool:
         """A place for one more frame under --max-frames (released by `unreserve`)."""
@@ -225,7 +230,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
 
     def feed():
         """While the main loop infers, hand each helper that is free the newest frame."""
-        while not stop_feeding.is_set():
+        while not (stop_feeding.is_set() or broken.is_set()):
             with state:
                 h = helpers
             if h is None:
@@ -239,41 +244,68 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             got = take(0.05, lambda fr, depth, small: submit(fr, depth, small))
             if got is None:
                 unreserve()
+            elif got[4].done() and got[4].exception() is not None:
+                return  # the helpers are gone: this frame is the main loop's to infer (adopt)
 
     def submit(fr, depth, small):
         with state:  # a helper that died meanwhile: a future holding the pool's error
             fut = helpers.submit(small) if helpers is not None else _broken()
             item = [fr, depth, small, None, fut, None, None]
             pending.append(item)
+        fut.add_done_callback(lambda _: notify())
         return item
 
-    def result_of(item, wait: bool) -> bool:
-        """Whether item's result is in (waiting for it with `wait`); a helper that died: the
-        frame is inferred here, and the run goes on without helpers."""
+    def notify():
+        with state:
+            state.notify_all()
+
+    def adopt():
+        """After a helper's death: every frame the helpers held is inferred here, and the run
+        goes on without them (main loop only: this engine is not shared between threads)."""
         nonlocal helpers
-        fut = item[4]
-        if fut is None:
-            return item[3] is not None
-        if not (wait or fut.done()):
-            return False
+        broken.clear()
+        with state:
+            h, helpers = helpers, None
+            held = [other for other in pending if other[4] is not None]
+        if h is not None:
+            e = died[0] if died else None
+            log(f"live: a helper process died ({e or 'no reason given'}); its frames are inferred here, "
+                f"the run goes on in one process")
+            h.close()
+        for other in held:
+            t = time.perf_counter()
+            res = engine.infer(other[2])
+            with state:
+                other[3], other[5], other[6], other[4] = res, time.perf_counter() - t, worker.name, None
+                state.notify_all()
+
+    def next_ready():
+        """The first pending item once its result is in (None: closing and nothing left)."""
+        with state:
+            while not abandon.is_set():
+                item = pending[0] if pending else None
+                if item is None:
+                    if closing.is_set():
+                        return None
+                elif item[4] is None and item[3] is not None:
+                    return pending.popleft()
+                elif item[4] is not None and item[4].done():
+                    try:
+                        item[3], item[5], item[6] = item[4].result()
+                        item[4] = None
+                        continue
+                    except BrokenProcessPool as e:
+                        died.append(e)
+                        broken.set()  # the main loop adopts its frames
+                state.wait(0.05)
+            return None  # the run failed: the frames after stay unwritten
+
+    def finishing():
         try:
-            item[3], item[5], item[6] = fut.result()
-        except BrokenProcessPool as e:
-            with state:
-                h, helpers = helpers, None
-            if h is not None:
-                log(f"live: a helper process died ({e or 'no reason given'}); its frames are inferred here, "
-                    f"the run goes on in one process")
-                h.close()
-            with state:
-                held = [other for other in pending if other[4] is not None]
-            for other in held:  # every frame it held
-                t = time.perf_counter()
-                other[3], other[6] = engine.infer(other[2]), worker.name
-                other[5] = time.perf_counter() - t
-                other[4] = None
-        item[4] = None
-        return True
+            while (item := next_ready()) is not None:
+                finish(item)
+        except BaseException as e:  # raised by the main loop; the frames after it stay unwritten
+            failure.append(e)
 
     def finish(item):
         nonlocal done, track_s
@@ -296,24 +328,28 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         infer_s.append(infer)
         done += 1
 
-    def drain(wait: bool):
-        while True:
-            with state:
-                item = pending[0] if pending else None
-            if item is None or not result_of(item, wait):
-                return
-            with state:
-                pending.popleft()
-            finish(item)
-
     def mine(fr, depth, small):
         item = [fr, depth, small, None, None, None, worker.name]
         with state:
             pending.append(item)
         return item
 
+    def close_finisher():
+        """Every frame taken written and tracked (the helpers' dead ones inferred here first),
+        then the finisher gone; its error, if it had one, raised here."""
+        closing.set()
+        notify()
+        while finisher.is_alive():
+            if broken.is_set():
+                adopt()
+            finisher.join(0.05)
+        if failure:
+            raise failure[0]
+
     source.start(slot.put)
     feeder = threading.Thread(target=feed, daemon=True) if helpers is not None else None
+    finisher = threading.Thread(target=finishing, daemon=True)
+    finisher.start()
     stopped_by, stop_error = "max_frames", None
     try:
         while reserve():
@@ -331,27 +367,35 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
                 feeder.start()  # the helpers' frames from now on, beside this loop's
             t0 = time.perf_counter()
             res = engine.infer(item[2])
-            item[5] = time.perf_counter() - t0
-            item[3] = res
-            drain(wait=False)
+            with state:
+                item[3], item[5] = res, time.perf_counter() - t0
+                state.notify_all()
+            if broken.is_set():
+                adopt()
+            if failure:
+                raise failure[0]
             if latencies and time.perf_counter() - last_line >= 1.0:
                 last_line = time.perf_counter()
                 rate = done / max(1e-9, last_line - t_first)
                 log(f"live: {done} frames, {rate:.1f} frames/s, {slot.dropped} dropped, latency "
                     f"{1000 * statistics.median(latencies[-30:]):.0f} ms")
         stop_threads(feeder, stop_feeding)
-        drain(wait=True)
+        close_finisher()
     except KeyboardInterrupt:
         stopped_by = "Ctrl-C"
         stop_threads(feeder, stop_feeding)
         for item in list(pending):  # one being inferred here when Ctrl-C came: again
             if item[3] is None and item[4] is None:
                 t0 = time.perf_counter()
-                item[3] = engine.infer(item[2])
-                item[5] = time.perf_counter() - t0
-        drain(wait=True)  # the frames taken are inferred and written: nothing is lost
+                res = engine.infer(item[2])
+                with state:
+                    item[3], item[5] = res, time.perf_counter() - t0
+                    state.notify_all()
+        close_finisher()  # the frames taken are inferred and written: nothing is lost
     finally:
         stop_threads(feeder, stop_feeding)
+        abandon.set()  # (the finisher is done here unless the run failed)
+        notify()
         try:
             source.stop()
         except RuntimeError as e:  # an unplugged camera's SDK may fail to stop it: keep the frames

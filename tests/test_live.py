@@ -165,6 +165,48 @@ def test_a_helper_process_that_dies_loses_no_frame(camera_config, capsys):
     assert summary["per_frame"][-1]["worker"] == "main"
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_ctrl_c_writes_and_tracks_every_frame_taken(camera_config, workers):
+    """Ctrl-C (SIGINT to the run's process) mid-run: the frames taken so far, the one being
+    inferred and those the helper or the finisher thread held included, are all written and
+    tracked, in stream order, each the plain run's map; the summary says why it stopped."""
+    import os
+    import signal
+    import threading
+    import time
+
+    path, cam, tmp = camera_config
+    want = plain_maps(tmp)
+    out, sent = tmp / "out", []
+
+    def interrupt():
+        deadline = time.time() + 60
+        while time.time() < deadline:
+            if (out / "frames").exists() and len(list((out / "frames").glob("*.json"))) >= 5:
+                os.kill(os.getpid(), signal.SIGINT)
+                sent.append(True)
+                return
+            time.sleep(0.01)
+
+    cam.fps = 100.0  # frames arriving while the finisher and the helper are busy
+    cam.start()
+    ctrl_c = threading.Thread(target=interrupt, daemon=True)
+    ctrl_c.start()
+    try:
+        assert main(["run", str(path), "--no-progress", "--workers", str(workers)]) == 0
+    finally:
+        cam.stop()
+        ctrl_c.join(5)
+    assert sent
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["live"]["stopped_by"] == "Ctrl-C"
+    frames = summary["live"]["frames"]
+    assert frames >= 5 and len(list((out / "maps").glob("*.npy"))) == frames
+    assert_plain_maps_in_stream_order(out, want, frames)
+    t = summary["tracking"]  # every frame pushed to the online tracker: a solve each past the delay
+    assert t["method"] == "online" and t["solves"] == max(0, frames - t["delay_frames"]) + 1
+
+
 def test_a_frame_handed_to_a_pool_already_broken_is_a_future_of_that_error(camera_config):
     """The main process may learn of a helper's death when it hands over the next frame (the
     pool is marked broken before its futures fail): that frame must come back as a failed
