@@ -207,6 +207,31 @@ def test_ctrl_c_writes_and_tracks_every_frame_taken(camera_config, workers):
     assert t["method"] == "online" and t["solves"] == max(0, frames - t["delay_frames"]) + 1
 
 
+def test_an_error_writing_a_frame_ends_the_live_run_with_one_line(camera_config, capsys, monkeypatch):
+    """The finisher thread writes the frames; an error there (a full disk) ends the run with
+    a non-zero exit and a line naming it, the frames before it written, nothing after."""
+    import dpom_warp.worker as worker_module
+
+    path, cam, tmp = camera_config
+    real, calls = worker_module.write_output, []
+
+    def failing(out, output):
+        calls.append(output.stem)
+        if len(calls) == 4:
+            raise OSError(28, "No space left on device")
+        return real(out, output)
+
+    monkeypatch.setattr(worker_module, "write_output", failing)
+    cam.start()
+    try:
+        assert main(["run", str(path), "--no-progress", "--max-frames", "12"]) != 0
+    finally:
+        cam.stop()
+    err = capsys.readouterr().err
+    assert "No space left on device" in err and len(err.strip().splitlines()) == 1
+    assert len(list((tmp / "out" / "frames").glob("*.json"))) == 3
+
+
 def test_a_frame_handed_to_a_pool_already_broken_is_a_future_of_that_error(camera_config):
     """The main process may learn of a helper's death when it hands over the next frame (the
     pool is marked broken before its futures fail): that frame must come back as a failed
