@@ -6,10 +6,11 @@ latency (a frame's arrival to its record written).
 
 The camera's frames arrive on the driver's thread into a one-frame slot; the loop here takes
 the newest, infers it with the run's engine and FrameWorker (the plain run's code), writes its
-map and record, and feeds its map to the online tracker. With helper processes (`--workers`),
-a feeder thread hands each helper the newest frame as soon as it is free, while the loop
-infers its own; frames are written and tracked in the order they were taken. Stopping writes detections.csv,
-tracks.csv, track_table.csv and summary.json (with a `live` block) as a plain run does.
+map and record, and feeds its map to the online tracker. The writing and tracking run on a
+finisher thread, in the order the frames were taken, as soon as each result is in; with
+helper processes (`--workers`) a feeder thread hands each helper the newest frame the moment
+it is free, while the loop infers its own. Stopping writes detections.csv, tracks.csv,
+track_table.csv and summary.json (with a `live` block) as a plain run does.
 
 A camera that stops sending (unplugged, or its stream stalled: no frame for STALL_S seconds)
 ends the run with every output of the frames inferred so far written, then one line and exit
@@ -133,7 +134,7 @@ def _broken(error: BrokenProcessPool | None = None) -> Future:
 
 
 def stop_threads(thread: threading.Thread | None, stop: threading.Event) -> None:
-    """Stop the live run's feeder thread (if it was started) and wait for it."""
+    """Set `stop` and wait for `thread` (the live run's feeder), if it was started."""
     stop.set()
     if thread is not None and thread.is_alive():
         thread.join()
