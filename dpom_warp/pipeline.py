@@ -155,8 +155,8 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     and skipped (listed in summary.json), unless `strict`. Each frame's outputs (map,
     picture, then its record in frames/) are written atomically, so an interrupted run
     leaves whole files and `resume` continues it to the same final files. With `workers` > 1
-    frames are inferred by that many processes, each with its own engine (Warp runs CPU
-    kernels on one thread), and written here: the same files.
+    frames are inferred by that many processes, this one and workers - 1 helpers, each with
+    its own engine (Warp runs CPU kernels on one thread), and written here: the same files.
     """
     from .sources.realsense import is_live
 
@@ -164,10 +164,10 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         from .live import run_live
 
         return run_live(cfg, output_dir, device, log, max_frames, overwrite, workers=workers)
-    plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1)
+    plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1, keep_engine=workers > 1)
     open_output(plan, overwrite, resume, log)
     if workers > 1 and len(plan.todo) > 1:
-        outcomes = pool_outcomes(plan.spec, kernel_cache(), plan.chunks(), workers)
+        outcomes = pool_outcomes(plan.spec, kernel_cache(), plan.chunks(), workers, plan.engine)
         runner, desc = {"kind": "processes", "workers": workers}, f"dpom x{workers}"
     else:
         outcomes = _outcomes_here(plan)
@@ -187,10 +187,11 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
 
 
 def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None,
-             log=print, strict: bool = False, parallel: bool = False) -> RunPlan:
+             log=print, strict: bool = False, parallel: bool = False, keep_engine: bool = False) -> RunPlan:
     """Check the frames, fit the pose, set up the background and the engine; nothing is
     written to the output yet. `parallel`: other processes will infer the frames, so the
-    engine here only compiles the kernels (into the cache they are given) and is dropped."""
+    engine here compiles the kernels (into the cache they are given) and is dropped unless
+    `keep_engine` (this process infers frames beside them)."""
     t_start = time.perf_counter()
     out = Path(output_dir or cfg.output.dir)
     source = run_frames(cfg, strict, log)  # every frame read and checked once
@@ -200,7 +201,7 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         missing = [f.name for f in frames if f.name not in truth]
         if missing:
             raise InputError(f"{cfg.evaluation.ground_truth}: no ground truth for frame {missing[0]}")
-    s = set_up(cfg, frames, device, log, parallel)
+    s = set_up(cfg, frames, device, log, parallel, keep_engine)
     s.spec.pictures = cfg.output.images and not pictures_deferred(cfg, len(frames))
     return RunPlan(**{f.name: getattr(s, f.name) for f in dataclasses.fields(Setup)}, cfg=cfg,
                    out=out, frames=frames, skipped=skipped, truth=truth, t_start=t_start,
@@ -208,7 +209,7 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
 
 
 def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=print,
-           parallel: bool = False) -> Setup:
+           parallel: bool = False, keep_engine: bool = False) -> Setup:
     """The pose (fitted with extrinsics: auto), the background (frames, auto from `frames`,
     or the floor) and the engine of a run: what `dpom-warp run` and the Python API's
     Detector both infer with. `frames`: the run's frames (read only for `auto` background
@@ -269,7 +270,7 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
                  "warm_start": cfg.model.warm_start, "exact": cfg.engine.exact}
     if parallel:  # an empty frame compiles every kernel into the cache the workers are given
         engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))
-        engine = None
+        engine = engine if keep_engine else None
     return Setup(dev, WorkerSpec(cfg, camera, dev, given), geometry, ground, background, auto_report,
                  inference, engine, time.perf_counter() - t)
 

@@ -294,24 +294,94 @@ def _pool_process(items: list[FrameItem]):
     return _pool_worker[0].process(items)
 
 
-def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], workers: int):
-    """The outcomes of FrameWorker.process over `chunks`, in a pool of `workers` processes
-    ('spawn': no Warp state is forked) that each build the engine once from `spec` and load
-    the kernels from `cache`. Frames travel as paths: the processes share this disk."""
+def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], workers: int,
+                  engine: Engine | None = None):
+    """The outcomes of FrameWorker.process over `chunks`, in chunk order, from a pool of
+    processes ('spawn': no Warp state is forked) that each build the engine once from `spec`
+    and load the kernels from `cache`; frames travel as paths (the processes share this disk).
+    With `engine` (this process's, set up from the same spec) this process infers chunks too,
+    beside workers - 1 helpers: it takes the next chunk whenever the helpers have theirs, so
+    it works while they start (a second or two) and none of the `workers` cores waits; without,
+    `workers` helpers infer them all."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
     from .io import WorkerError
 
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+    helpers = workers - 1 if engine is not None else workers
+    here = FrameWorker(spec, engine=engine) if engine is not None else None
+    pool = ProcessPoolExecutor(helpers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_pool_start, initargs=(spec, cache))
-    try:
-        for fut in [pool.submit(_pool_process, chunk) for chunk in chunks]:
+    # with this process inferring, a helper gets chunks once it has started (an empty task
+    # done), so that no chunk waits for a helper still starting while this process could do
+    # it; the helpers are started on a thread (spawning one blocks until its interpreter reads
+    # the engine's spec and kernels, ~0.7 s) while this process infers
+    started: list | None = None
+    starting = None
+    if here is not None:
+        import threading
+
+        started = []
+
+        def start():
             try:
-                yield from fut.result()
-            except BrokenProcessPool as e:
-                raise WorkerError(f"--workers: a worker process died ({e}); finished frames are "
-                                  f"kept, continue with --resume") from None
+                for _ in range(helpers):
+                    started.append(pool.submit(_pool_started))
+            except (RuntimeError, BrokenProcessPool):  # the run ended (or a helper died) first
+                pass
+
+        starting = threading.Thread(target=start, daemon=True)
+        starting.start()
+    inferred: dict[int, list] = {}  # chunk -> its outcomes (here) or the future of them (helpers)
+    nxt = 0
+    try:
+        for i in range(len(chunks)):
+            while i not in inferred or (here is not None and not _ready(inferred[i])):
+                # chunks queued for the helpers, two each: the next is there when one is free
+                ahead = 2 * (helpers if started is None else sum(f.done() for f in started))
+                # with this process inferring, the last two chunks are its own: a helper's first
+                # chunk can take longer than the chunks this process has left
+                last = len(chunks) if here is None else len(chunks) - 2
+                while nxt < last and sum(not _ready(v) for v in inferred.values()) < ahead:
+                    inferred[nxt] = pool.submit(_pool_process, chunks[nxt])
+                    nxt += 1
+                if here is None or nxt >= len(chunks):
+                    break  # nothing left to infer here: wait for the helpers' chunk i
+                inferred[nxt] = list(here.process(chunks[nxt]))  # the next one, here
+                nxt += 1
+            got = inferred.pop(i)
+            yield from (got if isinstance(got, list) else got.result())
+        # every chunk done: a helper still starting is not waited for, one being spawned
+        # (the thread still in submit) is left to end once it has started
+        spawning = starting is not None and starting.is_alive()
+        if not spawning:
+            _stop_helpers(pool)
+        pool.shutdown(wait=not spawning, cancel_futures=True)
+    except BrokenProcessPool as e:
+        raise WorkerError(f"--workers: a worker process died ({e}); finished frames are "
+                          f"kept, continue with --resume") from None
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        pool.shutdown(wait=True, cancel_futures=True)  # (returns at once after the above)
+
+
+def _stop_helpers(pool) -> None:
+    """End a process pool's workers now (their work all done; one may still be starting:
+    building its engine takes a second or two, which a short run should not wait for). Their
+    private kernel caches are removed by the next process that starts one."""
+    terminate = getattr(pool, "terminate_workers", None)  # Python >= 3.14
+    if terminate is not None:
+        terminate()
+        return
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        process.terminate()
+
+
+def _pool_started() -> bool:
+    """An empty task: done once a helper has built its engine (pool_outcomes)."""
+    return True
+
+
+def _ready(value) -> bool:
+    """A chunk's outcomes are in: inferred here, or its helper's future done."""
+    return isinstance(value, list) or value.done()

@@ -307,9 +307,23 @@ def test_killed_run_leaves_whole_files_and_resumes(tmp_path, scene):
             assert a == b, f"{folder}/{n}"
 
 
-def test_workers_give_the_same_files(tmp_path, scene):
+def test_workers_give_the_same_files(tmp_path, scene, monkeypatch):
+    """--workers 2: this process and a helper infer the frames (the helper once it has
+    started: here this process is slowed down so that it has), the files are the one-process
+    run's."""
+    import time
+
+    from dpom_warp.worker import FrameWorker
+
     path = write_config(tmp_path, scene[1])
     assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "one")]) == 0
+    real = FrameWorker.process
+
+    def slow(self, items, *read):  # this process only: the helpers run their own module
+        time.sleep(1.0)
+        return real(self, items, *read)
+
+    monkeypatch.setattr(FrameWorker, "process", slow)
     assert main(["run", str(path), "--no-progress", "--workers", "2", "--output", str(tmp_path / "two")]) == 0
     one, two = tmp_path / "one", tmp_path / "two"
     for name in ("detections.csv", "tracks.csv", "track_table.csv"):
@@ -317,7 +331,58 @@ def test_workers_give_the_same_files(tmp_path, scene):
     for folder in ("maps", "images"):
         for m in (one / folder).iterdir():
             assert (two / folder / m.name).read_bytes() == m.read_bytes()
-    assert json.load(open(two / "summary.json"))["scores"] == json.load(open(one / "summary.json"))["scores"]
+    summary = json.load(open(two / "summary.json"))
+    assert summary["scores"] == json.load(open(one / "summary.json"))["scores"]
+    workers = summary["runner"]["frames_per_worker"]
+    assert "main" in workers and any(w.startswith("process ") for w in workers), workers
+    assert sum(workers.values()) == summary["frames"]
+
+
+def test_a_worker_process_that_dies_is_one_line_and_resume_finishes(tmp_path, scene, monkeypatch, capsys):
+    """--workers 2: the helper killed mid-run ends the run with one line (exit 1), the frames
+    written before kept; --resume finishes it to the one-process run's files."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from test_live import helper_pids
+
+    from dpom_warp.worker import FrameWorker
+
+    path = write_config(tmp_path, scene[1])
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "whole")]) == 0
+    real, killed = FrameWorker.process, []
+
+    def slow(self, items, *read):  # this process: slow enough that the helper takes chunks
+        time.sleep(1.0)
+        return real(self, items, *read)
+
+    def kill_the_helper():
+        deadline = time.time() + 60
+        while time.time() < deadline and not killed:
+            pids = helper_pids()
+            if pids and (tmp_path / "out" / "maps").exists():
+                for pid in pids:
+                    os.kill(pid, signal.SIGKILL)
+                    killed.append(pid)
+            time.sleep(0.05)
+
+    monkeypatch.setattr(FrameWorker, "process", slow)
+    killer = threading.Thread(target=kill_the_helper, daemon=True)
+    killer.start()
+    assert main(["run", str(path), "--no-progress", "--workers", "2"]) == 1
+    killer.join(5)
+    assert killed
+    err = capsys.readouterr().err.strip()
+    assert "--workers: a worker process died" in err and "continue with --resume" in err and "\n" not in err
+    monkeypatch.setattr(FrameWorker, "process", real)
+    assert main(["run", str(path), "--no-progress", "--resume"]) == 0
+    out, whole = tmp_path / "out", tmp_path / "whole"
+    for name in ("detections.csv", "tracks.csv", "track_table.csv"):
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+    for m in (whole / "maps").iterdir():
+        assert (out / "maps" / m.name).read_bytes() == m.read_bytes()
 
 
 @pytest.mark.parametrize("graph", ["off", "on"])
