@@ -304,7 +304,7 @@ def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], 
     it works while they start (a second or two) and none of the `workers` cores waits; without,
     `workers` helpers infer them all."""
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures import Future, ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
     from .io import WorkerError
@@ -328,7 +328,11 @@ def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], 
             try:
                 for _ in range(helpers):
                     started.append(pool.submit(_pool_started))
-            except (RuntimeError, BrokenProcessPool):  # the run ended (or a helper died) first
+            except BrokenProcessPool as e:  # a helper died starting: the run learns it below
+                died = Future()
+                died.set_exception(e)
+                started.append(died)
+            except RuntimeError:  # the run ended first (the pool shut down)
                 pass
 
         starting = threading.Thread(target=start, daemon=True)
@@ -338,6 +342,9 @@ def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], 
     try:
         for i in range(len(chunks)):
             while i not in inferred or (here is not None and not _ready(inferred[i])):
+                for f in started or []:  # a helper that died starting ends the run as one dying later
+                    if f.done() and f.exception() is not None:
+                        raise f.exception()
                 # chunks queued for the helpers, two each: the next is there when one is free
                 ahead = 2 * (helpers if started is None else sum(f.done() for f in started))
                 # with this process inferring, the last two chunks are its own: a helper's first

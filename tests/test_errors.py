@@ -313,6 +313,8 @@ def test_workers_give_the_same_files(tmp_path, scene, monkeypatch):
     run's."""
     import time
 
+    from test_live import helper_pids
+
     from dpom_warp.worker import FrameWorker
 
     path = write_config(tmp_path, scene[1])
@@ -320,8 +322,16 @@ def test_workers_give_the_same_files(tmp_path, scene, monkeypatch):
     real = FrameWorker.process
 
     def slow(self, items, *read):  # this process only: the helpers run their own module
-        time.sleep(1.0)
+        if not slow.calls:  # the helper's process spawned, then ample time for it to start
+            deadline = time.time() + 30
+            while not helper_pids() and time.time() < deadline:
+                time.sleep(0.05)
+            time.sleep(8.0)
+        slow.calls += 1
+        time.sleep(0.5)
         return real(self, items, *read)
+
+    slow.calls = 0
 
     monkeypatch.setattr(FrameWorker, "process", slow)
     assert main(["run", str(path), "--no-progress", "--workers", "2", "--output", str(tmp_path / "two")]) == 0
