@@ -24,7 +24,7 @@ import statistics
 import threading
 import time
 from collections import deque
-from concurrent.futures import FIRST_COMPLETED, Future
+from concurrent.futures import FIRST_COMPLETED
 from concurrent.futures import wait as wait_futures
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -113,10 +113,12 @@ class Helpers:
         """A future of the frame's result; a pool already broken by a helper's death (which
         the main process may learn of here first) gives a future holding that error, so the
         frame is inferred where every other death is handled (run_live's adopt)."""
+        from .worker import failed_future
+
         try:
             fut = self.pool.submit(_helper_infer, small)
         except BrokenProcessPool as e:
-            fut = _broken(e)
+            fut = failed_future(e)
         self.running.append(fut)
         return fut
 
@@ -124,13 +126,6 @@ class Helpers:
         if self.pool is not None:
             self.pool.shutdown(wait=True, cancel_futures=True)
             self.pool = None
-
-
-def _broken(error: BrokenProcessPool | None = None) -> Future:
-    """A future holding a broken pool's error (a frame handed to helpers that have died)."""
-    fut = Future()
-    fut.set_exception(error or BrokenProcessPool("the helper processes are gone"))
-    return fut
 
 
 def stop_threads(thread: threading.Thread | None, stop: threading.Event) -> None:
@@ -149,7 +144,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     from .pipeline import _jsonable, prepare_output, set_up, summarise, track_table_files
     from .sources.realsense import RealSenseLive
     from .tracking import Cells, OnlineTracker
-    from .worker import FrameItem, FrameWorker, write_output
+    from .worker import FrameItem, FrameWorker, failed_future, write_output
 
     if cfg.inputs.auto_background:
         raise ConfigError("input.background: auto estimates the background from the run's frames; a live "
@@ -250,7 +245,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
 
     def submit(fr, depth, small):
         with state:  # a helper that died meanwhile: a future holding the pool's error
-            fut = helpers.submit(small) if helpers is not None else _broken()
+            fut = (helpers.submit(small) if helpers is not None
+                   else failed_future(BrokenProcessPool("the helper processes are gone")))
             item = [fr, depth, small, None, fut, None, None]
             pending.append(item)
         fut.add_done_callback(lambda _: notify())

@@ -17,6 +17,7 @@ import shutil
 import tarfile
 import tempfile
 import time
+from concurrent.futures import Future
 from pathlib import Path
 
 import numpy as np
@@ -294,66 +295,53 @@ def _pool_process(items: list[FrameItem]):
     return _pool_worker[0].process(items)
 
 
-def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], workers: int,
-                  engine: Engine | None = None):
-    """The outcomes of FrameWorker.process over `chunks`, in chunk order, from a pool of
-    processes ('spawn': no Warp state is forked) that each build the engine once from `spec`
-    and load the kernels from `cache`; frames travel as paths (the processes share this disk).
-    With `engine` (this process's, set up from the same spec) this process infers chunks too,
-    beside workers - 1 helpers: it takes the next chunk whenever the helpers have theirs, so
-    it works while they start (a second or two) and none of the `workers` cores waits; without,
-    `workers` helpers infer them all."""
+def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], workers: int, engine: Engine):
+    """The outcomes of FrameWorker.process over `chunks`, in chunk order, inferred by this
+    process (with `engine`, set up from `spec`) and workers - 1 helper processes ('spawn': no
+    Warp state is forked) that each build the engine once from `spec` and load the kernels
+    from `cache`; frames travel as paths (the processes share this disk). The helpers are
+    spawned on a thread (spawning one blocks until its interpreter reads the spec and the
+    kernels, ~0.7 s) and get chunks, two queued each, once started (an empty task done), so
+    that no chunk waits for a helper still starting; this process takes the next chunk
+    whenever they have theirs, and the last two itself (a helper's first chunk can take
+    longer than those)."""
     import multiprocessing
-    from concurrent.futures import Future, ProcessPoolExecutor
+    import threading
+    from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
     from .io import WorkerError
 
-    helpers = workers - 1 if engine is not None else workers
-    here = FrameWorker(spec, engine=engine) if engine is not None else None
+    helpers = workers - 1
+    here = FrameWorker(spec, engine=engine)
     pool = ProcessPoolExecutor(helpers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_pool_start, initargs=(spec, cache))
-    # with this process inferring, a helper gets chunks once it has started (an empty task
-    # done), so that no chunk waits for a helper still starting while this process could do
-    # it; the helpers are started on a thread (spawning one blocks until its interpreter reads
-    # the engine's spec and kernels, ~0.7 s) while this process infers
-    started: list | None = None
-    starting = None
-    if here is not None:
-        import threading
+    started: list = []
 
-        started = []
+    def start():
+        try:
+            for _ in range(helpers):
+                started.append(pool.submit(_pool_started))
+        except BrokenProcessPool as e:  # a helper died starting: the run learns it below
+            started.append(failed_future(e))
+        except RuntimeError:  # the run ended first (the pool shut down)
+            pass
 
-        def start():
-            try:
-                for _ in range(helpers):
-                    started.append(pool.submit(_pool_started))
-            except BrokenProcessPool as e:  # a helper died starting: the run learns it below
-                died = Future()
-                died.set_exception(e)
-                started.append(died)
-            except RuntimeError:  # the run ended first (the pool shut down)
-                pass
-
-        starting = threading.Thread(target=start, daemon=True)
-        starting.start()
+    starting = threading.Thread(target=start, daemon=True)
+    starting.start()
     inferred: dict[int, list] = {}  # chunk -> its outcomes (here) or the future of them (helpers)
     nxt = 0
     try:
         for i in range(len(chunks)):
-            while i not in inferred or (here is not None and not _ready(inferred[i])):
-                for f in started or []:  # a helper that died starting ends the run as one dying later
+            while i not in inferred or not _ready(inferred[i]):
+                for f in started:  # a helper that died starting ends the run as one dying later
                     if f.done() and f.exception() is not None:
                         raise f.exception()
-                # chunks queued for the helpers, two each: the next is there when one is free
-                ahead = 2 * (helpers if started is None else sum(f.done() for f in started))
-                # with this process inferring, the last two chunks are its own: a helper's first
-                # chunk can take longer than the chunks this process has left
-                last = len(chunks) if here is None else len(chunks) - 2
-                while nxt < last and sum(not _ready(v) for v in inferred.values()) < ahead:
+                ahead = 2 * sum(f.done() for f in started)
+                while nxt < len(chunks) - 2 and sum(not _ready(v) for v in inferred.values()) < ahead:
                     inferred[nxt] = pool.submit(_pool_process, chunks[nxt])
                     nxt += 1
-                if here is None or nxt >= len(chunks):
+                if nxt >= len(chunks):
                     break  # nothing left to infer here: wait for the helpers' chunk i
                 inferred[nxt] = list(here.process(chunks[nxt]))  # the next one, here
                 nxt += 1
@@ -361,7 +349,7 @@ def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], 
             yield from (got if isinstance(got, list) else got.result())
         # every chunk done: a helper still starting is not waited for, one being spawned
         # (the thread still in submit) is left to end once it has started
-        spawning = starting is not None and starting.is_alive()
+        spawning = starting.is_alive()
         if not spawning:
             _stop_helpers(pool)
         pool.shutdown(wait=not spawning, cancel_futures=True)
@@ -370,6 +358,13 @@ def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], 
                           f"kept, continue with --resume") from None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)  # (returns at once after the above)
+
+
+def failed_future(error: BaseException) -> Future:
+    """A future that holds `error` (a frame handed to helper processes that have died)."""
+    fut = Future()
+    fut.set_exception(error)
+    return fut
 
 
 def _stop_helpers(pool) -> None:
