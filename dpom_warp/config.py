@@ -404,7 +404,7 @@ class ObjectSection(Node):
     """The object's size and shape model, metres."""
 
     width: Num = Field(0.5, gt=0, description="metres, across the line of sight")
-    height: Num = Field(1.8, gt=0, description="metres")
+    height: Num = Field(1.85, gt=0, description="metres")
     depth: Num | None = Field(None, gt=0, description="default: = width")
     shape: Literal["plane", "solid"] = Field(
         _d(ObjectBox, "shape"), description="plane: a pixel expects the depth of the plane facing the "

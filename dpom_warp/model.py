@@ -109,7 +109,8 @@ class ModelParams:
             it on the solid scaled to it (Geometry.shorter), counted as above; a location keeps
             the counts whose factor is the largest. A person of 1.56 m hidden to the head
             fills a quarter of the 1.8 m solid's band (the rest reads the room behind: u ~ 0.1,
-            cut), while the band of a 1.65 m solid holds the head. Where the object's own band
+            cut), while the band of a 1.65 m solid holds the head (measured with the 1.8 m
+            solid; the people config's 1.85 m tries 1.70 m). Where the object's own band
             is out of view (fewer than top_min_pixels in the image) top_unseen decides, as
             without. () here; the config's default is one, object.height - TOP_SHORTER, with
             the solid on ground grids and a background (frames or auto), chosen on the tuning
@@ -133,13 +134,13 @@ class ModelParams:
             behind_side of the row's run at each end (arms, a body narrower than the solid)
             and the object points below behind_low x the height (the gap between the legs) or
             above behind_high x the height (heads: people shorter than the solid read behind
-            its top; 0.85 x 1.8 m is below the shortest rendered person's head). Counted on the
-            pixels whose row and column are multiples of behind_step, each standing for
-            behind_step^2 pixels (a quarter of the work with 2). Only the locations in some
-            list count (the others stay where they start, as before). 0 here (off: the
-            paper); the config's default is BEHIND_COST with the solid on ground grids (its
-            core is the solid's), chosen with behind_high 0.85 on the tuning draw (README, How
-            it works).
+            its top; 0.85 x 1.85 m = 1.57 m is about the top of the shortest rendered
+            person). Counted on the pixels whose row and column are multiples of behind_step,
+            each standing for behind_step^2 pixels (a quarter of the work with 2). Only the
+            locations in some list count (the others stay where they start, as before). 0
+            here (off: the paper); the config's default is BEHIND_COST with the solid on
+            ground grids (its core is the solid's), chosen with behind_high 0.85 on the tuning
+            draw (README, How it works).
         behind_side, behind_low, behind_high, behind_step: see behind_cost.
     """
 

@@ -98,7 +98,7 @@ CONFIG_CASES = [
     ({"model__sensor_noise": [0.01]}, "model.sensor_noise: expected a list of 2 numbers"),
     ({"model__sensor_noise": [-0.01, 0.001]}, "model.sensor_noise: expected [a, b] >= 0"),
     ({"model__damping": 0.5, "model__damping_max": 0.3}, "model.damping_max: expected at least model.damping"),
-    ({"model__top_heights": [1.9]}, "model.top_heights: expected heights below object.height (1.8 m), found [1.9]"),
+    ({"model__top_heights": [1.9]}, "model.top_heights: expected heights below object.height (1.85 m), found [1.9]"),
     ({"model__top_heights": 1.6}, "model.top_heights: expected a list of heights > 0 (metres), found 1.6"),
     ({"camera__intrinsics__fx": DELETE}, "camera.intrinsics.fx: required key is missing"),
     ({"camera__intrinsics__cx": 400}, "camera.intrinsics.cx: expected a value <= 128, found 400"),
