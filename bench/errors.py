@@ -10,7 +10,10 @@ hidden / in view, the kept band's) and the readings behind the cell's core. For 
 detection: its rho* and the nearest people, with the same at its cell.
 
     python -m bench.errors [--tuning] [--background frames|auto|floor] [--set key=value ...]
-                           [--scenes NAME ...] [--frames 10]
+                           [--scenes NAME ...] [--frames 10] [--tracking]
+
+--tracking: bench.tracking's long scenes instead (people entering and leaving the view; all
+75 frames unless --frames says fewer).
 """
 
 from __future__ import annotations
@@ -19,7 +22,10 @@ import argparse
 
 import numpy as np
 
+from bench import tracking
 from bench.robustness import VARIANTS, scene_sets
+
+BACKGROUNDS = {"auto": "input.background=auto", "floor": "input.background=null"}
 
 
 def cell_state(detector, result, k: int) -> str:
@@ -44,18 +50,26 @@ def main():
     ap.add_argument("--tuning", action="store_true", help="the tuning draw (seeds + 1000)")
     ap.add_argument("--background", choices=("frames", "auto", "floor"), default="frames")
     ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
-    ap.add_argument("--scenes", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
-    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--scenes", nargs="+", choices=list(VARIANTS) + list(tracking.SCENES))
+    ap.add_argument("--frames", type=int, help="frames a scene (default 10; --tracking: 75)")
+    ap.add_argument("--tracking", action="store_true", help="bench.tracking's scenes")
     a = ap.parse_args()
+    scenes = a.scenes or list(tracking.SCENES if a.tracking else VARIANTS)
+    frames = a.frames or (tracking.FRAMES if a.tracking else 10)
     false_total = missed_total = 0
-    for name in a.scenes:
-        sets = scene_sets(name, VARIANTS[name], a.frames, a.background, a.tuning) + a.set + ["device=cpu"]
+    for name in scenes:
+        if name in tracking.SCENES:
+            sets = tracking.scene_sets(name, tracking.FRAMES, a.tuning) + (
+                [BACKGROUNDS[a.background]] if a.background in BACKGROUNDS else [])
+        else:
+            sets = scene_sets(name, VARIANTS[name], frames, a.background, a.tuning)
+        sets += a.set + ["device=cpu"]
         detector = Detector.from_config("configs/demo_people.yaml", sets)
         cfg = detector.config
         truth = load_ground_truth(cfg.evaluation.ground_truth)
         locations = detector.worker.geometry.locations[:, :2]
         shape = (cfg.camera.height, cfg.camera.width)
-        for f in expand(cfg.inputs.frames, "input.frames")[:a.frames]:
+        for f in expand(cfg.inputs.frames, "input.frames")[:frames]:
             result = detector.detect(read_depth(f, cfg.inputs.depth_scale, shape))
             people = truth[f.name]
             found = np.array([(d.x, d.y) for d in result.detections]).reshape(-1, 2)
@@ -83,7 +97,7 @@ def main():
                 print(f"false   {name} {f.name}: at ({d.x:.2f}, {d.y:.2f}), nearest people {close or 'none'}; "
                       f"{cell_state(detector, result, k)}")
     draw = "tuning draw" if a.tuning else "held-out draw"
-    print(f"{draw}, {len(a.scenes)} scenes x {a.frames} frames, background {a.background}"
+    print(f"{draw}, {len(scenes)} scenes x {frames} frames, background {a.background}"
           f"{'; ' + ', '.join(a.set) if a.set else ''}: {false_total} false detections, {missed_total} missed")
 
 

@@ -8,10 +8,12 @@ while). Every scene is inferred once (background frames, fast path); the tracks 
 methods are computed from the same maps, the naive baseline links the same detections.
 
     python -m bench.tracking [--frames 75] [--jobs 2] [--output runs/tracking] [--tuning]
-                             [--set tracking.KEY=VALUE ...] [--retrack]
+                             [--set tracking.KEY=VALUE ...] [--infer-set KEY=VALUE ...] [--retrack]
 
 --tuning: another draw (seeds + 1000, cached apart) for choosing tracking defaults; the
-README reports the draw above, on which no parameter was chosen.
+README reports the draw above, on which no parameter was chosen. --infer-set overrides the
+inference of every scene (a model default measured on whole sequences: people entering and
+leaving the view); --set only the tracking.
 """
 
 from __future__ import annotations
@@ -21,6 +23,9 @@ import json
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from bench.robustness import slug_of
+
+FRAMES = 75  # frames a scene
 COMMON = ["synthetic.motion=paths", "synthetic.step_m=0.08", "input.fps=15"]
 SCENES = {
     "6 people crossing": ["synthetic.people=6"],
@@ -36,23 +41,29 @@ SCENES = {
 }
 
 
+def scene_sets(name: str, frames: int, tuning: bool) -> list[str]:
+    """The demo config's overrides for one tracking scene of one draw (its seed, its cached
+    frames, background frames)."""
+    seed = 11 + list(SCENES).index(name) + (1000 if tuning else 0)
+    cache = Path(".cache") / ("tracking_tuning" if tuning else "tracking") / f"{slug_of(name)}_{frames}"
+    return COMMON + SCENES[name] + [
+        f"synthetic.seed={seed}", f"synthetic.frames={frames}",
+        f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
+        f"input.background={cache}/background/*.png",
+        f"evaluation.ground_truth={cache}/ground_truth.json", "output.images=false"]
+
+
 def run_scene(args):
-    name, overrides, frames, out, extra, tuning, seed, again = args
+    name, infer_sets, frames, out, extra, tuning, again = args
     import os
 
     os.environ.setdefault("WARP_CACHE_PATH", str(Path(".cache") / f"warp-{os.getpid()}"))
     from dpom_warp.config import load_config
     from dpom_warp.pipeline import retrack, run
 
-    slug = name.replace(" ", "_").replace(",", "").replace(".", "")
-    cache = Path(".cache") / ("tracking_tuning" if tuning else "tracking") / f"{slug}_{frames}"
-    sets = COMMON + overrides + [
-        f"synthetic.seed={seed + (1000 if tuning else 0)}", f"synthetic.frames={frames}",
-        f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
-        f"input.background={cache}/background/*.png",
-        f"evaluation.ground_truth={cache}/ground_truth.json", "output.images=false",
-        "tracking.method=ksp"]
-    cfg = load_config("configs/demo_people.yaml", sets)
+    slug = slug_of(name)
+    cfg = load_config("configs/demo_people.yaml", scene_sets(name, frames, tuning) + ["tracking.method=ksp"]
+                      + list(infer_sets))
     run_dir = Path(out) / slug
     if again and (run_dir / "summary.json").exists():  # --retrack: the maps of an earlier run
         summary = json.loads((run_dir / "summary.json").read_text())
@@ -162,26 +173,28 @@ def _mb(x):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--frames", type=int, default=75)
+    ap.add_argument("--frames", type=int, default=FRAMES)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--output", default="runs/tracking")
     ap.add_argument("--tuning", action="store_true", help="the tuning draw (seeds + 1000)")
     ap.add_argument("--set", action="append", default=[], metavar="tracking.KEY=VALUE",
                     help="tracking override for both methods")
+    ap.add_argument("--infer-set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="config override for every scene's run (inference)")
     ap.add_argument("--retrack", action="store_true",
                     help="track the maps of the scenes' earlier runs again instead of inferring")
     ap.add_argument("--long", type=int, default=10000, metavar="FRAMES",
                     help="also time both methods on a run this long (the first scene's maps "
                          "played back and forth; 0: no)")
     a = ap.parse_args()
-    jobs = [(n, o, a.frames, a.output + ("_tuning" if a.tuning else ""), a.set, a.tuning, 11 + i, a.retrack)
-            for i, (n, o) in enumerate(SCENES.items())]
+    jobs = [(n, a.infer_set, a.frames, a.output + ("_tuning" if a.tuning else ""), a.set, a.tuning, a.retrack)
+            for n in SCENES]
     with ProcessPoolExecutor(a.jobs) as pool:
         results = dict(pool.map(run_scene, jobs))
     lines = table(results)
     out = Path(a.output + ("_tuning" if a.tuning else ""))
     if a.long:
-        first = out / next(iter(SCENES)).replace(" ", "_").replace(",", "").replace(".", "")
+        first = out / slug_of(next(iter(SCENES)))
         results["long"] = long_run(first, a.long, a.set)
         lo = results["long"]
         lines += ["", f"Long run (the first scene's maps back and forth, read from disk as needed): KSP "

@@ -493,9 +493,11 @@ class ModelSection(Node):
     top_slope: Num = Field(_d(ModelParams, "top_slope"), gt=0, description="steepness of the top-band sigmoid")
     top_min_pixels: Int = Field(_d(ModelParams, "top_min_pixels"), ge=1,
                                 description="fewer readings in the band: not judged")
-    top_unseen: Num = Field(_d(ModelParams, "top_unseen"), ge=0, le=1,
-                            description="the top-band factor where fewer than top_min_pixels of the "
-                                        "band are in the image (its top out of view); 1: not judged")
+    top_unseen: Num | None = Field(None, ge=0, le=1,
+                                   description="the top-band factor where fewer than top_min_pixels of the "
+                                               "band are in the image (its top out of view); 1: not judged; "
+                                               "default 1 with a background (frames or auto: people at the "
+                                               "image's edges), 0 floor-only (furniture there passes)")
     top_sigmas: Num = Field(_d(ModelParams, "top_sigmas"), ge=0,
                             description="a band pixel supports the object within this many sigma of "
                                         "its depth; 0: the mask test")
@@ -940,8 +942,12 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     top_heights = (m.top_heights if m.top_heights is not None else
                    ((round(c.object.height - TOP_SHORTER, 6),) if c.grid.mode == "ground" and c.object.shape == "solid"
                     and c.object.height > 1.0 and c.input.background is not None else ()))
+    # a cell whose band is out of the image is not judged by it (people entering the view, a
+    # ceiling camera's edges); floor-only it is rejected: a table at the image's edge supports
+    # the lower part of such a solid, and without a background nothing tells it from a person
+    top_unseen = m.top_unseen if m.top_unseen is not None else (1.0 if c.input.background is not None else 0.0)
     model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost,
-                  top_heights=top_heights)
+                  top_heights=top_heights, top_unseen=top_unseen)
     detection = _fill(Detection, c.detection)
     evaluation = _fill(Evaluation, c.evaluation)
     output = _fill(Output, c.output)

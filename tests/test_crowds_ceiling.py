@@ -133,17 +133,19 @@ def test_short_person_hidden_to_the_head_keeps_a_shorter_top_band():
     """A person of 1.56 m 0.9 m behind one of 1.66 m (0.1 m aside), seen by the rendered
     room's camera: the mean field finds them (rho 1, e of eq. 13 above its cut-off), but the
     top band of the 1.8 m solid reads the room above their head (u under top_support: rho*
-    < 0.1) and they are lost without model.top_heights; with the config's default (a 1.65 m
-    solid's band, which holds the head; with a background only) both people are found, and
-    nothing more."""
+    < 0.1) and they are lost without model.top_heights; with the config's rule for that solid
+    (object.height - 0.15: a 1.65 m solid's band, which holds the head; with a background
+    only) both people are found, and nothing more."""
     from dpom_warp.detect import detect
     from dpom_warp.engine import Engine
-    from dpom_warp.model import BEHIND_COST, ModelParams
+    from dpom_warp.model import BEHIND_COST, TOP_SHORTER, ModelParams
 
     people = np.array([(0.0, 4.3), (0.1, 5.2)])
     _, grid, geom, empty, depth = rendered_people(people, [1.66, 1.56])
-    heights = load_config(CONFIGS / "demo_people.yaml").model.top_heights
-    assert heights == pytest.approx((1.65,))  # and off floor-only, where it lets furniture through
+    config = load_config(CONFIGS / "demo_people.yaml")
+    assert config.model.top_heights == pytest.approx((config.obj.height - TOP_SHORTER,))
+    heights = (1.8 - TOP_SHORTER,)  # the rule, for this test's 1.8 m solid
+    # and off floor-only, where it lets furniture through
     assert load_config(CONFIGS / "demo_people.yaml", ["input.background=null"]).model.top_heights == ()
 
     def found(top_heights):
@@ -193,3 +195,46 @@ def test_readings_behind_count_against_a_cell_beside_a_person():
 
     n, err = located(params)
     assert n == 1 and err < 0.2, (n, err)
+
+
+def test_a_person_at_a_ceiling_cameras_edge_is_found_with_a_background():
+    """A ceiling camera 3 m up looking straight down sees a person standing near the edge of
+    its image from the knees down to the floor: the top band of the solid (its head and
+    shoulders) lies outside the image. With a background (frames or auto) such a cell is not
+    judged by the band (model.top_unseen 1, the config's default there) and the person is
+    found, once; with top_unseen 0 (the floor-only default, where a table at the edge looks
+    the same) they are lost, though the mean field holds them."""
+    from dpom_warp.detect import detect
+    from dpom_warp.engine import Engine
+    from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
+    from dpom_warp.model import BEHIND_COST, ModelParams
+    from dpom_warp.synthetic import SceneSpec, _box, _scene, person_mesh, render, sensor_noise
+
+    assert load_config(DEMO).model.top_unseen == 1.0
+    assert load_config(DEMO, ["input.background=auto"]).model.top_unseen == 1.0
+    assert load_config(DEMO, ["input.background=null"]).model.top_unseen == 0.0
+    cam = Camera(160, 120, 114.0, 114.0, 79.5, 59.5, pose_from_angles(3.0, 90.0, y_m=4.0))
+    floor = [_box((12, 14, 0.1), (0, 4, -0.05))]
+    empty = np.stack([sensor_noise(render(_scene(floor)[0], cam)[0], SceneSpec(), np.random.default_rng(s))
+                      for s in range(5)]).astype(np.float32)
+    person = np.array([1.45, 4.0])
+    mesh = person_mesh(1.75, 0.3, 0.5).translate((*person, 0.0))
+    depth = sensor_noise(render(_scene(floor + [mesh])[0], cam)[0], SceneSpec(),
+                         np.random.default_rng(7)).astype(np.float32)
+    grid = Grid(x=(-2.0, 2.0, 0.1), y=(2.5, 5.5, 0.1))
+    geom = build_geometry(cam, grid, ObjectBox(0.4, 1.85))
+
+    def found(top_unseen):
+        params = ModelParams(behind_cost=BEHIND_COST, top_heights=(1.7,), top_unseen=top_unseen)
+        engine = Engine(geom, params, "cpu")
+        engine.set_background_frames(empty)
+        res = engine.infer(depth)
+        dets = detect(res.rho_star.reshape(grid.shape), geom.locations, geom.rect, 0.5, 0.4)
+        own = int(np.argmin(np.hypot(*(geom.locations[:, :2] - person).T)))
+        return res, own, engine.top_seen.numpy()[own], np.array([[d.x, d.y] for d in dets]).reshape(-1, 2)
+
+    res, own, seen, dets = found(1.0)
+    assert 0 <= seen < 3, seen  # the band out of view (fewer than top_min_pixels)
+    assert len(dets) == 1 and np.hypot(*(dets[0] - person)) < 0.3, dets
+    res, own, seen, dets = found(0.0)
+    assert res.rho[own] > 0.9 and len(dets) == 0, (res.rho[own], dets)
