@@ -51,13 +51,13 @@ def main():
     ap.add_argument("--background", choices=("frames", "auto", "floor"), default="frames")
     ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
     ap.add_argument("--scenes", nargs="+", choices=list(VARIANTS) + list(tracking.SCENES))
-    ap.add_argument("--frames", type=int, help="frames a scene (default 10; --tracking: 75)")
+    ap.add_argument("--frames", type=int, help="frames a scene (default 10; a tracking scene: 75)")
     ap.add_argument("--tracking", action="store_true", help="bench.tracking's scenes")
     a = ap.parse_args()
     scenes = a.scenes or list(tracking.SCENES if a.tracking else VARIANTS)
-    frames = a.frames or (tracking.FRAMES if a.tracking else 10)
     false_total = missed_total = 0
     for name in scenes:
+        frames = a.frames or (tracking.FRAMES if name in tracking.SCENES else 10)
         if name in tracking.SCENES:
             sets = tracking.scene_sets(name, tracking.FRAMES, a.tuning) + (
                 [BACKGROUNDS[a.background]] if a.background in BACKGROUNDS else [])

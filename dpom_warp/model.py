@@ -100,7 +100,9 @@ class ModelParams:
             band's pixels in the image, with a reading or not (its top out of view: nothing
             then tells it from furniture as tall as the part in view; a table at the edge of
             a ceiling camera's image supports the lower part of a solid whose head lies
-            outside it); 0: not a detection, 1: not judged.
+            outside it); 0: not a detection, 1: not judged. 0 here; the config's default is 1
+            with a background (frames or auto), where a table is background and such cells
+            were mostly people entering or leaving the view (README, Known behaviour).
         top_sigmas: a band pixel supports the object when its reading is within this many
             sigma of the object's depth (0: when it passes the mask test, ~3.5 sigma with the
             defaults, which let a surface behind a cell's head support it).
