@@ -56,8 +56,9 @@ def main():
     a = ap.parse_args()
     scenes = a.scenes or list(tracking.SCENES if a.tracking else VARIANTS)
     false_total = missed_total = 0
+    counts = {name: a.frames or (tracking.FRAMES if name in tracking.SCENES else 10) for name in scenes}
     for name in scenes:
-        frames = a.frames or (tracking.FRAMES if name in tracking.SCENES else 10)
+        frames = counts[name]
         if name in tracking.SCENES:
             sets = tracking.scene_sets(name, tracking.FRAMES, a.tuning) + (
                 [BACKGROUNDS[a.background]] if a.background in BACKGROUNDS else [])
@@ -97,7 +98,8 @@ def main():
                 print(f"false   {name} {f.name}: at ({d.x:.2f}, {d.y:.2f}), nearest people {close or 'none'}; "
                       f"{cell_state(detector, result, k)}")
     draw = "tuning draw" if a.tuning else "held-out draw"
-    print(f"{draw}, {len(scenes)} scenes x {frames} frames, background {a.background}"
+    per_scene = " / ".join(str(n) for n in sorted(set(counts.values())))
+    print(f"{draw}, {len(scenes)} scenes x {per_scene} frames, background {a.background}"
           f"{'; ' + ', '.join(a.set) if a.set else ''}: {false_total} false detections, {missed_total} missed")
 
 

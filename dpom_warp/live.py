@@ -256,6 +256,15 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         with state:
             state.notify_all()
 
+    def infer_here(item):
+        """Infer a pending item with this process's engine (main loop only: the engine is not
+        shared between threads) and hand its result to the finisher."""
+        t0 = time.perf_counter()
+        res = engine.infer(item[2])
+        with state:
+            item[3], item[4], item[5], item[6] = res, None, time.perf_counter() - t0, worker.name
+            state.notify_all()
+
     def adopt():
         """After a helper's death: every frame the helpers held is inferred here, and the run
         goes on without them (main loop only: this engine is not shared between threads)."""
@@ -270,11 +279,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
                 f"the run goes on in one process")
             h.close()
         for other in held:
-            t = time.perf_counter()
-            res = engine.infer(other[2])
-            with state:
-                other[3], other[5], other[6], other[4] = res, time.perf_counter() - t, worker.name, None
-                state.notify_all()
+            infer_here(other)
 
     def next_ready():
         """The first pending item once its result is in (None: closing and nothing left)."""
@@ -362,11 +367,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             t_first = t_first or item[0].arrived
             if feeder is not None and first:
                 feeder.start()  # the helpers' frames from now on, beside this loop's
-            t0 = time.perf_counter()
-            res = engine.infer(item[2])
-            with state:
-                item[3], item[5] = res, time.perf_counter() - t0
-                state.notify_all()
+            infer_here(item)
             if broken.is_set():
                 adopt()
             if failure:
@@ -383,11 +384,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         stop_threads(feeder, stop_feeding)
         for item in list(pending):  # one being inferred here when Ctrl-C came: again
             if item[3] is None and item[4] is None:
-                t0 = time.perf_counter()
-                res = engine.infer(item[2])
-                with state:
-                    item[3], item[5] = res, time.perf_counter() - t0
-                    state.notify_all()
+                infer_here(item)
         close_finisher()  # the frames taken are inferred and written: nothing is lost
     finally:
         stop_threads(feeder, stop_feeding)
