@@ -3,7 +3,8 @@ with what the model says at its place.
 
 Runs the people demo's config over bench.robustness's scenes (the tuning draw with --tuning)
 through the Python API and matches each frame's detections with its ground truth at 0.5 m.
-For a missed person: their height and visibility, the nearest other person, and at the cell
+For a missed person: their height and visibility, the nearest other person and detection
+(a detection under 0.5 m was matched to someone else), and at the cell
 within 0.3 m with the largest rho: rho (mean field), e (eq. 13's share), rho* before the
 top-band test (sigmoid(alpha e + beta) rho), the top band's counts (support / against /
 hidden / in view, the kept band's) and the readings behind the cell's core. For a false
@@ -86,8 +87,10 @@ def main():
                 near = np.flatnonzero(np.hypot(*(locations - where[j]).T) < 0.3)
                 state = cell_state(detector, result, int(near[np.argmax(result.rho.ravel()[near])])) if len(
                     near) else "no cell within 0.3 m"
+                gap = np.hypot(*(found - where[j]).T).min() if len(found) else float("inf")
                 print(f"missed  {name} {f.name}: person at ({o['x']:.2f}, {o['y']:.2f}), {o['height']:.2f} m, "
-                      f"{100 * o['visibility']:.0f} % visible, nearest person {nearest:.2f} m; {state}")
+                      f"{100 * o['visibility']:.0f} % visible, nearest person {nearest:.2f} m, nearest detection "
+                      f"{gap:.2f} m; {state}")
             for i, d in enumerate(result.detections):
                 if i in matched_found:
                     continue

@@ -498,6 +498,9 @@ class ModelSection(Node):
                                                "band are in the image (its top out of view); 1: not judged; "
                                                "default 1 with a background (frames or auto: people at the "
                                                "image's edges), 0 floor-only (furniture there passes)")
+    top_unseen_share: Num = Field(_d(ModelParams, "top_unseen_share"), ge=0, le=1,
+                                  description="where the band is out of view, rho* also x sigmoid(top_slope "
+                                              "(e - this)), e eq. 13's share; 0: off")
     top_sigmas: Num = Field(_d(ModelParams, "top_sigmas"), ge=0,
                             description="a band pixel supports the object within this many sigma of "
                                         "its depth; 0: the mask test")

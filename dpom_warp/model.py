@@ -103,6 +103,10 @@ class ModelParams:
             outside it); 0: not a detection, 1: not judged. 0 here; the config's default is 1
             with a background (frames or auto), where a table is background and such cells
             were mostly people entering or leaving the view (README, Known behaviour).
+        top_unseen_share: where the band is out of view (as for top_unseen), rho* is also
+            multiplied by sigmoid(top_slope (e - top_unseen_share)), e eq. 13's share: with no
+            head to judge, the object must explain this share of its silhouette (a second cell
+            beside a person at the image's edge explains a sliver of it). 0: off.
         top_sigmas: a band pixel supports the object when its reading is within this many
             sigma of the object's depth (0: when it passes the mask test, ~3.5 sigma with the
             defaults, which let a surface behind a cell's head support it).
@@ -177,6 +181,7 @@ class ModelParams:
     top_slope: float = 100.0
     top_min_pixels: int = 3
     top_unseen: float = 0.0
+    top_unseen_share: float = 0.1
     top_sigmas: float = 2.0
     top_heights: tuple[float, ...] = ()
     exclusion: float = 10.0

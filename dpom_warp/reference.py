@@ -391,6 +391,10 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
                 (seen >= 0) & (seen < params.top_min_pixels))  # out of view: top_unseen decides
             counts = tuple(np.where(better, b, a) for a, b in zip(counts, shorter))
         rho_star = rho_star * top_factor(*counts, params)
+        if params.top_unseen_share > 0:  # band out of view: the share of eq. 13 must reach this
+            unseen = (counts[3] >= 0) & (counts[3] < params.top_min_pixels)
+            rho_star = np.where(unseen, rho_star * sigmoid(params.top_slope * (share - params.top_unseen_share)),
+                                rho_star)
     support, against, hidden, seen = counts
     return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
                 entries=entries, live=int(live.sum()), pruned=pruned, top_support=support, top_against=against,

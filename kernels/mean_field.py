@@ -493,6 +493,7 @@ def soft_threshold(
     top_slope: wp.float64,
     top_min_pixels: int,
     top_unseen: wp.float64,
+    unseen_share: wp.float64,
     unhidden: int,
     all_support: wp.array(dtype=wp.int32),
     all_against: wp.array(dtype=wp.int32),
@@ -503,7 +504,9 @@ def soft_threshold(
     (area holds the L locations of one frame; the arrays hold the frames of a batch), or with
     `unhidden` e = visible / (pixels of S_k reading at or behind the object: all_support +
     all_against, the top_band counts over the whole silhouette) where there are any; times
-    the top-band factor (top_band, top_factor; top_share = 0: none)."""
+    the top-band factor (top_band, top_factor; top_share = 0: none), and where the band is out
+    of view (0 <= seen < top_min_pixels) by sigmoid(top_slope (e - unseen_share)) unless
+    unseen_share is 0 (ModelParams.top_unseen_share)."""
     k = wp.tid()
     a = area[k % area.shape[0]]
     if a > f64(0.0):
@@ -514,8 +517,11 @@ def soft_threshold(
         share[k] = e
         rho_star[k] = sigmoid(alpha * e + beta) * rho[k]
         if top_share > f64(0.0):
-            rho_star[k] = rho_star[k] * top_factor(support[k], against[k], hidden[k], seen[k], top_hidden,
-                                                   top_share, top_slope, top_min_pixels, top_unseen)
+            factor = top_factor(support[k], against[k], hidden[k], seen[k], top_hidden, top_share, top_slope,
+                                top_min_pixels, top_unseen)
+            if unseen_share > f64(0.0) and seen[k] >= 0 and seen[k] < top_min_pixels:  # band out of view
+                factor = factor * sigmoid(top_slope * (e - unseen_share))
+            rho_star[k] = rho_star[k] * factor
     else:
         share[k] = f64(0.0)
         rho_star[k] = f64(0.0)

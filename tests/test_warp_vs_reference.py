@@ -367,6 +367,36 @@ def test_shorter_top_bands_match_reference(device, seed, shape, path):
     assert np.any(want["rho_star"] > plain["rho_star"] + 1e-6)
 
 
+@pytest.mark.parametrize("path", ["exact", "sparse"])
+@pytest.mark.parametrize("seed", [0, 1])  # the solid's bands are out of view
+def test_unseen_band_share_matches_reference(device, seed, path):
+    """model.top_unseen_share (where a location's top band is out of view, rho* also x
+    sigmoid(top_slope (e - share))) on the Warp path equals the reference; against the same
+    scene with the share off, exactly the locations whose band is out of view change, by that
+    factor (the share set between their e values, so that some are cut and some kept)."""
+    geom, params, depth, bg_frames = random_scene(seed, shape="solid")
+    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4, top_unseen=1.0,
+                                 top_unseen_share=0.0)
+    bg = ref.background_from_frames(bg_frames, params)
+    off = ref.mean_field(depth, geom, bg, params)
+    unseen = (off["top_seen"] >= 0) & (off["top_seen"] < params.top_min_pixels)
+    judged = unseen & (off["rho_star"] > 1e-3)
+    assert judged.sum() >= 2, "fewer than two locations with their band out of view: not exercised"
+    share = float(np.median(off["evidence_share"][judged]))
+    params = dataclasses.replace(params, top_unseen_share=share)
+    engine = Engine(geom, params, device)
+    engine.set_background_frames(bg_frames)
+    want = ref.mean_field(depth, geom, bg, params)
+    got = engine.infer(depth)
+    np.testing.assert_array_equal(engine.top_seen.numpy(), want["top_seen"])
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    factor = ref.sigmoid(params.top_slope * (want["evidence_share"] - share))
+    np.testing.assert_allclose(want["rho_star"], np.where(unseen, off["rho_star"] * factor, off["rho_star"]),
+                               rtol=0, atol=1e-12)
+    assert np.any(judged & (want["rho_star"] < 0.6 * off["rho_star"]))
+    assert np.any(judged & (want["rho_star"] >= 0.5 * off["rho_star"]))
+
+
 def test_shorter_solid_lies_inside_the_silhouettes():
     """Geometry.shorter: shoulder and top scaled above the bottom, the radii and legs kept, so
     the shorter solid's projection lies inside each silhouette rectangle (the kernels walk
