@@ -501,6 +501,9 @@ class ModelSection(Node):
     top_unseen_share: Num = Field(_d(ModelParams, "top_unseen_share"), ge=0, le=1,
                                   description="where the band is out of view, rho* also x sigmoid(top_slope "
                                               "(e - this)), e eq. 13's share; 0: off")
+    top_unseen_part: Num = Field(_d(ModelParams, "top_unseen_part"), ge=0, le=1,
+                                 description="a band with fewer than this share of the silhouette's pixels in "
+                                             "the image also counts as out of view")
     top_sigmas: Num = Field(_d(ModelParams, "top_sigmas"), ge=0,
                             description="a band pixel supports the object within this many sigma of "
                                         "its depth; 0: the mask test")

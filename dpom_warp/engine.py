@@ -715,8 +715,8 @@ class Engine:
             wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
                       inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support,
                               self.top_against, self.top_hidden, self.top_seen, p.top_hidden, top_share,
-                              p.top_slope, p.top_min_pixels, p.top_unseen, p.top_unseen_share, unhidden,
-                              self.all_support, self.all_against, self.share, self.rho_star])
+                              p.top_slope, p.top_min_pixels, p.top_unseen, p.top_unseen_share, p.top_unseen_part,
+                              unhidden, self.all_support, self.all_against, self.share, self.rho_star])
 
         def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
             wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
@@ -738,7 +738,7 @@ class Engine:
                 top_band(p.top_band * short, short, gate, self.other_top, p.top_sigmas, geo)
                 wp.launch(K.keep_better_top, dim=self.batch * self.n_locations, device=dev,
                           inputs=[*counts, *self.other_top, p.top_hidden, top, p.top_slope, p.top_min_pixels,
-                                  p.top_unseen])
+                                  p.top_unseen, self.area, p.top_unseen_part])
         soft_threshold(top)
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))

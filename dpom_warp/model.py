@@ -96,8 +96,9 @@ class ModelParams:
             0.6; an arm beside a person seen from above 0.08 to 0.1), also when their legs
             are hidden. 0.05 suits the facing plane. 0: off.
         top_band, top_hidden, top_slope, top_min_pixels: see top_support.
-        top_unseen: the top-band factor of a location with fewer than top_min_pixels of its
-            band's pixels in the image, with a reading or not (its top out of view: nothing
+        top_unseen: the top-band factor of a location with fewer than top_min_pixels (or
+            top_unseen_part x |S_k|) of its band's pixels in the image, with a reading or not
+            (its top out of view: nothing
             then tells it from furniture as tall as the part in view; a table at the edge of
             a ceiling camera's image supports the lower part of a solid whose head lies
             outside it); 0: not a detection, 1: not judged. 0 here; the config's default is 1
@@ -107,6 +108,11 @@ class ModelParams:
             multiplied by sigmoid(top_slope (e - top_unseen_share)), e eq. 13's share: with no
             head to judge, the object must explain this share of its silhouette (a second cell
             beside a person at the image's edge explains a sliver of it). 0: off.
+        top_unseen_part: a band also counts as out of view (for top_unseen and
+            top_unseen_share) with fewer than this share of the silhouette's pixels |S_k| in the
+            image: a sliver of a band at the image's edge reads whatever lies beside the head
+            (a person walking out of view, whole in the image but for the top of the head,
+            kept 12 band pixels, all reading what lies behind). 0: only top_min_pixels.
         top_sigmas: a band pixel supports the object when its reading is within this many
             sigma of the object's depth (0: when it passes the mask test, ~3.5 sigma with the
             defaults, which let a surface behind a cell's head support it).
@@ -117,7 +123,7 @@ class ModelParams:
             fills a quarter of the 1.8 m solid's band (the rest reads the room behind: u ~ 0.1,
             cut), while the band of a 1.65 m solid holds the head (measured with the 1.8 m
             solid; the people config's 1.85 m tries 1.70 m). Where the object's own band
-            is out of view (fewer than top_min_pixels in the image) top_unseen decides, as
+            is out of view (top_unseen_part, top_min_pixels) top_unseen decides, as
             without. () here; the config's default is one, object.height - TOP_SHORTER, with
             the solid on ground grids and a background (frames or auto), chosen on the tuning
             draw (README, How it works); floor-only it is off: there the band is what tells
@@ -182,6 +188,7 @@ class ModelParams:
     top_min_pixels: int = 3
     top_unseen: float = 0.0
     top_unseen_share: float = 0.1
+    top_unseen_part: float = 0.05
     top_sigmas: float = 2.0
     top_heights: tuple[float, ...] = ()
     exclusion: float = 10.0

@@ -387,12 +387,12 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         for height in params.top_heights:  # shorter people: the band whose factor is larger
             shorter = top_band(depth_m, geom.shorter(height), params, gate)
             seen = counts[3]
-            better = (top_factor(*shorter, params) > top_factor(*counts, params)) & ~(
-                (seen >= 0) & (seen < params.top_min_pixels))  # out of view: top_unseen decides
+            better = (top_factor(*shorter, params, geom.area) > top_factor(*counts, params, geom.area)) & ~(
+                band_out_of_view(seen, geom.area, params))  # out of view: top_unseen decides
             counts = tuple(np.where(better, b, a) for a, b in zip(counts, shorter))
-        rho_star = rho_star * top_factor(*counts, params)
+        rho_star = rho_star * top_factor(*counts, params, geom.area)
         if params.top_unseen_share > 0:  # band out of view: the share of eq. 13 must reach this
-            unseen = (counts[3] >= 0) & (counts[3] < params.top_min_pixels)
+            unseen = band_out_of_view(counts[3], geom.area, params)
             rho_star = np.where(unseen, rho_star * sigmoid(params.top_slope * (share - params.top_unseen_share)),
                                 rho_star)
     support, against, hidden, seen = counts
@@ -401,18 +401,25 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
                 top_hidden=hidden, top_seen=seen)
 
 
-def top_factor(support, against, hidden, seen, params: ModelParams):
+def band_out_of_view(seen, area, params: ModelParams):
+    """Where a location's top band is out of view: counted (seen >= 0), with fewer than
+    top_min_pixels, or fewer than top_unseen_part x |S_k| (area), of its pixels in the image
+    (kernels.mean_field.band_out_of_view)."""
+    seen = np.asarray(seen)
+    return (seen >= 0) & ((seen < params.top_min_pixels) | (seen < params.top_unseen_part * np.asarray(area)))
+
+
+def top_factor(support, against, hidden, seen, params: ModelParams, area):
     """The top-band factor of each location from its counts (top_band):
     sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f); 1 with fewer
-    than top_min_pixels readings in the band, top_unseen with fewer than top_min_pixels of
-    its pixels in the image (kernels.mean_field.top_factor)."""
+    than top_min_pixels readings in the band, top_unseen where the band is out of view
+    (band_out_of_view; kernels.mean_field.top_factor)."""
     n = support + against + hidden
     with np.errstate(divide="ignore", invalid="ignore"):
         u = (support + params.top_hidden * hidden) / n
         factor = np.where(n >= max(params.top_min_pixels, 1),
                           sigmoid(params.top_slope * (u - params.top_support)), 1.0)
-    # a band with too few pixels in the image (its top out of view): top_unseen
-    return np.where((seen >= 0) & (seen < params.top_min_pixels), params.top_unseen, factor)
+    return np.where(band_out_of_view(seen, area, params), params.top_unseen, factor)
 
 
 def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):

@@ -431,12 +431,19 @@ def top_band(
 
 
 @wp.func
+def band_out_of_view(seen: int, min_pixels: int, area: wp.float64, part: wp.float64) -> bool:
+    """Whether a location's top band is out of view: counted (seen >= 0) with fewer than
+    min_pixels, or fewer than part x |S_k| (area), of its pixels in the image."""
+    return seen >= 0 and (seen < min_pixels or f64(seen) < part * area)
+
+
+@wp.func
 def top_factor(s: int, a: int, f: int, seen: int, weight: wp.float64, share: wp.float64,
-               slope: wp.float64, min_pixels: int, unseen: wp.float64) -> wp.float64:
-    """sigmoid(slope ((s + weight f) / (s + a + f) - share)); `unseen` where fewer than
-    min_pixels of the band are in the image (0 <= seen < min_pixels: its top out of view),
-    else 1 with fewer than min_pixels read in the band."""
-    if seen >= 0 and seen < min_pixels:
+               slope: wp.float64, min_pixels: int, unseen: wp.float64, area: wp.float64,
+               part: wp.float64) -> wp.float64:
+    """sigmoid(slope ((s + weight f) / (s + a + f) - share)); `unseen` where the band is out of
+    view (band_out_of_view), else 1 with fewer than min_pixels read in the band."""
+    if band_out_of_view(seen, min_pixels, area, part):
         return unseen
     n = s + a + f
     if n < min_pixels or n == 0:
@@ -459,17 +466,20 @@ def keep_better_top(
     slope: wp.float64,
     min_pixels: int,
     unseen: wp.float64,
+    area: wp.array(dtype=wp.float64),
+    part: wp.float64,
 ):
     """A location's top-band counts become those of another band (a shorter solid's,
     ModelParams.top_heights) where that band's top_factor is larger, except where its own band
-    is out of view (0 <= seen < min_pixels: top_unseen decides, as without). One thread per
-    location of the batch (reference.mean_field)."""
+    is out of view (band_out_of_view: top_unseen decides, as without). One thread per
+    location of the batch (reference.mean_field); area holds the L locations of one frame."""
     k = wp.tid()
-    if seen[k] >= 0 and seen[k] < min_pixels:
+    a = area[k % area.shape[0]]
+    if band_out_of_view(seen[k], min_pixels, a, part):
         return
-    mine = top_factor(support[k], against[k], hidden[k], seen[k], weight, share, slope, min_pixels, unseen)
+    mine = top_factor(support[k], against[k], hidden[k], seen[k], weight, share, slope, min_pixels, unseen, a, part)
     other = top_factor(other_support[k], other_against[k], other_hidden[k], other_seen[k], weight, share, slope,
-                       min_pixels, unseen)
+                       min_pixels, unseen, a, part)
     if other > mine:
         support[k] = other_support[k]
         against[k] = other_against[k]
@@ -494,6 +504,7 @@ def soft_threshold(
     top_min_pixels: int,
     top_unseen: wp.float64,
     unseen_share: wp.float64,
+    unseen_part: wp.float64,
     unhidden: int,
     all_support: wp.array(dtype=wp.int32),
     all_against: wp.array(dtype=wp.int32),
@@ -505,7 +516,7 @@ def soft_threshold(
     `unhidden` e = visible / (pixels of S_k reading at or behind the object: all_support +
     all_against, the top_band counts over the whole silhouette) where there are any; times
     the top-band factor (top_band, top_factor; top_share = 0: none), and where the band is out
-    of view (0 <= seen < top_min_pixels) by sigmoid(top_slope (e - unseen_share)) unless
+    of view (band_out_of_view, unseen_part) by sigmoid(top_slope (e - unseen_share)) unless
     unseen_share is 0 (ModelParams.top_unseen_share)."""
     k = wp.tid()
     a = area[k % area.shape[0]]
@@ -518,8 +529,8 @@ def soft_threshold(
         rho_star[k] = sigmoid(alpha * e + beta) * rho[k]
         if top_share > f64(0.0):
             factor = top_factor(support[k], against[k], hidden[k], seen[k], top_hidden, top_share, top_slope,
-                                top_min_pixels, top_unseen)
-            if unseen_share > f64(0.0) and seen[k] >= 0 and seen[k] < top_min_pixels:  # band out of view
+                                top_min_pixels, top_unseen, a, unseen_part)
+            if unseen_share > f64(0.0) and band_out_of_view(seen[k], top_min_pixels, a, unseen_part):
                 factor = factor * sigmoid(top_slope * (e - unseen_share))
             rho_star[k] = rho_star[k] * factor
     else:

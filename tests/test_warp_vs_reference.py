@@ -379,7 +379,7 @@ def test_unseen_band_share_matches_reference(device, seed, path):
                                  top_unseen_share=0.0)
     bg = ref.background_from_frames(bg_frames, params)
     off = ref.mean_field(depth, geom, bg, params)
-    unseen = (off["top_seen"] >= 0) & (off["top_seen"] < params.top_min_pixels)
+    unseen = ref.band_out_of_view(off["top_seen"], geom.area, params)
     judged = unseen & (off["rho_star"] > 1e-3)
     assert judged.sum() >= 2, "fewer than two locations with their band out of view: not exercised"
     share = float(np.median(off["evidence_share"][judged]))
@@ -395,6 +395,41 @@ def test_unseen_band_share_matches_reference(device, seed, path):
                                rtol=0, atol=1e-12)
     assert np.any(judged & (want["rho_star"] < 0.6 * off["rho_star"]))
     assert np.any(judged & (want["rho_star"] >= 0.5 * off["rho_star"]))
+
+
+@pytest.mark.parametrize("path", ["exact", "sparse"])
+@pytest.mark.parametrize("seed", [2, 3])
+def test_band_partly_out_of_view_matches_reference(device, seed, path):
+    """model.top_unseen_part (a band with fewer than this share of |S_k| in the image counts
+    as out of view) on the Warp path equals the reference, with a shorter band tried beside
+    (keep_better_top); the share set between the counted locations' seen / |S_k|, so that
+    some bands with top_min_pixels or more in view become out of view and take top_unseen
+    (0 here: their rho* falls to 0)."""
+    from scenes import draw_slab
+
+    geom, params, depth, bg_frames = random_scene(seed, shape="solid")
+    seen = np.flatnonzero(geom.rect_area > 0)
+    for k in seen[len(seen) // 4::len(seen) // 4]:  # people whose bands are counted
+        draw_slab(depth, geom, k, below=0.9 * geom.height)
+    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4, top_unseen=0.0,
+                                 top_unseen_part=0.0, top_heights=(0.85 * geom.height,))
+    bg = ref.background_from_frames(bg_frames, params)
+    off = ref.mean_field(depth, geom, bg, params)
+    counted = (off["top_seen"] >= params.top_min_pixels) & (geom.area > 0)
+    assert counted.sum() >= 2, "fewer than two bands counted: not exercised"
+    part = float(np.median(off["top_seen"][counted] / geom.area[counted]))
+    params = dataclasses.replace(params, top_unseen_part=part)
+    engine = Engine(geom, params, device)
+    engine.set_background_frames(bg_frames)
+    want = ref.mean_field(depth, geom, bg, params)
+    got = engine.infer(depth)
+    for key in ("top_support", "top_against", "top_hidden", "top_seen"):
+        np.testing.assert_array_equal(getattr(engine, key).numpy(), want[key], err_msg=key)
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    partly = ref.band_out_of_view(want["top_seen"], geom.area, params) & (want["top_seen"] >= params.top_min_pixels)
+    assert partly.any(), "no band partly out of view"
+    assert np.all(want["rho_star"][partly] == 0.0)  # top_unseen 0: not a detection
+    assert np.any(off["rho_star"][partly] > 1e-3)
 
 
 def test_shorter_solid_lies_inside_the_silhouettes():
