@@ -494,8 +494,9 @@ class ModelSection(Node):
     top_min_pixels: Int = Field(_d(ModelParams, "top_min_pixels"), ge=1,
                                 description="fewer readings in the band: not judged")
     top_unseen: Num | None = Field(None, ge=0, le=1,
-                                   description="the top-band factor where fewer than top_min_pixels of the "
-                                               "band are in the image (its top out of view); 1: not judged; "
+                                   description="the top-band factor where fewer than top_min_pixels (or "
+                                               "top_unseen_part of the silhouette) of the band are in the image "
+                                               "(its top out of view); 1: not judged; "
                                                "default 1 with a background (frames or auto: people at the "
                                                "image's edges), 0 floor-only (furniture there passes)")
     top_unseen_share: Num = Field(_d(ModelParams, "top_unseen_share"), ge=0, le=1,

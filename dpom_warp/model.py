@@ -98,10 +98,9 @@ class ModelParams:
         top_band, top_hidden, top_slope, top_min_pixels: see top_support.
         top_unseen: the top-band factor of a location with fewer than top_min_pixels (or
             top_unseen_part x |S_k|) of its band's pixels in the image, with a reading or not
-            (its top out of view: nothing
-            then tells it from furniture as tall as the part in view; a table at the edge of
-            a ceiling camera's image supports the lower part of a solid whose head lies
-            outside it); 0: not a detection, 1: not judged. 0 here; the config's default is 1
+            (its top out of view: nothing then tells it from furniture as tall as the part in
+            view; a table at the edge of a ceiling camera's image supports the lower part of a
+            solid whose head lies outside it); 0: not a detection, 1: not judged. 0 here; the config's default is 1
             with a background (frames or auto), where a table is background and such cells
             were mostly people entering or leaving the view (README, Known behaviour).
         top_unseen_share: where the band is out of view (as for top_unseen), rho* is also
