@@ -8,7 +8,8 @@ For a missed person: their height and visibility, the nearest other person and d
 within 0.3 m with the largest rho: rho (mean field), e (eq. 13's share), rho* before the
 top-band test (sigmoid(alpha e + beta) rho), the top band's counts (support / against /
 hidden / in view, the kept band's) and the readings behind the cell's core. For a false
-detection: its rho* and the nearest people, with the same at its cell.
+detection: its rho* and the nearest people, with the same at its cell. Before the summary, a
+count of the errors by kind (miss_kind, false_kind).
 
     python -m bench.errors [--tuning] [--background frames|auto|floor] [--set key=value ...]
                            [--scenes NAME ...] [--frames 10] [--tracking]
@@ -20,25 +21,55 @@ detection: its rho* and the nearest people, with the same at its cell.
 from __future__ import annotations
 
 import argparse
+import collections
 
 import numpy as np
 
 from bench import tracking
 from bench.robustness import VARIANTS, scene_sets
 
+GATE = 0.5  # the matching gate, metres
 BACKGROUNDS = {"auto": "input.background=auto", "floor": "input.background=null"}
 
 
-def cell_state(detector, result, k: int) -> str:
-    """What the model says at location k of the frame just detected."""
+def cell_values(detector, result, k: int) -> dict:
+    """What the model says at location k of the frame just detected: rho, e, rho* before the
+    top band, the band's counts, whether the band is out of view, readings behind, rho*."""
+    from dpom_warp.reference import band_out_of_view
+
     engine, p = detector.engine, detector.engine.params
     rho, e = float(result.rho.ravel()[k]), float(engine.share.numpy()[k])
-    before = rho / (1.0 + np.exp(-(p.alpha * e + p.beta)))
-    s, a, f, seen = (int(getattr(engine, n).numpy()[k]) for n in ("top_support", "top_against", "top_hidden",
-                                                                   "top_seen"))
-    return (f"rho {rho:.3f}, e {e:.3f}, rho* before the top band {before:.3f}, top band s/a/f/in view "
-            f"{s}/{a}/{f}/{seen}, readings behind {int(engine.n_behind.numpy()[k])}, rho* "
-            f"{float(result.rho_star.ravel()[k]):.3f}")
+    counts = tuple(int(getattr(engine, n).numpy()[k]) for n in ("top_support", "top_against", "top_hidden",
+                                                                 "top_seen"))
+    area = float(engine.area.numpy()[k % len(engine.area)])
+    return dict(rho=rho, e=e, before=rho / (1.0 + np.exp(-(p.alpha * e + p.beta))), counts=counts,
+                out_of_view=bool(band_out_of_view(counts[3], area, p)), behind=int(engine.n_behind.numpy()[k]),
+                rho_star=float(result.rho_star.ravel()[k]))
+
+
+def cell_state(v: dict) -> str:
+    return (f"rho {v['rho']:.3f}, e {v['e']:.3f}, rho* before the top band {v['before']:.3f}, top band "
+            f"s/a/f/in view {'/'.join(str(c) for c in v['counts'])}, readings behind {v['behind']}, rho* "
+            f"{v['rho_star']:.3f}")
+
+
+def miss_kind(v: dict | None, threshold: float) -> str:
+    """Why a person was missed, from the cell within 0.3 m with the largest rho (cell_values;
+    None: no cell there): the mean field did not support them, eq. 13 or the top band cut rho*
+    under the threshold, or rho* passed and the detection step kept a neighbour's instead."""
+    if v is None or v["rho"] < threshold:
+        return "no support in the mean field"
+    if v["rho_star"] >= threshold:
+        return "found as one with a neighbour"
+    return "cut by eq. 13" if v["before"] < threshold else "cut by the top band"
+
+
+def false_kind(v: dict, nearest: float, gate: float) -> str:
+    """What a false detection is: a cell whose top band is out of view, a second cell within
+    the matching gate of a person found by another detection, or something elsewhere."""
+    if v["out_of_view"]:
+        return "band out of view"
+    return "second cell beside a person" if nearest < gate else "elsewhere"
 
 
 def main():
@@ -57,6 +88,7 @@ def main():
     a = ap.parse_args()
     scenes = a.scenes or list(tracking.SCENES if a.tracking else VARIANTS)
     false_total = missed_total = 0
+    kinds = collections.Counter()
     counts = {name: a.frames or (tracking.FRAMES if name in tracking.SCENES else 10) for name in scenes}
     for name in scenes:
         frames = counts[name]
@@ -76,7 +108,7 @@ def main():
             people = truth[f.name]
             found = np.array([(d.x, d.y) for d in result.detections]).reshape(-1, 2)
             where = np.array([(o["x"], o["y"]) for o in people]).reshape(-1, 2)
-            pairs = match(found, where, 0.5)
+            pairs = match(found, where, GATE)
             matched_found, matched_people = {i for i, _ in pairs}, {j for _, j in pairs}
             for j, o in enumerate(people):
                 if j in matched_people:
@@ -85,8 +117,10 @@ def main():
                 others = np.delete(where, j, axis=0)
                 nearest = np.hypot(*(others - where[j]).T).min() if len(others) else float("inf")
                 near = np.flatnonzero(np.hypot(*(locations - where[j]).T) < 0.3)
-                state = cell_state(detector, result, int(near[np.argmax(result.rho.ravel()[near])])) if len(
-                    near) else "no cell within 0.3 m"
+                v = cell_values(detector, result, int(near[np.argmax(result.rho.ravel()[near])])) if len(
+                    near) else None
+                state = cell_state(v) if v else "no cell within 0.3 m"
+                kinds[miss_kind(v, cfg.detection.threshold)] += 1
                 gap = np.hypot(*(found - where[j]).T).min() if len(found) else float("inf")
                 print(f"missed  {name} {f.name}: person at ({o['x']:.2f}, {o['y']:.2f}), {o['height']:.2f} m, "
                       f"{100 * o['visibility']:.0f} % visible, nearest person {nearest:.2f} m, nearest detection "
@@ -98,10 +132,13 @@ def main():
                 dist = np.hypot(*(where - found[i]).T) if len(where) else np.array([])
                 close = ", ".join(f"{dist[j]:.2f} m ({people[j]['height']:.2f} m tall)" for j in np.argsort(dist)[:2])
                 k = int(np.argmin(np.hypot(*(locations - found[i]).T)))
+                v = cell_values(detector, result, k)
+                kinds[false_kind(v, dist.min() if len(dist) else np.inf, GATE)] += 1
                 print(f"false   {name} {f.name}: at ({d.x:.2f}, {d.y:.2f}), nearest people {close or 'none'}; "
-                      f"{cell_state(detector, result, k)}")
+                      f"{cell_state(v)}")
     draw = "tuning draw" if a.tuning else "held-out draw"
     per_scene = " / ".join(str(n) for n in sorted(set(counts.values())))
+    print("kinds: " + "; ".join(f"{kind} {n}" for kind, n in kinds.most_common()))
     print(f"{draw}, {len(scenes)} scenes x {per_scene} frames, background {a.background}"
           f"{'; ' + ', '.join(a.set) if a.set else ''}: {false_total} false detections, {missed_total} missed")
 

@@ -30,3 +30,30 @@ def test_bench_times_every_stage_and_batches_honestly(tmp_path):
     alone.set_background_frames(alone.resolution.frames(bg))
     assert r["batch_iterations"] == [alone.infer(alone.resolution.frames(f)).iterations for f in frames]
     assert r["frames_per_s_batched"] == 1 / r["median_s"]["per frame, batched"]
+
+
+def test_errors_sorts_each_error_by_its_kind(tmp_path):
+    """bench.errors' kinds: a miss by the stage that lost the person, a false detection by
+    its band and its distance to the people; cell_values reads a real frame's engine."""
+    from bench.errors import cell_values, false_kind, miss_kind
+    from dpom_warp.api import Detector
+
+    cell = dict(rho=1.0, before=1.0, rho_star=1.0, out_of_view=False)
+    assert miss_kind(None, 0.5) == "no support in the mean field"
+    assert miss_kind({**cell, "rho": 0.2, "before": 0.2, "rho_star": 0.2}, 0.5) == "no support in the mean field"
+    assert miss_kind({**cell, "before": 0.3, "rho_star": 0.3}, 0.5) == "cut by eq. 13"
+    assert miss_kind({**cell, "rho_star": 0.1}, 0.5) == "cut by the top band"
+    assert miss_kind(cell, 0.5) == "found as one with a neighbour"
+    assert false_kind({**cell, "out_of_view": True}, 0.2, 0.5) == "band out of view"
+    assert false_kind(cell, 0.3, 0.5) == "second cell beside a person"
+    assert false_kind(cell, 0.8, 0.5) == "elsewhere"
+
+    det = Detector.from_config(small_config(tmp_path), ["device=cpu"])
+    cfg = det.config
+    generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
+    frame = expand(cfg.inputs.frames, "input.frames")[0]
+    result = det.detect(read_depth(frame, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width)))
+    k = int(np.argmax(result.rho_star))
+    v = cell_values(det, result, k)
+    assert v["rho_star"] == float(result.rho_star.ravel()[k]) and v["rho"] == float(result.rho.ravel()[k])
+    assert v["before"] >= v["rho_star"] - 1e-9  # the top band's factor is at most 1
