@@ -59,6 +59,7 @@ LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 48 + 4 + 4  # rec
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 TABLE_BYTES = 4 + 4 + 8 + 8 + 8 + 4  # pixel table: location, float32 mu, mu, sigma, log sigma, half-width
 TABLE_PIXEL_BYTES = 4 + 8  # its start and reach
+BEHIND_POINT_BYTES = 4 + 8 + 8  # model.behind_cost's lattice point: pixel, mu, var (Engine._behind_table)
 TABLE_BUDGET = 256 * 2**20  # table=None: the pixel table where it holds at most this
 
 
@@ -172,7 +173,15 @@ class Engine:
         self.tile, tiles_x = tile, -(-self.width // tile)
         self.n_tiles = tiles_x * -(-self.height // tile)
         P, L = batch * self.n_pixels, batch * self.n_locations
+        # the optical axis: every ray's parameter is its z-depth, d . forward = 1
+        rays = geometry.rays.reshape(-1, 3)
+        self.forward = wp.vec3d(*(float(x) for x in np.linalg.lstsq(rays, np.ones(len(rays)), rcond=None)[0]))
         self.extra_bytes = background_auto.state_bytes(self.n_pixels) if background_auto else 0
+        with wp.ScopedDevice(device):
+            self.geo = self._geometry_arrays(geometry)
+        self._behind_counts = None
+        self.behind_table = self._behind_table(counts_only=True)
+        self.extra_bytes += BEHIND_POINT_BYTES * self.behind_table + 4 * (self.n_locations + 1)  # and its starts
         start, nbrs = neighbour_lists(geometry.locations, params.exclusion_radius if params.exclusion > 0 else 0.0)
         self.extra_bytes += 4 * (len(start) + len(nbrs))  # model.exclusion's neighbour lists
         most = int(geometry.rect_area.sum())  # the pixel table's pairs at most
@@ -200,10 +209,6 @@ class Engine:
         self.grown: list[int] = []
         self.pm = pixel_model(params)
         with wp.ScopedDevice(device):
-            self.geo = self._geometry_arrays(geometry)
-            # the optical axis: every ray's parameter is its z-depth, d . forward = 1
-            rays = geometry.rays.reshape(-1, 3)
-            self.forward = wp.vec3d(*(float(x) for x in np.linalg.lstsq(rays, np.ones(len(rays)), rcond=None)[0]))
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
             self.centre = wp.vec3d(*(float(c) for c in geometry.centre))
@@ -251,6 +256,7 @@ class Engine:
             self.no_reserved = wp.zeros(0, dtype=wp.int32)
             self.neighbour_start = wp.array(start, dtype=wp.int32)
             self.neighbours = wp.array(nbrs, dtype=wp.int32)
+        self._behind_table()
         self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
         self.table = self._pixel_table(self.use_table)
         self._allocate_lists(int(entries_per_pixel * P))
@@ -276,6 +282,44 @@ class Engine:
         g.body_radius, g.head_radius, g.bottom, g.shoulder, g.top, g.height_spread = solid[1:7]
         g.leg_radius, g.hip, g.depth_radius = solid[7:10]
         return g
+
+    def _behind_band(self) -> tuple[float, float]:
+        """The heights between which model.behind_cost counts readings behind (ground grids)."""
+        p, h = self.params, self.geometry.height
+        return (p.behind_low * h, p.behind_high * h) if h > 0 else (-BAND_ALL, BAND_ALL)
+
+    def _behind_table(self, counts_only: bool = False) -> int:
+        """The lattice points of every location's silhouette core that model.behind_cost
+        counts (kernels.mean_field.behind_points): static, so built once here and only
+        classified against each frame's readings (behind_count). Returns how many points
+        (none without behind_cost); with `counts_only`, counts them without the table."""
+        p, dev, L = self.params, self.device, self.n_locations
+        if p.behind_cost <= 0 or L == 0:
+            if not counts_only:
+                self.behind_first = wp.zeros(L + 1, dtype=wp.int32, device=dev)
+                self.behind_pixel = wp.zeros(0, dtype=wp.int32, device=dev)
+                self.behind_mu, self.behind_var = (wp.zeros(0, dtype=wp.float64, device=dev) for _ in range(2))
+            return 0
+        low, high = self._behind_band()
+        statics = [self.geo, float(self.geometry.centre[2]), p.behind_side, low, high, p.behind_step, self.forward]
+        with wp.ScopedDevice(dev):
+            if counts_only or self._behind_counts is None:
+                counts = wp.zeros(L, dtype=wp.int32)
+                none_i, none_f = wp.zeros(0, dtype=wp.int32), wp.zeros(0, dtype=wp.float64)
+                wp.launch(K.behind_points, dim=L, inputs=statics + [0, counts, counts, none_i, none_f, none_f])
+                self._behind_counts = counts
+            counts = self._behind_counts
+            c = counts.numpy().astype(np.int64)
+            if counts_only:
+                return int(c.sum())
+            self._behind_counts = None
+            first = np.concatenate([[0], np.cumsum(c)]).astype(np.int32)
+            self.behind_first = wp.array(first, dtype=wp.int32)
+            self.behind_pixel = wp.zeros(int(c.sum()), dtype=wp.int32)
+            self.behind_mu, self.behind_var = (wp.zeros(int(c.sum()), dtype=wp.float64) for _ in range(2))
+            wp.launch(K.behind_points, dim=L, inputs=statics + [1, self.behind_first, counts, self.behind_pixel,
+                                                                self.behind_mu, self.behind_var])
+        return int(c.sum())
 
     def _tile_index(self, pair_loc, pair_tile, tiles_x) -> K.TileIndex:
         """Depth bounds of every (location, tile) pair, sorted by tile then lo (kernels.masks)."""
@@ -697,11 +741,9 @@ class Engine:
                 wp.launch(K.prune_lists, dim=self.batch * self.n_pixels, device=dev,
                           inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
                                   self.live, self.per_location])
-            h = self.geometry.height
-            low, high = (p.behind_low * h, p.behind_high * h) if h > 0 else (-BAND_ALL, BAND_ALL)
             wp.launch(K.behind_count, dim=len(self.live), device=dev,
-                      inputs=[self.depth, self.geo, self.pm, float(self.geometry.centre[2]), p.behind_side,
-                              low, high, p.behind_step, self.forward, self.per_location, self.n_behind])
+                      inputs=[self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu,
+                              self.behind_var, p.behind_step, self.per_location, self.n_behind])
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()

@@ -283,91 +283,126 @@ def reading_class(pm: PixelModel, z: wp.float64, mu: wp.float64, var: wp.float64
 
 
 @wp.kernel(enable_backward=False)
-def behind_count(
-    depth: wp.array3d(dtype=wp.float32),
+def behind_points(
     geo: GeometryArrays,
-    pm: PixelModel,
     centre_z: wp.float64,
     side: wp.float64,
     low: wp.float64,
     high: wp.float64,
     step: int,
     forward: wp.vec3d,
+    fill: int,
+    first: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    pixel: wp.array(dtype=wp.int32),
+    mu: wp.array(dtype=wp.float64),
+    var: wp.array(dtype=wp.float64),
+):
+    """The static half of behind_count, once per camera and grid: the pixels of location k's
+    silhouette (its solid's projection) counted in its core, on the lattice of pixels whose row
+    and column are multiples of `step`: in each lattice row, the lattice pixels whose rays hit
+    the solid run from column a to b, and the `side` share of that run at each end is left out
+    (arms, a narrower body than the solid), as are object points below height `low` (the gap
+    between the legs) or above `high` (heads: people are shorter or taller than the solid).
+    With fill 0, counts[k] = how many; with fill 1 they are written from first[k] on: the
+    pixel (v x width + u), the object's depth mu and extra variance var there (object_depth).
+    One thread per location. `forward`: the camera's optical axis (a ray's parameter is its
+    z-depth, d . forward = 1): a lattice row none of whose points can lie between `low` and
+    `high` on the solid (the z-depths of the solid's bounding box times the row's vertical ray
+    components) is skipped without walking it, which changes no point."""
+    k = wp.tid()
+    width = geo.rays.shape[1]
+    n = int(0)
+    r = geo.rect[k]
+    u0 = (r[0] + step - 1) / step * step  # the first lattice column and row in the rectangle
+    v0 = (r[1] + step - 1) / step * step
+    # the z-depths (ray parameters) the solid's bounding box spans, floored at 0
+    p = geo.location[k]
+    reach = wp.max(wp.max(geo.body_radius, geo.depth_radius), wp.max(geo.head_radius, geo.leg_radius))
+    t_lo = f64(1.0e30)
+    t_hi = f64(0.0)
+    for corner in range(8):
+        dx = reach
+        if corner % 2 == 0:
+            dx = -reach
+        dy = reach
+        if (corner / 2) % 2 == 0:
+            dy = -reach
+        dz = geo.top
+        if corner / 4 == 0:
+            dz = geo.bottom
+        t = wp.dot(wp.vec3d(p[0] + dx, p[1] + dy, p[2] + dz) - geo.centre, forward)
+        t_lo = wp.min(t_lo, t)
+        t_hi = wp.max(t_hi, t)
+    t_lo = wp.max(t_lo, f64(0.0))
+    for v in range(v0, r[3] + 1, step):
+        z_lo = f64(1.0e30)  # the row's vertical ray components
+        z_hi = f64(-1.0e30)
+        for u in range(u0, r[2] + 1, step):
+            z_lo = wp.min(z_lo, geo.rays[v, u][2])
+            z_hi = wp.max(z_hi, geo.rays[v, u][2])
+        h_lo = centre_z + wp.min(wp.min(t_lo * z_lo, t_lo * z_hi), wp.min(t_hi * z_lo, t_hi * z_hi))
+        h_hi = centre_z + wp.max(wp.max(t_lo * z_lo, t_lo * z_hi), wp.max(t_hi * z_lo, t_hi * z_hi))
+        if h_hi + f64(1.0e-9) < low or h_lo - f64(1.0e-9) > high:  # (a margin for rounding)
+            continue
+        first_u = int(-1)
+        for u in range(u0, r[2] + 1, step):
+            if object_depth(geo, k, geo.rays[v, u])[0] > f64(0.0):
+                first_u = u
+                break
+        last_u = int(-1)
+        if first_u >= 0:
+            for u in range(r[2] / step * step, first_u - 1, -step):
+                if object_depth(geo, k, geo.rays[v, u])[0] > f64(0.0):
+                    last_u = u
+                    break
+            trim = side * f64(last_u - first_u)
+            for u in range(first_u, last_u + 1, step):
+                if f64(u) >= f64(first_u) + trim and f64(u) <= f64(last_u) - trim:
+                    d = geo.rays[v, u]
+                    o = object_depth(geo, k, d)
+                    h = centre_z + o[0] * d[2]
+                    if o[0] > f64(0.0) and h >= low and h <= high:
+                        if fill != 0:
+                            j = first[k] + n
+                            pixel[j] = v * width + u
+                            mu[j] = o[0]
+                            var[j] = o[1]
+                        n += 1
+    if fill == 0:
+        counts[k] = n
+
+
+@wp.kernel(enable_backward=False)
+def behind_count(
+    depth: wp.array3d(dtype=wp.float32),
+    pm: PixelModel,
+    first: wp.array(dtype=wp.int32),
+    pixel: wp.array(dtype=wp.int32),
+    mu: wp.array(dtype=wp.float64),
+    var: wp.array(dtype=wp.float64),
+    step: int,
     entries: wp.array(dtype=wp.int32),
     behind: wp.array(dtype=wp.int32),
 ):
-    """behind[i]: the pixels of location i's silhouette (its solid's projection) whose reading
-    lies behind its object beyond the mask test (reading_class BEHIND: were the object there it
-    would hide them), counted in its core on the lattice of pixels whose row and column are
-    multiples of `step`, each standing for step^2 pixels: in each lattice row, the lattice
-    pixels whose rays hit the solid run from column a to b, and the `side` share of that run
-    at each end is left out (arms, a narrower body than the solid), as are object points below
-    height `low` (the gap between the legs) or above `high` (heads: people are shorter or taller
-    than the solid). One thread per location of the batch; 0 for the locations in no list
+    """behind[i]: the pixels of location i's silhouette core (behind_points' lattice: the
+    table from first[k] to first[k + 1]) whose reading lies behind its object beyond the mask
+    test (reading_class BEHIND: were the object there it would hide them), each standing for
+    step^2 pixels. One thread per location of the batch; 0 for the locations in no list
     (entries[i], their entries in the lists, 0: no reading supports them, and on the fast path
-    the pruned and idle ones, kernels.sparse), which stay where they start as before.
-    `forward`: the camera's optical axis (a ray's parameter is its z-depth, d . forward = 1):
-    a lattice row none of whose points can lie between `low` and `high` on the solid (the
-    z-depths of the solid's bounding box times the row's vertical ray components) is skipped
-    without walking it, which changes no count."""
+    the pruned and idle ones, kernels.sparse), which stay where they start as before."""
     i = wp.tid()
-    n_loc = geo.rect.shape[0]
+    n_loc = first.shape[0] - 1
     b = i / n_loc
     k = i - b * n_loc
+    width = depth.shape[2]
     n = int(0)
     if entries[i] > 0:
-        r = geo.rect[k]
-        u0 = (r[0] + step - 1) / step * step  # the first lattice column and row in the rectangle
-        v0 = (r[1] + step - 1) / step * step
-        # the z-depths (ray parameters) the solid's bounding box spans, floored at 0
-        p = geo.location[k]
-        reach = wp.max(wp.max(geo.body_radius, geo.depth_radius), wp.max(geo.head_radius, geo.leg_radius))
-        t_lo = f64(1.0e30)
-        t_hi = f64(0.0)
-        for corner in range(8):
-            dx = reach
-            if corner % 2 == 0:
-                dx = -reach
-            dy = reach
-            if (corner / 2) % 2 == 0:
-                dy = -reach
-            dz = geo.top
-            if corner / 4 == 0:
-                dz = geo.bottom
-            t = wp.dot(wp.vec3d(p[0] + dx, p[1] + dy, p[2] + dz) - geo.centre, forward)
-            t_lo = wp.min(t_lo, t)
-            t_hi = wp.max(t_hi, t)
-        t_lo = wp.max(t_lo, f64(0.0))
-        for v in range(v0, r[3] + 1, step):
-            z_lo = f64(1.0e30)  # the row's vertical ray components
-            z_hi = f64(-1.0e30)
-            for u in range(u0, r[2] + 1, step):
-                z_lo = wp.min(z_lo, geo.rays[v, u][2])
-                z_hi = wp.max(z_hi, geo.rays[v, u][2])
-            h_lo = centre_z + wp.min(wp.min(t_lo * z_lo, t_lo * z_hi), wp.min(t_hi * z_lo, t_hi * z_hi))
-            h_hi = centre_z + wp.max(wp.max(t_lo * z_lo, t_lo * z_hi), wp.max(t_hi * z_lo, t_hi * z_hi))
-            if h_hi + f64(1.0e-9) < low or h_lo - f64(1.0e-9) > high:  # (a margin for rounding)
-                continue
-            first = int(-1)
-            for u in range(u0, r[2] + 1, step):
-                if object_depth(geo, k, geo.rays[v, u])[0] > f64(0.0):
-                    first = u
-                    break
-            last = int(-1)
-            if first >= 0:
-                for u in range(r[2] / step * step, first - 1, -step):
-                    if object_depth(geo, k, geo.rays[v, u])[0] > f64(0.0):
-                        last = u
-                        break
-                trim = side * f64(last - first)
-                for u in range(first, last + 1, step):
-                    if f64(u) >= f64(first) + trim and f64(u) <= f64(last) - trim:
-                        d = geo.rays[v, u]
-                        o = object_depth(geo, k, d)
-                        h = centre_z + o[0] * d[2]
-                        if o[0] > f64(0.0) and h >= low and h <= high:
-                            if reading_class(pm, f64(depth[b, v, u]), o[0], o[1], f64(0.0)) == BEHIND:
-                                n += step * step
+        for j in range(first[k], first[k + 1]):
+            v = pixel[j] / width
+            u = pixel[j] - v * width
+            if reading_class(pm, f64(depth[b, v, u]), mu[j], var[j], f64(0.0)) == BEHIND:
+                n += step * step
     behind[i] = n
 
 
