@@ -307,6 +307,30 @@ def test_neighbour_lists_are_the_locations_within_the_radius():
     assert start.shape == (61,) and not start.any()
 
 
+@pytest.mark.parametrize("seed", range(2))
+def test_behind_table_serves_every_frame_and_counts_in_memory(device, seed):
+    """The core's lattice points are found once per engine (Engine._behind_table): frames
+    with other readings, one after another, each get the reference's counts, and the table
+    is in memory_bytes (BEHIND_POINT_BYTES a point, beside an engine without the cost)."""
+    from dpom_warp.engine import BEHIND_POINT_BYTES
+
+    geom, params, depth, bg_frames = random_scene(seed, shape="solid")
+    params = dataclasses.replace(params, sparse_epsilon=0.0, behind_cost=3.0, behind_low=0.3, behind_step=1)
+    engine = Engine(geom, params, device)
+    engine.set_background_frames(bg_frames)
+    everyone = np.ones(len(geom.rect), bool)
+    rng = np.random.default_rng(seed)
+    for frame in (depth, depth * rng.uniform(1.0, 1.3, depth.shape), depth):
+        engine.infer(frame)
+        listed = engine.per_location.numpy() > 0
+        want = ref.behind_count(frame, geom, params, everyone)
+        np.testing.assert_array_equal(engine.n_behind.numpy()[listed], want[listed])
+        assert want[listed].max() > 0, "no reading behind any listed location: the count is not exercised"
+    assert engine.behind_table == len(engine.behind_mu) > 0
+    plain = Engine(geom, dataclasses.replace(params, behind_cost=0.0), device)
+    assert engine.memory_bytes() - plain.memory_bytes() == BEHIND_POINT_BYTES * engine.behind_table
+
+
 @pytest.mark.parametrize("path", ["exact", "sparse", "graph"])
 @pytest.mark.parametrize("shape", ["plane", "solid"])
 @pytest.mark.parametrize("seed", range(3))
