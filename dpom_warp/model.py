@@ -25,9 +25,9 @@ class ModelParams:
         missing_prob: pi_inf of objects (and of the floor-only background).
         z_max: sensor range, metres; readings beyond it are treated as no reading.
         alpha, beta: soft threshold rho* = sigmoid(alpha e + beta) rho (eq. 13, corrected sign;
-            beta = -4.5 cuts at e = 0.045: MODEL.md's -8, at 0.08, and -6.5, at 0.065, cut more
-            hidden people in the crowds of the tuning draw and no false detection more once
-            the top-band test judged the head, README).
+            beta = -3.5 cuts at e = 0.035: MODEL.md's -8, at 0.08, -6.5 and -4.5 cut more
+            hidden people in the crowds of the tuning draw, for fewer false detections than
+            they save, once the top-band test judged the head, README).
         share_of: what e of eq. 13 is a share of: 'silhouette' (MODEL.md: sum of T over the
             mask / |S_k|) or 'unhidden' (/ the silhouette's pixels that read at or behind the
             object: those whose reading is nearer, hidden by something in front, and those
@@ -162,7 +162,7 @@ class ModelParams:
     missing_prob: float = 0.05
     z_max: float = 10.0
     alpha: float = 100.0
-    beta: float = -4.5
+    beta: float = -3.5
     share_of: str = "silhouette"
     damping: float = 0.1
     damping_growth: float = 1.03

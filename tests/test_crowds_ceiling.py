@@ -84,7 +84,7 @@ def test_person_hidden_but_for_head_and_shoulders_is_found():
     """A person 0.7 m straight behind another of the same height (1.8 m), seen by a camera
     2.2 m high at pitch 20 with five empty-room frames: the mean field finds them (rho 1), and
     the share of their silhouette left unhidden and supported, e of eq. 13, is about 0.05. The
-    default cut-off (beta -4.5: e = 0.045) keeps them and adds no detection; the former one
+    default cut-off (beta -3.5: e = 0.035) keeps them and adds no detection; an earlier one
     (beta -6.5: 0.065) cut them (README, Hidden people and eq. 13)."""
     from dpom_warp.detect import detect
     from dpom_warp.engine import Engine

@@ -123,7 +123,9 @@ def test_object_hiding_another_one_step(device):
 def test_hidden_object_is_explained_away_not_penalised(device):
     """With the paper's independent prior (no exclusion), at convergence the front object
     takes the pixels; the one behind it returns to its prior (it is hidden, not absent), and
-    its soft-thresholded rho* vanishes."""
+    its soft-thresholded rho* vanishes: eq. 13 leaves it sigmoid(alpha e + beta) of its rho,
+    e the share of its silhouette that A lets through (at most 1 - rho_A), under 5 % of the
+    prior."""
     params = ModelParams(prior=0.05, sigma_object=0.15, damping=0.2, max_iterations=300, exclusion=0.0)
     geom = toy_geometry([2.0, 2.1, 4.0], [(1, 1, 3, 2), (1, 1, 3, 2), (1, 1, 3, 2)])
     depth = np.full((H, W), 5.0)
@@ -132,7 +134,11 @@ def test_hidden_object_is_explained_away_not_penalised(device):
     assert got.rho[0] > 0.999
     assert got.rho[1] == pytest.approx(0.05, abs=1e-3)  # evidence x (1 - rho_A) -> 0
     assert got.rho[2] == pytest.approx(0.05, abs=1e-12)  # 2 m in front of its plane: no mask
-    assert got.rho_star[1] < 1e-3 and got.rho_star[2] < 1e-3
+    e = got.evidence_share
+    assert e[1] <= 1 - got.rho[0] + 1e-12 and e[2] == 0
+    for k in (1, 2):
+        assert got.rho_star[k] == pytest.approx(sigmoid(params.alpha * e[k] + params.beta) * got.rho[k], rel=1e-9)
+        assert got.rho_star[k] < 0.05 * params.prior
     assert got.rho_star[0] > 0.99
 
 
