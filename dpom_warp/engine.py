@@ -59,7 +59,7 @@ LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 48 + 4 + 4  # rec
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 TABLE_BYTES = 4 + 4 + 8 + 8 + 8 + 4  # pixel table: location, float32 mu, mu, sigma, log sigma, half-width
 TABLE_PIXEL_BYTES = 4 + 8  # its start and reach
-BEHIND_POINT_BYTES = 4 + 8 + 8  # model.behind_cost's lattice point: pixel, mu, var (Engine._behind_table)
+BEHIND_POINT_BYTES = 4 + 8 + 8  # model.behind_cost's lattice point: pixel, mu, var (Engine._fill_behind_table)
 TABLE_BUDGET = 256 * 2**20  # table=None: the pixel table where it holds at most this
 
 
@@ -179,8 +179,8 @@ class Engine:
         self.extra_bytes = background_auto.state_bytes(self.n_pixels) if background_auto else 0
         with wp.ScopedDevice(device):
             self.geo = self._geometry_arrays(geometry)
-        self._behind_counts = None
-        self.behind_table = self._behind_table(counts_only=True)
+        behind_points = self._count_behind_points()  # counted first: the table is in the budget
+        self.behind_table = int(behind_points.sum())
         self.extra_bytes += BEHIND_POINT_BYTES * self.behind_table + 4 * (self.n_locations + 1)  # and its starts
         start, nbrs = neighbour_lists(geometry.locations, params.exclusion_radius if params.exclusion > 0 else 0.0)
         self.extra_bytes += 4 * (len(start) + len(nbrs))  # model.exclusion's neighbour lists
@@ -256,7 +256,7 @@ class Engine:
             self.no_reserved = wp.zeros(0, dtype=wp.int32)
             self.neighbour_start = wp.array(start, dtype=wp.int32)
             self.neighbours = wp.array(nbrs, dtype=wp.int32)
-        self._behind_table()
+        self._fill_behind_table(behind_points)
         self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
         self.table = self._pixel_table(self.use_table)
         self._allocate_lists(int(entries_per_pixel * P))
@@ -288,38 +288,41 @@ class Engine:
         p, h = self.params, self.geometry.height
         return (p.behind_low * h, p.behind_high * h) if h > 0 else (-BAND_ALL, BAND_ALL)
 
-    def _behind_table(self, counts_only: bool = False) -> int:
-        """The lattice points of every location's silhouette core that model.behind_cost
-        counts (kernels.mean_field.behind_points): static, so built once here and only
-        classified against each frame's readings (behind_count). Returns how many points
-        (none without behind_cost); with `counts_only`, counts them without the table."""
-        p, dev, L = self.params, self.device, self.n_locations
-        if p.behind_cost <= 0 or L == 0:
-            if not counts_only:
-                self.behind_first = wp.zeros(L + 1, dtype=wp.int32, device=dev)
-                self.behind_pixel = wp.zeros(0, dtype=wp.int32, device=dev)
-                self.behind_mu, self.behind_var = (wp.zeros(0, dtype=wp.float64, device=dev) for _ in range(2))
-            return 0
+    def _behind_statics(self) -> list:
+        """behind_points' inputs that describe the core: geometry, band, side share, lattice."""
+        p = self.params
         low, high = self._behind_band()
-        statics = [self.geo, float(self.geometry.centre[2]), p.behind_side, low, high, p.behind_step, self.forward]
-        with wp.ScopedDevice(dev):
-            if counts_only or self._behind_counts is None:
-                counts = wp.zeros(L, dtype=wp.int32)
-                none_i, none_f = wp.zeros(0, dtype=wp.int32), wp.zeros(0, dtype=wp.float64)
-                wp.launch(K.behind_points, dim=L, inputs=statics + [0, counts, counts, none_i, none_f, none_f])
-                self._behind_counts = counts
-            counts = self._behind_counts
-            c = counts.numpy().astype(np.int64)
-            if counts_only:
-                return int(c.sum())
-            self._behind_counts = None
-            first = np.concatenate([[0], np.cumsum(c)]).astype(np.int32)
+        return [self.geo, float(self.geometry.centre[2]), p.behind_side, low, high, p.behind_step, self.forward]
+
+    def _count_behind_points(self) -> np.ndarray:
+        """How many lattice points of each location's silhouette core model.behind_cost counts
+        (kernels.mean_field.behind_points, fill 0); none without behind_cost."""
+        L = self.n_locations
+        if self.params.behind_cost <= 0 or L == 0:
+            return np.zeros(0, np.int64)
+        with wp.ScopedDevice(self.device):
+            counts = wp.zeros(L, dtype=wp.int32)
+            none_i, none_f = wp.zeros(0, dtype=wp.int32), wp.zeros(0, dtype=wp.float64)
+            wp.launch(K.behind_points, dim=L, inputs=self._behind_statics() + [0, none_i, counts, none_i, none_f,
+                                                                               none_f])
+        return counts.numpy().astype(np.int64)
+
+    def _fill_behind_table(self, counts: np.ndarray):
+        """The table of those points (`counts` from _count_behind_points): each one's pixel,
+        the object's depth and variance there (behind_points, fill 1). Static, so built once
+        here and only classified against each frame's readings (behind_count)."""
+        with wp.ScopedDevice(self.device):
+            first = np.zeros(self.n_locations + 1, np.int32)  # all 0: no points (no behind_cost)
+            first[1:len(counts) + 1] = np.cumsum(counts)
             self.behind_first = wp.array(first, dtype=wp.int32)
-            self.behind_pixel = wp.zeros(int(c.sum()), dtype=wp.int32)
-            self.behind_mu, self.behind_var = (wp.zeros(int(c.sum()), dtype=wp.float64) for _ in range(2))
-            wp.launch(K.behind_points, dim=L, inputs=statics + [1, self.behind_first, counts, self.behind_pixel,
-                                                                self.behind_mu, self.behind_var])
-        return int(c.sum())
+            n = int(first[-1])
+            self.behind_pixel = wp.zeros(n, dtype=wp.int32)
+            self.behind_mu, self.behind_var = (wp.zeros(n, dtype=wp.float64) for _ in range(2))
+            if n:
+                none_i = wp.zeros(0, dtype=wp.int32)
+                wp.launch(K.behind_points, dim=len(counts),
+                          inputs=self._behind_statics() + [1, self.behind_first, none_i, self.behind_pixel,
+                                                           self.behind_mu, self.behind_var])
 
     def _tile_index(self, pair_loc, pair_tile, tiles_x) -> K.TileIndex:
         """Depth bounds of every (location, tile) pair, sorted by tile then lo (kernels.masks)."""

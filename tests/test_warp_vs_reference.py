@@ -309,7 +309,7 @@ def test_neighbour_lists_are_the_locations_within_the_radius():
 
 @pytest.mark.parametrize("seed", range(2))
 def test_behind_table_serves_every_frame_and_counts_in_memory(device, seed):
-    """The core's lattice points are found once per engine (Engine._behind_table): frames
+    """The core's lattice points are found once per engine (Engine._fill_behind_table): frames
     with other readings, one after another, each get the reference's counts, and the table
     is in memory_bytes (BEHIND_POINT_BYTES a point, beside an engine without the cost)."""
     from dpom_warp.engine import BEHIND_POINT_BYTES
