@@ -199,7 +199,7 @@ def score_scene(cfg, device, seq, n):
     """MODA, precision, recall and mean position error of the config's path over the first
     `n` frames of a rendered sequence seq = scene_frames(..., with_truth=True), and each
     frame's rho*."""
-    from dpom_warp.detect import detect
+    from dpom_warp.detect import detect_map
     from dpom_warp.evaluate import score_frames
     from dpom_warp.geometry import build_geometry
     from dpom_warp.pipeline import make_engine
@@ -214,8 +214,7 @@ def score_scene(cfg, device, seq, n):
     for f, depth in zip(names, frames):
         res = engine.infer(engine.resolution.frames(depth))
         maps.append(res.rho_star)
-        dets = detect(res.rho_star.reshape(cfg.grid.shape), geom.locations, geom.rect,
-                      cfg.detection.threshold, cfg.detection.nms_radius)
+        dets = detect_map(res.rho_star.reshape(cfg.grid.shape), geom, cfg.detection)
         found[f] = np.array([[d.x, d.y, d.z][:dims] for d in dets]).reshape(-1, dims)
     s = score_frames(found, {f: truth[f] for f in names}, cfg.evaluation.match_distance,
                      cfg.evaluation.hidden_visibility, geom.centre[:2])

@@ -30,11 +30,10 @@ from bench.robustness import VARIANTS, scene_sets
 
 def score(rho_star, cfg, geometry, truth) -> tuple[int, int]:
     """(false detections, misses) of one frame's rho* at 0.5 m."""
-    from dpom_warp.detect import detect
+    from dpom_warp.detect import detect_map
     from dpom_warp.evaluate import match
 
-    dets = detect(rho_star.reshape(cfg.grid.shape), geometry.locations, geometry.rect, cfg.detection.threshold,
-                  cfg.detection.nms_radius)
+    dets = detect_map(rho_star.reshape(cfg.grid.shape), geometry, cfg.detection)
     found = np.array([(d.x, d.y) for d in dets]).reshape(-1, 2)
     people = np.array([(o["x"], o["y"]) for o in truth]).reshape(-1, 2)
     matched = len(match(found, people, 0.5))

@@ -24,6 +24,7 @@ from pydantic import (BaseModel, BeforeValidator, ConfigDict, Discriminator, Fie
                       ValidationError, model_validator)
 from pydantic_core import PydanticCustomError
 
+from .detect import EDGE_RADIUS
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
 from .ground import GroundOptions
 from .model import BEHIND_COST, TOP_SHORTER, AutoBackground, ModelParams
@@ -555,6 +556,12 @@ class DetectionSection(Node):
 
     threshold: Num = Field(0.5, gt=0, lt=1, description="minimum rho* of a detection (a local maximum)")
     nms_radius: Num = Field(0.4, ge=0, description="greedy non-maximum suppression radius, metres")
+    edge_radius: Num | None = Field(None, ge=0, description=(
+        "a detection whose silhouette is mostly outside the image (its share in view under edge_view) is dropped "
+        f"within this distance of one in view, metres (README, How it works); default {EDGE_RADIUS:g} on ground "
+        f"grids, 0 (off) in voxel mode"))
+    edge_view: Num = Field(0.5, gt=0, le=1, description=(
+        "the share of a silhouette's rectangle inside the image under which edge_radius applies"))
 
 
 class EvaluationSection(Node):
@@ -789,6 +796,8 @@ def _first_error(e: ValidationError) -> str:
 class Detection:
     threshold: float = 0.5
     nms_radius: float = 0.4
+    edge_radius: float = 0.0
+    edge_view: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -955,7 +964,9 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     top_unseen = m.top_unseen if m.top_unseen is not None else (1.0 if c.input.background is not None else 0.0)
     model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost,
                   top_heights=top_heights, top_unseen=top_unseen)
-    detection = _fill(Detection, c.detection)
+    edge_radius = (c.detection.edge_radius if c.detection.edge_radius is not None else
+                   EDGE_RADIUS if c.grid.mode == "ground" else 0.0)
+    detection = _fill(Detection, c.detection, edge_radius=edge_radius)
     evaluation = _fill(Evaluation, c.evaluation)
     output = _fill(Output, c.output)
     engine = _fill(EngineOptions, c.engine)

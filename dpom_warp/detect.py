@@ -1,11 +1,15 @@
 """Detections from an occupancy map: local maxima above a threshold, then greedy
-non-maximum suppression within a radius (MODEL.md, Detections and scores)."""
+non-maximum suppression within a radius (MODEL.md, Detections and scores); a cell mostly
+outside the image beside a detection in view is that person's edge (detection.edge_radius)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+
+
+EDGE_RADIUS = 0.45  # detection.edge_radius's default on ground grids (config; README, How it works)
 
 
 @dataclass(frozen=True)
@@ -33,7 +37,8 @@ def local_maxima(rho_map: np.ndarray) -> np.ndarray:
 
 
 def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, threshold: float,
-           nms_radius: float) -> list[Detected]:
+           nms_radius: float, view_part: np.ndarray | None = None, edge_radius: float = 0.0,
+           edge_view: float = 0.5) -> list[Detected]:
     """Detections of one frame, strongest first.
 
     Args:
@@ -45,6 +50,9 @@ def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, thresh
         rect: (K, 4) silhouette rectangles u0, v0, u1, v1.
         threshold: minimum rho*.
         nms_radius: a detection suppresses weaker ones closer than this, metres.
+        view_part: (K,) the share of each location's silhouette rectangle inside the image
+            (Geometry.view_part); None: every location in view.
+        edge_radius, edge_view: after the suppression, edge_drop.
     """
     from scipy.ndimage import uniform_filter
 
@@ -59,5 +67,28 @@ def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, thresh
     for k in cand:
         if all(np.linalg.norm(locations[k] - locations[j]) >= nms_radius for j in kept):
             kept.append(int(k))
+    kept = edge_drop(kept, flat, locations, view_part, edge_radius, edge_view)
     return [Detected(k, *(float(c) for c in locations[k]), float(flat[k]),
                      tuple(int(b) for b in rect[k])) for k in kept]
+
+
+def edge_drop(kept: list[int], flat: np.ndarray, locations: np.ndarray, view_part: np.ndarray | None,
+              edge_radius: float, edge_view: float) -> list[int]:
+    """`kept` (cells of one map) less those with view_part < edge_view (their silhouette
+    rectangle mostly outside the image: the axis out of view) that lie closer than
+    `edge_radius` (metres; 0: off) to a kept cell with view_part >= edge_view and at least
+    their value in `flat`: what is in view of such a cell is the edge of the person found
+    beside it, its core (where a second cell meets the readings behind it) outside the image."""
+    if view_part is None or edge_radius <= 0:
+        return kept
+    seen = [j for j in kept if view_part[j] >= edge_view]
+    return [k for k in kept if view_part[k] >= edge_view or all(
+        flat[j] < flat[k] or np.linalg.norm(locations[k] - locations[j]) >= edge_radius for j in seen)]
+
+
+def detect_map(rho_star: np.ndarray, geometry, detection, threshold: float | None = None) -> list[Detected]:
+    """detect() with a run config's detection section (`threshold` overrides its threshold)
+    on a geometry's locations, rectangles and view parts."""
+    return detect(rho_star, geometry.locations, geometry.rect,
+                  detection.threshold if threshold is None else threshold, detection.nms_radius,
+                  geometry.view_part, detection.edge_radius, detection.edge_view)

@@ -331,7 +331,7 @@ def run_detections(run_dir: str | Path, min_rho: float = 0.05) -> tuple[Detectio
         (detections, the run's summary, the object box (w, d, h) for voxel runs else None).
     """
     from .config import ConfigError, parse_config
-    from .detect import detect
+    from .detect import detect_map
     from .geometry import build_geometry
 
     run_dir = Path(run_dir)
@@ -358,7 +358,7 @@ def run_detections(run_dir: str | Path, min_rho: float = 0.05) -> tuple[Detectio
             rho = np.load(path)
         except (OSError, ValueError):
             raise InputError(f"{path}: missing or unreadable occupancy map") from None
-        dets = detect(rho, geom.locations, geom.rect, min_rho, cfg.detection.nms_radius)
+        dets = detect_map(rho, geom, cfg.detection, threshold=min_rho)
         frames[name] = [[d.x, d.y, d.z, d.rho, *d.box] for d in dets]
     cube = None
     if cfg.grid.mode == "voxel":

@@ -337,6 +337,8 @@ class Geometry:
             centred on voxels, where the top-band test of the soft threshold does not apply.
         solid: (10,) the object's solid (ObjectBox.solid); solid[0] = 0: the facing-plane
             model.
+        view_part: (K,) the share of each silhouette rectangle (before clipping) inside the
+            image, 0 with none (detection.edge_radius); None: not known, every location whole.
         area: |S_k| (property): the rectangle's area for the facing plane; with a solid, the
             pixels of the rectangle whose rays enter it, counted on first use (seconds at
             full resolution: only the engine and the reference need it, not the pictures).
@@ -352,6 +354,7 @@ class Geometry:
     bounds: np.ndarray
     height: float = 0.0
     solid: np.ndarray = field(default_factory=lambda: np.zeros(10))
+    view_part: np.ndarray | None = None
 
     @cached_property
     def area(self) -> np.ndarray:
@@ -403,6 +406,8 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
         u1 = np.floor(np.nanmax(np.where(in_front[:, None], u, np.nan), axis=1))
         v0 = np.ceil(np.nanmin(np.where(in_front[:, None], v, np.nan), axis=1))
         v1 = np.floor(np.nanmax(np.where(in_front[:, None], v, np.nan), axis=1))
+    with np.errstate(invalid="ignore"):  # the rectangle before clipping (NaN: no silhouette)
+        whole = (u1 - u0 + 1) * (v1 - v0 + 1)
     big = 1e9
     u0 = np.clip(np.nan_to_num(u0, nan=big), 0, camera.width)
     v0 = np.clip(np.nan_to_num(v0, nan=big), 0, camera.height)
@@ -412,6 +417,8 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
     rect = np.stack([u0, v0, u1, v1], axis=1).astype(np.int64)
     rect[empty] = (0, 0, -1, -1)
     area = np.where(empty, 0, (rect[:, 2] - rect[:, 0] + 1) * (rect[:, 3] - rect[:, 1] + 1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        view_part = np.where(empty, 0.0, area / np.where(whole > 0, whole, np.inf))
 
     c = camera.centre
     to_cam = c[None, :] - locs
@@ -429,6 +436,7 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
         rect_area=area.astype(np.int64), normal=normal, plane=plane,
         bounds=np.stack([corners.min(axis=(0, 1)), corners.max(axis=(0, 1))], 1).ravel(),
         height=float(obj.height) if grid.mode == "ground" else 0.0, solid=obj.solid(grid.mode),
+        view_part=np.clip(view_part, 0.0, 1.0),
     )
 
 

@@ -451,7 +451,7 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
                pictures: bool, timestamps: dict | None = None, camera=None) -> None:
     """After the frames: each frame's picture (with `tracks`, their identities and trails)
     when `pictures`, and its Rerun log with output.rerun or --view (depth, boxes, map, tracks)."""
-    from .detect import detect
+    from .detect import detect_map
     from .render import frame_picture
     from .tracking import per_frame
 
@@ -478,8 +478,7 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
         """Frame i's detections, depth and (with `pictures`) picture file."""
         f = done[i]
         rho_map = maps[i].reshape(cfg.grid.shape)
-        dets = detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
-                      cfg.detection.nms_radius)
+        dets = detect_map(rho_map, geometry, cfg.detection)
         depth = read_frame(cfg, f)
         if pictures:
             png = frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2],

@@ -65,9 +65,13 @@ class Cells:
     step: float
     entry: np.ndarray  # (K,) bool
     nms_radius: float = 0.4  # a map's peaks closer than this are one object (detection.nms_radius)
+    view_part: np.ndarray | None = None  # Geometry.view_part, for detection.edge_radius
+    edge_radius: float = 0.0
+    edge_view: float = 0.5
 
     @classmethod
-    def of(cls, geometry, grid, image_size, regions=(), nms_radius: float = 0.4) -> "Cells":
+    def of(cls, geometry, grid, image_size, regions=(), nms_radius: float = 0.4, edge_radius: float = 0.0,
+           edge_view: float = 0.5) -> "Cells":
         """From a run's full-resolution geometry: entry cells are the cells the camera sees on
         the grid's border, beside a cell it does not see, whose silhouette leaves the image
         (`image_size` = (width, height)), or inside a configured region [x0, x1, y0, y1]."""
@@ -93,13 +97,16 @@ class Cells:
             inside |= (p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)
         entry = (seen & (border | beside | leaves)).ravel() | inside
         steps = [grid.x[2], grid.y[2]] + ([grid.z[2]] if grid.mode == "voxel" else [])
-        return cls(np.asarray(p, float), float(max(steps)), entry, nms_radius)
+        return cls(np.asarray(p, float), float(max(steps)), entry, nms_radius, geometry.view_part, edge_radius,
+                   edge_view)
 
     @classmethod
     def for_run(cls, geometry, cfg) -> "Cells":
-        """`of` with a run config's grid, image size, tracking.regions and detection.nms_radius."""
+        """`of` with a run config's grid, image size, tracking.regions and detection's
+        nms_radius, edge_radius and edge_view."""
+        d = cfg.detection
         return cls.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
-                      cfg.detection.nms_radius)
+                      d.nms_radius, d.edge_radius, d.edge_view)
 
     def nearest(self, xyz) -> int:
         """The cell nearest to a point."""
@@ -157,8 +164,9 @@ def _costs(rho, opt: TrackingOptions):
 def peaks(rho_map: np.ndarray, cells: Cells, threshold: float) -> np.ndarray:
     """The cells that matter in a map: its local maxima of at least `threshold`, one per
     cells.nms_radius as the detections (the solid model often explains one person by two
-    neighbouring cells; each would carry a track of its own). Sorted cell indices."""
-    from .detect import local_maxima
+    neighbouring cells; each would carry a track of its own), less a person's edge beside
+    them (detect.edge_drop). Sorted cell indices."""
+    from .detect import edge_drop, local_maxima
 
     flat = rho_map.ravel()
     cand = np.flatnonzero(local_maxima(rho_map).ravel() & (flat >= threshold))
@@ -168,6 +176,7 @@ def peaks(rho_map: np.ndarray, cells: Cells, threshold: float) -> np.ndarray:
     for k in cand:
         if not kept or (((cells.positions[kept] - cells.positions[k]) ** 2).sum(axis=1) >= r2).all():
             kept.append(int(k))
+    kept = edge_drop(kept, flat, cells.positions, cells.view_part, cells.edge_radius, cells.edge_view)
     return np.array(sorted(kept), dtype=np.int64)
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import ConfigError, RunConfig
-from .detect import detect
+from .detect import detect_map
 from .engine import Engine, ListOverflow
 from .geometry import Camera, build_geometry
 from .io import InputError, read_depth, write_bytes_atomic, write_json_atomic, write_npy_atomic
@@ -162,8 +162,7 @@ class FrameWorker:
         boxed on the full-resolution geometry."""
         cfg, geometry = self.cfg, self.geometry
         rho_map = res.rho_star.reshape(cfg.grid.shape)
-        return rho_map, detect(rho_map, geometry.locations, geometry.rect, cfg.detection.threshold,
-                               cfg.detection.nms_radius)
+        return rho_map, detect_map(rho_map, geometry, cfg.detection)
 
     def _finish(self, item: FrameItem, depth, res, read_s: float, infer_s: float, grown: list):
         """Detections, map, picture and record of an inferred frame; `infer_s` is the

@@ -239,3 +239,36 @@ def test_a_person_at_a_ceiling_cameras_edge_is_found_with_a_background():
     assert len(dets) == 1 and np.hypot(*(dets[0] - person)) < 0.3, dets
     res, own, seen, dets = found(0.0)
     assert res.rho[own] > 0.9 and len(dets) == 0, (res.rho[own], dets)
+
+
+def test_a_second_cell_at_a_ceiling_cameras_edge_is_dropped(tmp_path):
+    """The held-out ceiling scene at 3.0 m (bench.robustness, seed 100), frame 2: a person
+    of 1.57 m near the image's edge is found, and a cell 0.35 m beside them whose silhouette
+    rectangle lies mostly outside the image too (rho* 1). detection.edge_radius (0.45 m by
+    default) drops that cell, not the person, and the frame's detections are its people."""
+    from bench.robustness import VARIANTS
+    from dpom_warp.api import Detector
+    from dpom_warp.evaluate import load_ground_truth, match
+    from dpom_warp.io import read_depth
+
+    cache = tmp_path / "scene"
+    sets = VARIANTS["ceiling 3.0 m, pitch 90"] + [
+        "synthetic.seed=100", "synthetic.frames=10", f"synthetic.cache={cache}", f"input.frames={cache}/frames/0002.png",
+        f"input.background={cache}/background/*.png", "device=cpu"]
+    cfg = load_config(str(DEMO), sets)
+    generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
+    frame = cache / "frames" / "0002.png"
+    people = np.array([(o["x"], o["y"]) for o in load_ground_truth(cache / "ground_truth.json")[frame.name]])
+    found = {}
+    for radius in (0.0, None):
+        detector = Detector.from_config(str(DEMO), sets + ([f"detection.edge_radius={radius}"] if radius == 0 else []))
+        dets = detector.detect(read_depth(frame, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width)))
+        found[radius] = (np.array([(d.x, d.y) for d in dets.detections]),
+                         detector.worker.geometry.view_part[[d.k for d in dets.detections]])
+    assert detector.config.detection.edge_radius == 0.45
+    where, view = found[0.0]
+    assert len(where) == len(people) + 1
+    edge = np.flatnonzero(view < 0.5)
+    assert any(np.hypot(*(where[e] - where[j])) < 0.45 for e in edge for j in np.flatnonzero(view >= 0.5))
+    where, view = found[None]
+    assert len(where) == len(people) and len(match(where, people, 0.5)) == len(people)

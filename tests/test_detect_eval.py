@@ -3,7 +3,10 @@
 import numpy as np
 import pytest
 
+from dpom_warp.config import load_config
 from dpom_warp.detect import detect, local_maxima
+from dpom_warp.geometry import build_geometry
+from paths import ROOT
 from dpom_warp.evaluate import match, score_frames
 
 
@@ -73,3 +76,51 @@ def test_saturated_cells_tie_to_the_middle_of_their_blob_and_float32_is_the_map(
         got = detect(m, locations, rect, 0.5, 0.4)
         assert len(got) == 1 and got[0].k == (2 * 6 + 3 if left_first else 2 * 6 + 2)
         assert got == detect(m.astype(np.float32), locations, rect, 0.5, 0.4)
+
+
+def test_a_detection_mostly_outside_the_image_beside_one_in_view_is_dropped():
+    """detection.edge_radius: a cell whose silhouette lies mostly outside the image (view part
+    under edge_view) within the radius of an at least as strong detection in view is dropped;
+    in view of it is only the edge of the person found there. Two cells both mostly outside,
+    farther apart, a cell in view beside one outside, or a stronger one outside, stay."""
+    locs = grid_locations(1, 12)
+    rect = np.tile([0, 0, 1, 1], (12, 1))
+    m = np.zeros((1, 12))
+    m[0, 0], m[0, 4], m[0, 10] = 0.9, 1.0, 0.8  # 0.4 m apart, then 0.6 m
+    view = np.ones(12)
+    view[0] = 0.2  # mostly outside the image
+    plain = detect(m, locs, rect, 0.5, 0.35)
+    assert [d.k for d in plain] == [4, 0, 10]
+    assert [d.k for d in detect(m, locs, rect, 0.5, 0.35, view, edge_radius=0.45)] == [4, 10]
+    assert [d.k for d in detect(m, locs, rect, 0.5, 0.35, view, edge_radius=0.35)] == [4, 0, 10]
+    assert [d.k for d in detect(m, locs, rect, 0.5, 0.35, view, edge_radius=0.45, edge_view=0.1)] == [4, 0, 10]
+    view[4] = 0.4  # both mostly outside: neither judges the other
+    assert [d.k for d in detect(m, locs, rect, 0.5, 0.35, view, edge_radius=0.45)] == [4, 0, 10]
+    view[4], view[10] = 1.0, 0.3  # 0.6 m from the one in view: a person of its own
+    assert [d.k for d in detect(m, locs, rect, 0.5, 0.35, view, edge_radius=0.45)] == [4, 10]
+    m[0, 0] = 1.0  # as strong as the one in view: dropped
+    assert [d.k for d in detect(m, locs, rect, 0.5, 0.35, view, edge_radius=0.45)] == [4, 10]
+    m[0, 4] = 0.7  # weaker: someone at the edge beside a weak cell stays
+    assert [d.k for d in detect(m, locs, rect, 0.5, 0.35, view, edge_radius=0.45)] == [0, 10, 4]
+
+
+def test_view_part_is_the_share_of_the_silhouette_rectangle_in_the_image():
+    """Geometry.view_part from the box corners' projection: 1 where the rectangle is whole in
+    the image, the clipped rectangle's share of the whole one at the edges, 0 with no
+    silhouette."""
+    cfg = load_config(str(ROOT / "configs" / "demo_people.yaml"))
+    geom = build_geometry(cfg.camera, cfg.grid, cfg.obj)
+    corners = cfg.obj.corners(geom.locations, cfg.grid.mode)
+    u, v, z = cfg.camera.project(corners)
+    seen = np.flatnonzero(geom.rect_area > 0)
+    assert np.all(geom.view_part[geom.rect_area == 0] == 0)
+    edge = 0
+    for k in seen:
+        if np.any(z[k] <= 1e-6):
+            continue
+        u0, u1 = np.ceil(u[k].min()), np.floor(u[k].max())
+        v0, v1 = np.ceil(v[k].min()), np.floor(v[k].max())
+        whole = (u1 - u0 + 1) * (v1 - v0 + 1)
+        assert geom.view_part[k] == pytest.approx(geom.rect_area[k] / whole)
+        edge += geom.view_part[k] < 1
+    assert 0 < edge < len(seen) and np.all(geom.view_part[seen] > 0)

@@ -378,3 +378,24 @@ def test_rerun_recording_holds_every_frame(tracked_run, tmp_path):
                    "/world/tracks", "/world/trails"):
         assert rows.get(entity) == 8, (entity, rows)
     assert "/world/camera" in rows
+
+
+def test_peaks_drop_a_persons_edge_beside_them_as_the_detections_do():
+    """A peak mostly outside the image (view part under detection.edge_view) 0.4 m from an
+    at least as strong peak in view is that person's edge: the tracker's nodes leave it out,
+    as the detections do; a stronger edge peak (someone entering beside a weak peak) stays."""
+    from dataclasses import replace
+
+    from dpom_warp.tracking import peaks
+
+    cells = grid_cells()
+    view = np.ones(NX * NY)
+    view[cell(0.5, 1.0)] = 0.2
+    edge = replace(cells, view_part=view, edge_radius=0.45)
+    m = np.zeros((NY, NX))
+    m[10, 5], m[10, 9] = 0.9, 0.9  # the edge cell and one in view, 0.4 m apart
+    m[20, 30] = 0.8
+    assert list(peaks(m, cells, 0.3)) == sorted([cell(0.5, 1.0), cell(0.9, 1.0), cell(3.0, 2.0)])
+    assert list(peaks(m, edge, 0.3)) == sorted([cell(0.9, 1.0), cell(3.0, 2.0)])
+    m[10, 9] = 0.5
+    assert list(peaks(m, edge, 0.3)) == sorted([cell(0.5, 1.0), cell(0.9, 1.0), cell(3.0, 2.0)])
