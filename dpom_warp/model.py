@@ -181,7 +181,7 @@ class ModelParams:
     sparse_drop: float = 0.0
     bound_rounds: int = 3
     warm_start: bool = False
-    top_support: float = 0.12
+    top_support: float = 0.13
     top_band: float = 0.75
     top_hidden: float = 0.25
     top_slope: float = 100.0
