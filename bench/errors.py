@@ -7,7 +7,7 @@ For a missed person: their height and visibility, the nearest other person and d
 (a detection under 0.5 m was matched to someone else), and at the cell
 within 0.3 m with the largest rho: rho (mean field), e (eq. 13's share), rho* before the
 top-band test (sigmoid(alpha e + beta) rho), the top band's counts (support / against /
-hidden / in view, the kept band's) and the readings behind the cell's core. For a false
+hidden / missing / in view, the kept band's) and the readings behind the cell's core. For a false
 detection: its rho* and the nearest people, with the same at its cell. Before the summary, a
 count of the errors by kind (miss_kind, false_kind).
 
@@ -40,16 +40,16 @@ def cell_values(detector, result, k: int) -> dict:
     engine, p = detector.engine, detector.engine.params
     rho, e = float(result.rho.ravel()[k]), float(engine.share.numpy()[k])
     counts = tuple(int(getattr(engine, n).numpy()[k]) for n in ("top_support", "top_against", "top_hidden",
-                                                                 "top_seen"))
+                                                                 "top_missing", "top_seen"))
     area = float(engine.area.numpy()[k % len(engine.area)])
     return dict(rho=rho, e=e, before=rho / (1.0 + np.exp(-(p.alpha * e + p.beta))), counts=counts,
-                out_of_view=bool(band_out_of_view(counts[3], area, p)), behind=int(engine.n_behind.numpy()[k]),
+                out_of_view=bool(band_out_of_view(counts[4], area, p)), behind=int(engine.n_behind.numpy()[k]),
                 rho_star=float(result.rho_star.ravel()[k]))
 
 
 def cell_state(v: dict) -> str:
     return (f"rho {v['rho']:.3f}, e {v['e']:.3f}, rho* before the top band {v['before']:.3f}, top band "
-            f"s/a/f/in view {'/'.join(str(c) for c in v['counts'])}, readings behind {v['behind']}, rho* "
+            f"s/a/f/missing/in view {'/'.join(str(c) for c in v['counts'])}, readings behind {v['behind']}, rho* "
             f"{v['rho_star']:.3f}")
 
 

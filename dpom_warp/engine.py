@@ -226,14 +226,16 @@ class Engine:
             self.top_support = wp.zeros(L, dtype=wp.int32)
             self.top_against = wp.zeros(L, dtype=wp.int32)
             self.top_hidden = wp.zeros(L, dtype=wp.int32)
+            self.top_missing = wp.zeros(L, dtype=wp.int32)  # no reading where the object would be read
             self.top_seen = wp.zeros(L, dtype=wp.int32)  # the band's pixels in the image (-1: not counted)
             # a shorter solid's band (params.top_heights): its GeometryArrays and counts
             self.shorter_top = [(h, self._geometry_arrays(geometry.shorter(h), self.geo)) for h in params.top_heights
                                 if geometry.height > 0]
-            self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(4 if self.shorter_top else 0)]
+            self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(5 if self.shorter_top else 0)]
             self.all_support = wp.zeros(L, dtype=wp.int32)  # the same counts, whole silhouette
             self.all_against = wp.zeros(L, dtype=wp.int32)
             self.all_hidden = wp.zeros(L, dtype=wp.int32)
+            self.all_missing = wp.zeros(L, dtype=wp.int32)
             self.all_seen = wp.zeros(L, dtype=wp.int32)
             self.rho_star = wp.zeros(L, dtype=wp.float64)
             self.max_change = wp.zeros((batch, max(1, params.max_iterations)), dtype=wp.float64)
@@ -759,7 +761,8 @@ class Engine:
         def soft_threshold(top_share):
             wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
                       inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support,
-                              self.top_against, self.top_hidden, self.top_seen, p.top_hidden, top_share,
+                              self.top_against, self.top_hidden, self.top_missing, self.top_seen, p.top_hidden,
+                              p.top_missing, top_share,
                               p.top_slope, p.top_min_pixels, p.top_unseen, p.top_unseen_share, p.top_unseen_part,
                               unhidden, self.all_support, self.all_against, self.share, self.rho_star])
 
@@ -770,20 +773,20 @@ class Engine:
 
         if unhidden:
             top_band(-BAND_ALL, BAND_ALL, self.rho,
-                     (self.all_support, self.all_against, self.all_hidden, self.all_seen))
+                     (self.all_support, self.all_against, self.all_hidden, self.all_missing, self.all_seen))
         if top > 0:
             # counted only where rho* before the test (a factor <= 1) reaches TOP_MIN_RHO: the
             # silhouette walk is the threshold's whole cost, and most locations are far below
             if not unhidden:
                 soft_threshold(0.0)
             h, gate = self.geometry.height, self.rho if unhidden else self.rho_star
-            counts = (self.top_support, self.top_against, self.top_hidden, self.top_seen)
+            counts = (self.top_support, self.top_against, self.top_hidden, self.top_missing, self.top_seen)
             top_band(p.top_band * h, h, gate, counts, p.top_sigmas)
             for short, geo in self.shorter_top:  # shorter people: the band whose factor is larger
                 top_band(p.top_band * short, short, gate, self.other_top, p.top_sigmas, geo)
                 wp.launch(K.keep_better_top, dim=self.batch * self.n_locations, device=dev,
-                          inputs=[*counts, *self.other_top, p.top_hidden, top, p.top_slope, p.top_min_pixels,
-                                  p.top_unseen, self.area, p.top_unseen_part])
+                          inputs=[*counts, *self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
+                                  p.top_min_pixels, p.top_unseen, self.area, p.top_unseen_part])
         soft_threshold(top)
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))

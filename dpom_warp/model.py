@@ -128,6 +128,14 @@ class ModelParams:
             the solid on ground grids and a background (frames or auto), chosen on the tuning
             draw (README, How it works); floor-only it is off: there the band is what tells
             furniture from people, and a cabinet as tall as the shorter solid passes it.
+        top_missing: a band pixel with no reading where the object lies within z_max (were it
+            there, the sensor would read it) counts as this much of one reading behind it: u =
+            (s + top_hidden f) / (s + a + f + top_missing m), and a band with no reading at all
+            is judged (u = 0). A table far from a ceiling camera at pitch 45: the band above it
+            looks at the room beyond the sensor's range and reads nothing; a reading behind the
+            object is counted against it, and no reading there says the same, as strongly (the
+            model's pi_inf of an object is missing_prob, 0.05). 1 here and in the config (README,
+            How it works); 0: missing readings count for none.
         exclusion: two objects cannot stand within exclusion_radius of each other: each
             location's evidence loses exclusion x sum over the locations within the radius
             of max(0, rho - exclusion_gate) / (1 - exclusion_gate) (kernels.mean_field
@@ -191,6 +199,7 @@ class ModelParams:
     top_unseen_part: float = 0.05
     top_sigmas: float = 2.0
     top_heights: tuple[float, ...] = ()
+    top_missing: float = 1.0
     exclusion: float = 10.0
     exclusion_radius: float = 0.45
     exclusion_gate: float = 0.5

@@ -375,7 +375,7 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     tsum = np.bincount(L[valid], weights=T[valid], minlength=K)
     denominator = geom.area.astype(np.float64)
     if params.share_of == "unhidden":
-        s_all, a_all, _, _ = top_band(depth_m, geom, params, rho, whole=True)
+        s_all, a_all, *_ = top_band(depth_m, geom, params, rho, whole=True)
         denominator = np.where(s_all + a_all > 0, s_all + a_all, denominator)
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(geom.area > 0, tsum / denominator, 0.0)
@@ -386,19 +386,19 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     if params.top_support > 0 and geom.height > 0:
         for height in params.top_heights:  # shorter people: the band whose factor is larger
             shorter = top_band(depth_m, geom.shorter(height), params, gate)
-            seen = counts[3]
+            seen = counts[4]
             better = (top_factor(*shorter, params, geom.area) > top_factor(*counts, params, geom.area)) & ~(
                 band_out_of_view(seen, geom.area, params))  # out of view: top_unseen decides
             counts = tuple(np.where(better, b, a) for a, b in zip(counts, shorter))
         rho_star = rho_star * top_factor(*counts, params, geom.area)
         if params.top_unseen_share > 0:  # band out of view: the share of eq. 13 must reach this
-            unseen = band_out_of_view(counts[3], geom.area, params)
+            unseen = band_out_of_view(counts[4], geom.area, params)
             rho_star = np.where(unseen, rho_star * sigmoid(params.top_slope * (share - params.top_unseen_share)),
                                 rho_star)
-    support, against, hidden, seen = counts
+    support, against, hidden, missing, seen = counts
     return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
                 entries=entries, live=int(live.sum()), pruned=pruned, top_support=support, top_against=against,
-                top_hidden=hidden, top_seen=seen)
+                top_hidden=hidden, top_missing=missing, top_seen=seen)
 
 
 def band_out_of_view(seen, area, params: ModelParams):
@@ -409,14 +409,15 @@ def band_out_of_view(seen, area, params: ModelParams):
     return (seen >= 0) & ((seen < params.top_min_pixels) | (seen < params.top_unseen_part * np.asarray(area)))
 
 
-def top_factor(support, against, hidden, seen, params: ModelParams, area):
+def top_factor(support, against, hidden, missing, seen, params: ModelParams, area):
     """The top-band factor of each location from its counts (top_band):
-    sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f); 1 with fewer
-    than top_min_pixels readings in the band, top_unseen where the band is out of view
-    (band_out_of_view; kernels.mean_field.top_factor)."""
-    n = support + against + hidden
+    sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f + top_missing m);
+    1 with fewer than top_min_pixels judged in the band (read, or missing where top_missing >
+    0), top_unseen where the band is out of view (band_out_of_view;
+    kernels.mean_field.top_factor)."""
+    n = support + against + hidden + (missing if params.top_missing > 0 else 0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = (support + params.top_hidden * hidden) / n
+        u = (support + params.top_hidden * hidden) / (support + against + hidden + params.top_missing * missing)
         factor = np.where(n >= max(params.top_min_pixels, 1),
                           sigmoid(params.top_slope * (u - params.top_support)), 1.0)
     return np.where(band_out_of_view(seen, area, params), params.top_unseen, factor)
@@ -427,14 +428,16 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
     with rho >= TOP_MIN_RHO (mean_field gives rho* before the test) of a standing box, the silhouette pixels with a reading whose
     object point lies between top_band x height and the height that pass the mask test
     (support), and of the others those that read beyond the object (against) and in front
-    of it (hidden). `whole`: the same counts over the whole silhouette, any grid (the
+    of it (hidden); `missing`: those without a reading where the object lies within z_max (it
+    would be read there). `whole`: the same counts over the whole silhouette, any grid (the
     unhidden share of ModelParams.share_of). Also `seen`: the band's pixels in the image,
-    with a reading or not (-1 where not counted). Returns four (K,) arrays."""
+    with a reading or not (-1 where not counted). Returns five (K,) arrays: support, against,
+    hidden, missing, seen."""
     K = len(geom.rect)
-    support, against, hidden = (np.zeros(K, np.int64) for _ in range(3))
+    support, against, hidden, missing = (np.zeros(K, np.int64) for _ in range(4))
     seen = np.full(K, -1, np.int64)
     if geom.height <= 0 and not whole:
-        return support, against, hidden, seen
+        return support, against, hidden, missing, seen
     z_img = np.asarray(depth_m, dtype=np.float64)
     lo, hi = (-BAND_ALL, BAND_ALL) if whole else (params.top_band * geom.height, geom.height)
     for k in np.flatnonzero(np.asarray(rho) >= TOP_MIN_RHO):
@@ -455,7 +458,8 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
         support[k] = np.sum(in_band & supports)
         against[k] = np.sum(in_band & behind)
         hidden[k] = np.sum(in_band & in_front)
-    return support, against, hidden, seen
+        missing[k] = np.sum(in_band & ~valid_reading(z, params) & (mu <= params.z_max))
+    return support, against, hidden, missing, seen
 
 
 def reading_classes(z, mu, passes, params: ModelParams):

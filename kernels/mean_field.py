@@ -420,15 +420,18 @@ def top_band(
     support: wp.array(dtype=wp.int32),
     against: wp.array(dtype=wp.int32),
     hidden: wp.array(dtype=wp.int32),
+    missing: wp.array(dtype=wp.int32),
     seen: wp.array(dtype=wp.int32),
 ):
     """The top band of a standing box (heights lo to hi on its facing plane): how many of its
     silhouette's pixels there pass the mask test (support), read behind the plane (against:
     the box would hide them, so nothing that tall stands there) or in front of it (hidden by
     something nearer); with `support_sigmas` > 0 a pixel supports it when within that many
-    sigma of the object instead. Missing readings count for none; `seen` counts the band's pixels in
-    the image, with a reading or not (a band outside the image has none). One thread per
-    location of the batch, for those with rho >= min_rho (the others: 0, 0, 0 and seen -1)."""
+    sigma of the object instead; `missing` counts the pixels without a reading where the object
+    lies within the sensor's range (mu <= z_max: it would be read there); `seen` counts the
+    band's pixels in the image, with a reading or not (a band outside the image has none). One
+    thread per location of the batch, for those with rho >= min_rho (the others: 0, 0, 0, 0
+    and seen -1)."""
     i = wp.tid()
     n_loc = geo.rect.shape[0]
     b = i / n_loc
@@ -436,6 +439,7 @@ def top_band(
     s = int(0)
     a = int(0)
     f = int(0)
+    m = int(0)
     n = int(0)
     if rho[i] >= min_rho:
         r = geo.rect[k]
@@ -456,9 +460,12 @@ def top_band(
                             a += 1
                         elif c == IN_FRONT:
                             f += 1
+                        elif mu <= pm.z_max:
+                            m += 1
     support[i] = s
     against[i] = a
     hidden[i] = f
+    missing[i] = m
     if rho[i] >= min_rho:
         seen[i] = n
     else:
@@ -473,17 +480,20 @@ def band_out_of_view(seen: int, min_pixels: int, area: wp.float64, part: wp.floa
 
 
 @wp.func
-def top_factor(s: int, a: int, f: int, seen: int, weight: wp.float64, share: wp.float64,
-               slope: wp.float64, min_pixels: int, unseen: wp.float64, area: wp.float64,
+def top_factor(s: int, a: int, f: int, m: int, seen: int, weight: wp.float64, missing_weight: wp.float64,
+               share: wp.float64, slope: wp.float64, min_pixels: int, unseen: wp.float64, area: wp.float64,
                part: wp.float64) -> wp.float64:
-    """sigmoid(slope ((s + weight f) / (s + a + f) - share)); `unseen` where the band is out of
-    view (band_out_of_view), else 1 with fewer than min_pixels read in the band."""
+    """sigmoid(slope ((s + weight f) / (s + a + f + missing_weight m) - share)); `unseen` where
+    the band is out of view (band_out_of_view), else 1 with fewer than min_pixels judged in the
+    band (read, or missing where missing_weight > 0)."""
     if band_out_of_view(seen, min_pixels, area, part):
         return unseen
     n = s + a + f
+    if missing_weight > f64(0.0):
+        n = n + m
     if n < min_pixels or n == 0:
         return f64(1.0)
-    return sigmoid(slope * ((f64(s) + weight * f64(f)) / f64(n) - share))
+    return sigmoid(slope * ((f64(s) + weight * f64(f)) / (f64(s + a + f) + missing_weight * f64(m)) - share))
 
 
 @wp.kernel(enable_backward=False)
@@ -491,12 +501,15 @@ def keep_better_top(
     support: wp.array(dtype=wp.int32),
     against: wp.array(dtype=wp.int32),
     hidden: wp.array(dtype=wp.int32),
+    missing: wp.array(dtype=wp.int32),
     seen: wp.array(dtype=wp.int32),
     other_support: wp.array(dtype=wp.int32),
     other_against: wp.array(dtype=wp.int32),
     other_hidden: wp.array(dtype=wp.int32),
+    other_missing: wp.array(dtype=wp.int32),
     other_seen: wp.array(dtype=wp.int32),
     weight: wp.float64,
+    missing_weight: wp.float64,
     share: wp.float64,
     slope: wp.float64,
     min_pixels: int,
@@ -512,13 +525,15 @@ def keep_better_top(
     a = area[k % area.shape[0]]
     if band_out_of_view(seen[k], min_pixels, a, part):
         return
-    mine = top_factor(support[k], against[k], hidden[k], seen[k], weight, share, slope, min_pixels, unseen, a, part)
-    other = top_factor(other_support[k], other_against[k], other_hidden[k], other_seen[k], weight, share, slope,
-                       min_pixels, unseen, a, part)
+    mine = top_factor(support[k], against[k], hidden[k], missing[k], seen[k], weight, missing_weight, share, slope,
+                      min_pixels, unseen, a, part)
+    other = top_factor(other_support[k], other_against[k], other_hidden[k], other_missing[k], other_seen[k], weight,
+                       missing_weight, share, slope, min_pixels, unseen, a, part)
     if other > mine:
         support[k] = other_support[k]
         against[k] = other_against[k]
         hidden[k] = other_hidden[k]
+        missing[k] = other_missing[k]
         seen[k] = other_seen[k]
 
 
@@ -532,8 +547,10 @@ def soft_threshold(
     support: wp.array(dtype=wp.int32),
     against: wp.array(dtype=wp.int32),
     hidden: wp.array(dtype=wp.int32),
+    missing: wp.array(dtype=wp.int32),
     seen: wp.array(dtype=wp.int32),
     top_hidden: wp.float64,
+    top_missing: wp.float64,
     top_share: wp.float64,
     top_slope: wp.float64,
     top_min_pixels: int,
@@ -563,8 +580,8 @@ def soft_threshold(
         share[k] = e
         rho_star[k] = sigmoid(alpha * e + beta) * rho[k]
         if top_share > f64(0.0):
-            factor = top_factor(support[k], against[k], hidden[k], seen[k], top_hidden, top_share, top_slope,
-                                top_min_pixels, top_unseen, a, unseen_part)
+            factor = top_factor(support[k], against[k], hidden[k], missing[k], seen[k], top_hidden, top_missing,
+                                top_share, top_slope, top_min_pixels, top_unseen, a, unseen_part)
             if unseen_share > f64(0.0) and band_out_of_view(seen[k], top_min_pixels, a, unseen_part):
                 factor = factor * sigmoid(top_slope * (e - unseen_share))
             rho_star[k] = rho_star[k] * factor

@@ -302,3 +302,42 @@ def test_a_second_cell_beside_a_person_seen_from_above_fails_the_top_band(ceilin
     people, where, _, cfg = ceiling_frame(ceiling_3m, "0005.png", [])
     assert cfg.model.top_support == 0.13
     assert len(where) == len(people) and len(match(where, people, 0.5)) == len(people)
+
+
+def test_a_far_table_seen_from_a_ceiling_camera_is_not_a_person_floor_only(tmp_path):
+    """The held-out ceiling scene at 3.2 m, pitch 45 (bench.robustness, seed 100), first frame,
+    floor-only: the top band of a cell on a table 5 to 6 m away looks at the room beyond the
+    sensor's range and reads nothing there. With model.top_missing 0 those pixels count for
+    none, the band is hardly judged and the tables are detected; with the default (1) a missing
+    reading where the object would be read counts against it, and the detections are the
+    frame's people, each found."""
+    from bench.robustness import VARIANTS
+    from dpom_warp.api import Detector
+    from dpom_warp.evaluate import load_ground_truth, match
+    from dpom_warp.io import read_depth
+
+    cache = tmp_path / "scene"
+    sets = VARIANTS["ceiling 3.2 m, pitch 45, yaw -40, 8 people"] + [
+        "synthetic.seed=100", "synthetic.frames=1", f"synthetic.cache={cache}", "device=cpu",
+        f"input.frames={cache}/frames/0000.png", "input.background=null"]
+    generate(load_config(str(DEMO), sets).synthetic, load_config(str(DEMO), sets).camera, cache)
+    people = np.array([(o["x"], o["y"]) for o in load_ground_truth(cache / "ground_truth.json")["0000.png"]])
+
+    def found(extra):
+        detector = Detector.from_config(str(DEMO), sets + extra)
+        cfg = detector.config
+        res = detector.detect(read_depth(cache / "frames" / "0000.png", cfg.inputs.depth_scale,
+                                         (cfg.camera.height, cfg.camera.width)))
+        engine = detector.engine
+        where = np.array([(d.x, d.y) for d in res.detections]).reshape(-1, 2)
+        missing = engine.top_missing.numpy()[[d.k for d in res.detections]]
+        seen = engine.top_seen.numpy()[[d.k for d in res.detections]]
+        return where, missing, seen, cfg
+
+    where, missing, seen, _ = found(["model.top_missing=0"])
+    far = np.array([np.hypot(*(people - w).T).min() > 0.5 for w in where])
+    assert far.sum() >= 1 and len(match(where, people, 0.5)) == len(people)
+    assert np.all(missing[far] > 0.5 * seen[far])  # their bands mostly read nothing
+    where, _, _, cfg = found([])
+    assert cfg.model.top_missing == 1.0
+    assert len(where) == len(people) and len(match(where, people, 0.5)) == len(people)

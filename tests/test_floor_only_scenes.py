@@ -38,6 +38,7 @@ def test_top_band_matches_reference(device, seed, sigmas):
     np.testing.assert_array_equal(engine.top_support.numpy(), want["top_support"])
     np.testing.assert_array_equal(engine.top_against.numpy(), want["top_against"])
     np.testing.assert_array_equal(engine.top_hidden.numpy(), want["top_hidden"])
+    np.testing.assert_array_equal(engine.top_missing.numpy(), want["top_missing"])
     np.testing.assert_array_equal(engine.top_seen.numpy(), want["top_seen"])
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     judged = want["top_support"] + want["top_against"] + want["top_hidden"]
@@ -58,7 +59,7 @@ def test_top_sigmas_is_a_stricter_support_than_the_mask_test():
     strict = ref.top_band(depth, geom, dataclasses.replace(params, top_sigmas=1.0), gate)
     assert np.all(strict[0] <= mask[0]) and np.any(strict[0] < mask[0])
     np.testing.assert_array_equal(sum(strict[:3]), sum(mask[:3]))
-    np.testing.assert_array_equal(strict[3], mask[3])
+    np.testing.assert_array_equal(strict[3:], mask[3:])
 
 
 def test_off_and_voxel_grids_leave_rho_star_alone():
@@ -186,7 +187,7 @@ def test_band_out_of_view_counts_like_the_reference(device):
     engine.infer(depth)
     gate = np.ones(len(geom.rect))
     gate[::7] = 0.0  # not counted: seen -1
-    counts = [wp.zeros(len(gate), dtype=wp.int32, device=device) for _ in range(4)]
+    counts = [wp.zeros(len(gate), dtype=wp.int32, device=device) for _ in range(5)]
     h = geom.height
     wp.launch(K.top_band, dim=len(gate), device=device,
               inputs=[engine.depth, engine.geo, engine.pm, float(geom.centre[2]), params.top_band * h, h,
@@ -195,7 +196,7 @@ def test_band_out_of_view_counts_like_the_reference(device):
     want = ref.top_band(depth, geom, params, gate)
     for got, w in zip(counts, want):
         np.testing.assert_array_equal(got.numpy(), w)
-    seen = want[3]
+    seen = want[4]
     assert np.all(seen[::7] == -1)
     out_of_view = (seen >= 0) & (seen < params.top_min_pixels) & (geom.area > 0)
     assert out_of_view.sum() > 20 and (seen >= params.top_min_pixels).sum() > 20
@@ -220,3 +221,39 @@ def test_table_whose_top_would_be_out_of_view_is_not_a_person():
     plain = found(ModelParams(top_unseen=1.0))
     assert np.any(np.hypot(*(plain - person).T) < 0.5)
     assert np.any(np.hypot(*(plain - table).T) < 0.8), plain  # what top_unseen removes
+
+
+@pytest.mark.parametrize("seed", [1, 2, 9])  # scenes with missing readings in judged bands
+def test_missing_band_readings_count_against(device, seed):
+    """model.top_missing: a band pixel without a reading where the object lies within z_max
+    counts as that much of one reading behind. On the Warp path rho* equals the reference
+    with it on (1) and off (0); the band counts are the same both ways (only the factor
+    changes), the factor only lowers rho*, and somewhere it lowers it by more than 0.1."""
+    geom, params, depth = with_low_slabs(seed)
+    params = dataclasses.replace(params, sparse_epsilon=0.0, top_support=0.3)
+    got = {}
+    for weight in (0.0, 1.0):
+        p = dataclasses.replace(params, top_missing=weight)
+        engine = Engine(geom, p, device)
+        res = engine.infer(depth)
+        want = ref.mean_field(depth, geom, ref.floor_background(geom, p, depth), p)
+        np.testing.assert_allclose(res.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+        np.testing.assert_array_equal(engine.top_missing.numpy(), want["top_missing"])
+        got[weight] = want
+    off, on = got[0.0], got[1.0]
+    for key in ("top_support", "top_against", "top_hidden", "top_missing", "top_seen"):
+        np.testing.assert_array_equal(off[key], on[key], err_msg=key)
+    assert off["top_missing"].sum() > 0
+    assert np.all(on["rho_star"] <= off["rho_star"] + 1e-12)
+    assert np.any(on["rho_star"] < off["rho_star"] - 0.1)
+
+
+def test_missing_readings_count_only_where_the_object_would_be_read():
+    """top_band's `missing`: a band pixel with no reading counts where the object's depth is
+    within z_max, not beyond it (the sensor would not read the object there either)."""
+    geom, params, depth = with_low_slabs(9)
+    gate = np.ones(len(geom.rect))
+    counts = ref.top_band(depth, geom, params, gate)
+    assert counts[3].sum() > 0
+    near = ref.top_band(depth, geom, dataclasses.replace(params, z_max=0.5), gate)
+    assert near[3].sum() == 0  # every object lies beyond 0.5 m

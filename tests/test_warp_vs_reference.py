@@ -381,7 +381,7 @@ def test_shorter_top_bands_match_reference(device, seed, shape, path):
     bg = ref.background_from_frames(bg_frames, params)
     want = ref.mean_field(depth, geom, bg, params)
     got = engine.infer(depth)
-    for key in ("top_support", "top_against", "top_hidden", "top_seen"):
+    for key in ("top_support", "top_against", "top_hidden", "top_missing", "top_seen"):
         np.testing.assert_array_equal(getattr(engine, key).numpy(), want[key], err_msg=key)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, top_heights=()))
@@ -447,7 +447,7 @@ def test_band_partly_out_of_view_matches_reference(device, seed, path):
     engine.set_background_frames(bg_frames)
     want = ref.mean_field(depth, geom, bg, params)
     got = engine.infer(depth)
-    for key in ("top_support", "top_against", "top_hidden", "top_seen"):
+    for key in ("top_support", "top_against", "top_hidden", "top_missing", "top_seen"):
         np.testing.assert_array_equal(getattr(engine, key).numpy(), want[key], err_msg=key)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     partly = ref.band_out_of_view(want["top_seen"], geom.area, params) & (want["top_seen"] >= params.top_min_pixels)
