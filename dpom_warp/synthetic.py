@@ -528,8 +528,11 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
     if spec.tables:
         extra, placed = table_meshes(spec, rng, footprints)
         room, footprints, boxes = room + extra, footprints + placed, boxes + [(*f, 0.8) for f in placed]
-    (out / "frames").mkdir(parents=True, exist_ok=True)
-    (out / "background").mkdir(parents=True, exist_ok=True)
+    meta.unlink(missing_ok=True)  # an interrupted render is never taken for a finished one
+    for sub in ("frames", "background"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+        for old in (out / sub).glob("*.png"):  # a scene rendered before with more frames
+            old.unlink()
     static, _ = _scene(room)
     t_static, _ = render(static, camera)
     for f in range(spec.background_frames):

@@ -24,6 +24,16 @@ def test_same_seed_same_bytes_and_cache_reuse(tmp_path):
     assert (tmp_path / "a" / "frames" / "0000.png").read_bytes() != (tmp_path / "b" / "frames" / "0000.png").read_bytes()
 
 
+def test_rendering_again_with_fewer_frames_leaves_none_of_the_old(tmp_path):
+    """A scene's folder rendered again with fewer frames holds those frames only: the old
+    ones would be globbed by input.frames with no ground truth for them."""
+    generate(SceneSpec(seed=5, frames=3, background_frames=3, people=2), CAM, tmp_path)
+    generate(SceneSpec(seed=5, frames=2, background_frames=2, people=2), CAM, tmp_path)
+    assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == ["0000.png", "0001.png"]
+    assert sorted(p.name for p in (tmp_path / "background").iterdir()) == ["0000.png", "0001.png"]
+    assert [t["frame"] for t in json.loads((tmp_path / "ground_truth.json").read_text())] == ["0000.png", "0001.png"]
+
+
 def test_ground_truth_matches_rendering(tmp_path):
     spec = SceneSpec(seed=1, frames=3, background_frames=3, people=4, dropout=0.0, edge_holes=0.0)
     generate(spec, CAM, tmp_path)
