@@ -51,9 +51,9 @@ INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
 PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4 + 4  # ray, depth, count, offset, Delta_bg, background,
 # compact, floor mask, active pixels
-LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 48 + 4 + 4  # rect, normal, plane,
+LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 60 + 4 + 4  # rect, normal, plane,
 # centre, area, five accumulators and the pruning bound, live, live and kept indices, entries,
-# top-band, whole-silhouette and shorter band's counts (four each), the damping streak, the
+# top-band, whole-silhouette and shorter band's counts (five each), the damping streak, the
 # readings behind
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
