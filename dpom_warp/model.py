@@ -135,7 +135,7 @@ class ModelParams:
             looks at the room beyond the sensor's range and reads nothing; a reading behind the
             object is counted against it, and no reading there says the same, as strongly (the
             model's pi_inf of an object is missing_prob, 0.05). 1 here and in the config (README,
-            How it works); 0: missing readings count for none.
+            Known behaviour); 0: missing readings count for none.
         exclusion: two objects cannot stand within exclusion_radius of each other: each
             location's evidence loses exclusion x sum over the locations within the radius
             of max(0, rho - exclusion_gate) / (1 - exclusion_gate) (kernels.mean_field
