@@ -517,8 +517,8 @@ class ModelSection(Node):
                                                           f"furniture that tall would pass)")
     top_missing: Num = Field(_d(ModelParams, "top_missing"), ge=0, le=1,
                              description="a band pixel with no reading where the object lies within z_max "
-                                         "(the sensor would read it there) counts as this much of one "
-                                         "reading behind it; 0: none")
+                                         "(the sensor would read it there) and the background is mostly "
+                                         "read counts as this much of one reading behind it; 0: none")
     exclusion: Num | None = Field(None, ge=0,
                                   description=f"two objects cannot stand within exclusion_radius: a "
                                               f"location's evidence loses exclusion x its neighbours' rho "

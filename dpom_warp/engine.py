@@ -12,7 +12,7 @@ import warp as wp
 
 from . import kernels as K
 from .geometry import Geometry, neighbour_lists
-from .model import BAND_ALL, TOP_MIN_RHO, AutoBackground, Background, ModelParams
+from .model import BAND_ALL, MISSING_READ, TOP_MIN_RHO, AutoBackground, Background, ModelParams
 from .resolution import Resolution
 from .warp_setup import init_warp
 
@@ -769,7 +769,7 @@ class Engine:
         def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
             wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
                       inputs=[self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]),
-                              lo, hi, TOP_MIN_RHO, sigmas, gate, *counts])
+                              lo, hi, TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate, *counts])
 
         if unhidden:
             top_band(-BAND_ALL, BAND_ALL, self.rho,

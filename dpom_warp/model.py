@@ -11,6 +11,9 @@ TOP_MIN_RHO = 1e-3  # locations whose rho* is below it before the top-band test 
 BEHIND_COST = 2.0  # model.behind_cost's default with the solid on ground grids (config)
 TOP_SHORTER = 0.15  # model.top_heights' default: [object.height - TOP_SHORTER] with the solid on ground grids
 BAND_ALL = 1e30  # a height band that holds every pixel (the unhidden share of eq. 13)
+# a band pixel without a reading counts as missing (ModelParams.top_missing) only where the
+# background's pi_inf is below this: a sensor's dead region (never read) says nothing
+MISSING_READ = 0.5
 
 
 @dataclass(frozen=True)
@@ -134,8 +137,12 @@ class ModelParams:
             is judged (u = 0). A table far from a ceiling camera at pitch 45: the band above it
             looks at the room beyond the sensor's range and reads nothing; a reading behind the
             object is counted against it, and no reading there says the same, as strongly (the
-            model's pi_inf of an object is missing_prob, 0.05). 1 here and in the config (README,
-            Known behaviour); 0: missing readings count for none.
+            model's pi_inf of an object is missing_prob, 0.05). Only where the background is
+            mostly read (its pi_inf under MISSING_READ): a sensor's dead region (an Azure
+            Kinect's corners, a RealSense's left band), never read in the background frames,
+            says nothing; the floor-only background knows no such region and counts every
+            pixel. 1 here and in the config (README, Known behaviour); 0: missing readings
+            count for none.
         exclusion: two objects cannot stand within exclusion_radius of each other: each
             location's evidence loses exclusion x sum over the locations within the radius
             of max(0, rho - exclusion_gate) / (1 - exclusion_gate) (kernels.mean_field

@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 
 from .geometry import Geometry, neighbour_lists
-from .model import BAND_ALL, TOP_MIN_RHO, AutoBackground, Background, ModelParams
+from .model import BAND_ALL, MISSING_READ, TOP_MIN_RHO, AutoBackground, Background, ModelParams
 
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
 
@@ -375,17 +375,17 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     tsum = np.bincount(L[valid], weights=T[valid], minlength=K)
     denominator = geom.area.astype(np.float64)
     if params.share_of == "unhidden":
-        s_all, a_all, *_ = top_band(depth_m, geom, params, rho, whole=True)
+        s_all, a_all, *_ = top_band(depth_m, geom, params, rho, bg, whole=True)
         denominator = np.where(s_all + a_all > 0, s_all + a_all, denominator)
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(geom.area > 0, tsum / denominator, 0.0)
     rho_star = np.where(geom.area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
     # the top band is counted where rho* can still reach TOP_MIN_RHO (its factor is <= 1)
     gate = rho if params.share_of == "unhidden" else rho_star
-    counts = top_band(depth_m, geom, params, gate)
+    counts = top_band(depth_m, geom, params, gate, bg)
     if params.top_support > 0 and geom.height > 0:
         for height in params.top_heights:  # shorter people: the band whose factor is larger
-            shorter = top_band(depth_m, geom.shorter(height), params, gate)
+            shorter = top_band(depth_m, geom.shorter(height), params, gate, bg)
             seen = counts[4]
             better = (top_factor(*shorter, params, geom.area) > top_factor(*counts, params, geom.area)) & ~(
                 band_out_of_view(seen, geom.area, params))  # out of view: top_unseen decides
@@ -423,13 +423,14 @@ def top_factor(support, against, hidden, missing, seen, params: ModelParams, are
     return np.where(band_out_of_view(seen, area, params), params.top_unseen, factor)
 
 
-def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
+def top_band(depth_m, geom: Geometry, params: ModelParams, rho, bg: Background, whole=False):
     """The top-band test of the soft threshold (ModelParams.top_support): for each location
     with rho >= TOP_MIN_RHO (mean_field gives rho* before the test) of a standing box, the silhouette pixels with a reading whose
     object point lies between top_band x height and the height that pass the mask test
     (support), and of the others those that read beyond the object (against) and in front
     of it (hidden); `missing`: those without a reading where the object lies within z_max (it
-    would be read there). `whole`: the same counts over the whole silhouette, any grid (the
+    would be read there) and the background `bg` is mostly read (missing < MISSING_READ: not a
+    sensor's dead region, where nothing is ever read). `whole`: the same counts over the whole silhouette, any grid (the
     unhidden share of ModelParams.share_of). Also `seen`: the band's pixels in the image,
     with a reading or not (-1 where not counted). Returns five (K,) arrays: support, against,
     hidden, missing, seen."""
@@ -440,12 +441,14 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
         return support, against, hidden, missing, seen
     z_img = np.asarray(depth_m, dtype=np.float64)
     lo, hi = (-BAND_ALL, BAND_ALL) if whole else (params.top_band * geom.height, geom.height)
+    bg_read = np.asarray(bg.missing) < MISSING_READ
     for k in np.flatnonzero(np.asarray(rho) >= TOP_MIN_RHO):
         seen[k] = 0
         sil = silhouette(z_img, geom, k, params)
         if sil is None:
             continue
-        _, rays, z, mu, inlier = sil
+        (v0, u0), rays, z, mu, inlier = sil
+        read = bg_read[v0:v0 + z.shape[0], u0:u0 + z.shape[1]]
         h = geom.centre[2] + mu * rays[..., 2]
         in_band = (mu > 0) & (h >= lo) & (h <= hi)
         seen[k] = np.sum(in_band)
@@ -458,7 +461,7 @@ def top_band(depth_m, geom: Geometry, params: ModelParams, rho, whole=False):
         support[k] = np.sum(in_band & supports)
         against[k] = np.sum(in_band & behind)
         hidden[k] = np.sum(in_band & in_front)
-        missing[k] = np.sum(in_band & ~valid_reading(z, params) & (mu <= params.z_max))
+        missing[k] = np.sum(in_band & ~valid_reading(z, params) & (mu <= params.z_max) & read)
     return support, against, hidden, missing, seen
 
 

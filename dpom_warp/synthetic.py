@@ -531,8 +531,8 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
     meta.unlink(missing_ok=True)  # an interrupted render is never taken for a finished one
     for sub in ("frames", "background"):
         (out / sub).mkdir(parents=True, exist_ok=True)
-        for old in (out / sub).glob("*.png"):  # a scene rendered before with more frames
-            old.unlink()
+        for old in (out / sub).glob("[0-9]*.png"):  # a scene rendered before with more frames
+            old.unlink()  # (not a concurrent render's hidden temporary files)
     static, _ = _scene(room)
     t_static, _ = render(static, camera)
     for f in range(spec.background_frames):

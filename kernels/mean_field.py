@@ -416,6 +416,8 @@ def top_band(
     hi: wp.float64,
     min_rho: wp.float64,
     support_sigmas: wp.float64,
+    bg: wp.array2d(dtype=wp.float64),
+    missing_read: wp.float64,
     rho: wp.array(dtype=wp.float64),
     support: wp.array(dtype=wp.int32),
     against: wp.array(dtype=wp.int32),
@@ -428,7 +430,9 @@ def top_band(
     the box would hide them, so nothing that tall stands there) or in front of it (hidden by
     something nearer); with `support_sigmas` > 0 a pixel supports it when within that many
     sigma of the object instead; `missing` counts the pixels without a reading where the object
-    lies within the sensor's range (mu <= z_max: it would be read there); `seen` counts the
+    lies within the sensor's range (mu <= z_max: it would be read there) and the background
+    (bg, kernels.background) is mostly read (pi_inf < missing_read: not a sensor's dead
+    region); `seen` counts the
     band's pixels in the image, with a reading or not (a band outside the image has none). One
     thread per location of the batch, for those with rho >= min_rho (the others: 0, 0, 0, 0
     and seen -1)."""
@@ -461,7 +465,8 @@ def top_band(
                         elif c == IN_FRONT:
                             f += 1
                         elif mu <= pm.z_max:
-                            m += 1
+                            if bg[(b * depth.shape[1] + v) * depth.shape[2] + u, 2] < missing_read:
+                                m += 1
     support[i] = s
     against[i] = a
     hidden[i] = f

@@ -11,7 +11,7 @@ from dpom_warp import reference as ref
 from dpom_warp.detect import detect
 from dpom_warp.engine import Engine
 from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
-from dpom_warp.model import TOP_MIN_RHO, ModelParams
+from dpom_warp.model import MISSING_READ, TOP_MIN_RHO, ModelParams
 
 from scenes import draw_slab, random_scene
 
@@ -55,8 +55,9 @@ def test_top_sigmas_is_a_stricter_support_than_the_mask_test():
     pixels it no longer counts become against or hidden (the band's readings are the same)."""
     geom, params, depth = with_low_slabs(1)
     gate = np.ones(len(geom.rect))
-    mask = ref.top_band(depth, geom, dataclasses.replace(params, top_sigmas=0.0), gate)
-    strict = ref.top_band(depth, geom, dataclasses.replace(params, top_sigmas=1.0), gate)
+    bg = ref.floor_background(geom, params, depth)
+    mask = ref.top_band(depth, geom, dataclasses.replace(params, top_sigmas=0.0), gate, bg)
+    strict = ref.top_band(depth, geom, dataclasses.replace(params, top_sigmas=1.0), gate, bg)
     assert np.all(strict[0] <= mask[0]) and np.any(strict[0] < mask[0])
     np.testing.assert_array_equal(sum(strict[:3]), sum(mask[:3]))
     np.testing.assert_array_equal(strict[3:], mask[3:])
@@ -191,9 +192,10 @@ def test_band_out_of_view_counts_like_the_reference(device):
     h = geom.height
     wp.launch(K.top_band, dim=len(gate), device=device,
               inputs=[engine.depth, engine.geo, engine.pm, float(geom.centre[2]), params.top_band * h, h,
-                      TOP_MIN_RHO, params.top_sigmas, wp.array(gate, dtype=wp.float64, device=device),
+                      TOP_MIN_RHO, params.top_sigmas, engine.bg, MISSING_READ,
+                      wp.array(gate, dtype=wp.float64, device=device),
                       *counts])
-    want = ref.top_band(depth, geom, params, gate)
+    want = ref.top_band(depth, geom, params, gate, ref.floor_background(geom, params, depth))
     for got, w in zip(counts, want):
         np.testing.assert_array_equal(got.numpy(), w)
     seen = want[4]
@@ -253,7 +255,39 @@ def test_missing_readings_count_only_where_the_object_would_be_read():
     within z_max, not beyond it (the sensor would not read the object there either)."""
     geom, params, depth = with_low_slabs(9)
     gate = np.ones(len(geom.rect))
-    counts = ref.top_band(depth, geom, params, gate)
+    bg = ref.floor_background(geom, params, depth)
+    counts = ref.top_band(depth, geom, params, gate, bg)
     assert counts[3].sum() > 0
-    near = ref.top_band(depth, geom, dataclasses.replace(params, z_max=0.5), gate)
+    near = ref.top_band(depth, geom, dataclasses.replace(params, z_max=0.5), gate, bg)
     assert near[3].sum() == 0  # every object lies beyond 0.5 m
+
+
+@pytest.mark.parametrize("seed", [1, 9])
+def test_a_sensors_dead_region_is_not_missing(device, seed):
+    """A sensor that never reads a part of its image (an Azure Kinect's corners, a RealSense's
+    left band): with background frames, which never read it either, a band pixel there is
+    not counted as missing (ModelParams.top_missing); with the floor-only background, which
+    knows no such region, it is. The Warp counts equal the reference with either background."""
+    from scenes import random_scene
+
+    geom, params, depth, bg_frames = random_scene(seed)
+    params = dataclasses.replace(params, sparse_epsilon=0.0, top_support=0.3)
+    w = depth.shape[1] // 3
+    depth, bg_frames = depth.copy(), bg_frames.copy()
+    depth[:, :w] = 0.0  # the dead region
+    bg_frames[:, :, :w] = 0.0
+    gate = np.ones(len(geom.rect))
+    frames_bg = ref.background_from_frames(bg_frames, params)
+    with_frames = ref.top_band(depth, geom, params, gate, frames_bg)[3]
+    floor_only = ref.top_band(depth, geom, params, gate, ref.floor_background(geom, params, depth))[3]
+    inside = geom.rect[:, 2] < w  # silhouette rectangles wholly in the dead region
+    assert inside.any() and floor_only[inside].sum() > 0
+    assert np.all(with_frames[inside] == 0) and np.all(with_frames <= floor_only)
+    for set_background, bg in ((lambda e: e.set_background_frames(bg_frames), frames_bg),
+                               (lambda e: e.set_floor_background(), ref.floor_background(geom, params, depth))):
+        engine = Engine(geom, params, device)
+        set_background(engine)
+        got = engine.infer(depth)
+        want = ref.mean_field(depth, geom, bg, params)
+        np.testing.assert_array_equal(engine.top_missing.numpy(), want["top_missing"])
+        np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
