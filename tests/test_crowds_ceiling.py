@@ -320,7 +320,8 @@ def test_a_far_table_seen_from_a_ceiling_camera_is_not_a_person_floor_only(tmp_p
     sets = VARIANTS["ceiling 3.2 m, pitch 45, yaw -40, 8 people"] + [
         "synthetic.seed=100", "synthetic.frames=1", f"synthetic.cache={cache}", "device=cpu",
         f"input.frames={cache}/frames/0000.png", "input.background=null"]
-    generate(load_config(str(DEMO), sets).synthetic, load_config(str(DEMO), sets).camera, cache)
+    cfg = load_config(str(DEMO), sets)
+    generate(cfg.synthetic, cfg.camera, cache)
     people = np.array([(o["x"], o["y"]) for o in load_ground_truth(cache / "ground_truth.json")["0000.png"]])
 
     def found(extra):

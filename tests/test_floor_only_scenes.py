@@ -277,14 +277,14 @@ def test_a_sensors_dead_region_is_not_missing(device, seed):
     depth[:, :w] = 0.0  # the dead region
     bg_frames[:, :, :w] = 0.0
     gate = np.ones(len(geom.rect))
-    frames_bg = ref.background_from_frames(bg_frames, params)
+    frames_bg, floor_bg = ref.background_from_frames(bg_frames, params), ref.floor_background(geom, params, depth)
     with_frames = ref.top_band(depth, geom, params, gate, frames_bg)[3]
-    floor_only = ref.top_band(depth, geom, params, gate, ref.floor_background(geom, params, depth))[3]
+    floor_only = ref.top_band(depth, geom, params, gate, floor_bg)[3]
     inside = geom.rect[:, 2] < w  # silhouette rectangles wholly in the dead region
     assert inside.any() and floor_only[inside].sum() > 0
     assert np.all(with_frames[inside] == 0) and np.all(with_frames <= floor_only)
     for set_background, bg in ((lambda e: e.set_background_frames(bg_frames), frames_bg),
-                               (lambda e: e.set_floor_background(), ref.floor_background(geom, params, depth))):
+                               (lambda e: e.set_floor_background(), floor_bg)):
         engine = Engine(geom, params, device)
         set_background(engine)
         got = engine.infer(depth)
