@@ -10,6 +10,8 @@ tolerance, and the evidence pass and the update then leave it alone, so a batch 
 captured once as a graph, with no host sync) gives every frame what it would get alone.
 """
 
+from typing import Any
+
 import warp as wp
 
 from .pixel_model import (GeometryArrays, PixelModel, f64, is_reading, object_depth, object_log_inlier,
@@ -25,7 +27,31 @@ def sigmoid(x: wp.float64) -> wp.float64:
 
 
 LOCAL_ENTRIES = 128  # lists up to this long keep their scratch in registers / stack
+# a stack vector is zeroed where it is declared: tiers keep a short list's zeroing short
+# (a 128-entry pair is 2 KiB a pixel, most lists hold 5 to 30 entries)
+LOCAL_SHORT, LOCAL_MEDIUM = 16, 48
+LocalScratch16 = wp.types.vector(length=LOCAL_SHORT, dtype=wp.float64)
+LocalScratch48 = wp.types.vector(length=LOCAL_MEDIUM, dtype=wp.float64)
 LocalScratch = wp.types.vector(length=LOCAL_ENTRIES, dtype=wp.float64)
+
+
+@wp.func
+def local_evidence(start: int, n: int, b: wp.float64, entry_loc: wp.array(dtype=wp.int32),
+                   entry_delta: wp.array(dtype=wp.float32), rho: wp.array(dtype=wp.float64),
+                   evidence: wp.array(dtype=wp.float64), excess: Any, clear: Any):
+    """evidence_pass on one pixel's list of n <= len(excess) entries, with D_j - B_j in
+    `excess` and 1 - r_j in `clear` (fresh stack vectors of one tier)."""
+    for jj in range(n):  # back to front: B_j
+        j = n - 1 - jj
+        r = rho[entry_loc[start + j]]
+        d = f64(entry_delta[start + j])
+        excess[j] = d - b
+        clear[j] = f64(1.0) - r
+        b = r * d + clear[j] * b
+    t = f64(1.0)
+    for j in range(n):  # front to back: T_j and the evidence T_j (D_j - B_j)
+        wp.atomic_add(evidence, entry_loc[start + j], t * excess[j])
+        t = t * clear[j]
 
 
 @wp.func
@@ -69,19 +95,12 @@ def evidence_pass(
     start = offsets[p]
     b = delta_bg[p]  # B_n: what lies behind the last entry
     if local != 0 and n <= LOCAL_ENTRIES:
-        excess = LocalScratch()  # D_j - B_j
-        clear = LocalScratch()  # 1 - r_j
-        for jj in range(n):  # back to front: B_j
-            j = n - 1 - jj
-            r = rho[entry_loc[start + j]]
-            d = f64(entry_delta[start + j])
-            excess[j] = d - b
-            clear[j] = f64(1.0) - r
-            b = r * d + clear[j] * b
-        t = f64(1.0)
-        for j in range(n):  # front to back: T_j and the evidence T_j (D_j - B_j)
-            wp.atomic_add(evidence, entry_loc[start + j], t * excess[j])
-            t = t * clear[j]
+        if n <= LOCAL_SHORT:
+            local_evidence(start, n, b, entry_loc, entry_delta, rho, evidence, LocalScratch16(), LocalScratch16())
+        elif n <= LOCAL_MEDIUM:
+            local_evidence(start, n, b, entry_loc, entry_delta, rho, evidence, LocalScratch48(), LocalScratch48())
+        else:
+            local_evidence(start, n, b, entry_loc, entry_delta, rho, evidence, LocalScratch(), LocalScratch())
         return
     for jj in range(n):
         j = start + n - 1 - jj

@@ -23,11 +23,12 @@ def draw_slab(depth, geom, k, below=None):
     patch[front] = mu[front]
 
 
-def random_scene(seed: int, width=48, height=40, shape="plane"):
+def random_scene(seed: int, width=48, height=40, shape="plane", step=0.3):
     """A tilted camera over a small grid; depth = floor background with a few fronto-parallel
     slabs standing on it (some hiding others), noise and dropouts; background frames too.
     With shape 'solid', people-like solids (random body and head radii) seen by a camera
-    2.4 to 3.4 m high at any pitch from 10 to 90 degrees (tops and sides)."""
+    2.4 to 3.4 m high at any pitch from 10 to 90 degrees (tops and sides). `step`: the grid's
+    (a finer one gives longer per-pixel lists)."""
     rng = np.random.default_rng(seed)
     pose = pose_from_angles(rng.uniform(1.5, 2.8), rng.uniform(10, 30), rng.uniform(-4, 4))
     height_m = rng.uniform(1.6, 1.9)
@@ -43,7 +44,7 @@ def random_scene(seed: int, width=48, height=40, shape="plane"):
                         leg_radius=extra.choice([None, extra.uniform(0.08, 0.3)]),
                         hip=extra.uniform(0.4, 0.6), depth_radius=extra.choice([None, extra.uniform(0.08, 0.3)]))
     cam = Camera(width, height, 0.8 * width, 0.8 * width, (width - 1) / 2, (height - 1) / 2, pose)
-    grid = Grid(x=(-1.5, 1.5, 0.3), y=(1.5, 5.0, 0.3))
+    grid = Grid(x=(-1.5, 1.5, step), y=(1.5, 5.0, step))
     geom = build_geometry(cam, grid, obj)
     params = ModelParams(prior=rng.uniform(0.005, 0.05), sigma_object=rng.uniform(0.05, 0.2),
                          damping=rng.uniform(0.1, 0.4), max_iterations=int(rng.integers(20, 60)),

@@ -238,9 +238,12 @@ def test_graph_is_recaptured_when_the_lists_grow(device):
 
 
 def test_evidence_scratch_on_stack_or_global_agree(device):
-    """Both scratch paths of the evidence pass (stack on CPU, global array on GPUs and for
-    long lists) give the reference's result."""
-    geom, params, depth, _ = random_scene(2)
+    """Both scratch paths of the evidence pass (stack on CPU, in three sizes by the list's
+    length, and the global array on GPUs and for long lists) give the reference's result, on a
+    grid fine enough (0.06 m) that lists of every size occur."""
+    from kernels.mean_field import LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT
+
+    geom, params, depth, _ = random_scene(2, step=0.06)
     want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
     for local in (0, 1):
         engine = Engine(geom, params, device)
@@ -248,6 +251,9 @@ def test_evidence_scratch_on_stack_or_global_agree(device):
         got = engine.infer(depth)
         assert got.iterations == want["iterations"]
         np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
+    lengths = engine.counts.numpy()
+    tiers = np.digitize(lengths[lengths > 0], [LOCAL_SHORT + 1, LOCAL_MEDIUM + 1, LOCAL_ENTRIES + 1])
+    assert set(tiers) == {0, 1, 2, 3}, np.bincount(tiers)  # every stack size and the global scratch
 
 
 @pytest.mark.parametrize("shape", ["plane", "solid"])
