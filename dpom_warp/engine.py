@@ -614,7 +614,7 @@ class Engine:
                 wp.launch(K.bound_pass, dim=dim, device=dev,
                           inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
                                   self.delta_bg, self.rho, self.upper, self.behind, self.evidence,
-                                  self.n_pixels, self.done])
+                                  self.n_pixels, self.done, self.local_scratch])
                 wp.launch(K.update_bound, dim=len(self.upper), device=dev,
                           inputs=[logit_prior, self.evidence, self.upper])
             wp.launch(K.prune, dim=len(self.upper), device=dev,

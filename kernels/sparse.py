@@ -21,9 +21,12 @@ the updates run over an index of the locations that can move (`gather_live`; upd
 thread then counts the iteration, `count_iteration` when no location moves).
 """
 
+from typing import Any
+
 import warp as wp
 
-from .mean_field import frame_of, sigmoid
+from .mean_field import (LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT, LocalScratch, LocalScratch16, LocalScratch48,
+                         frame_of, sigmoid)
 from .pixel_model import f64
 
 PRUNED = -1  # live[k] of a location the pruning bound removed for the whole frame
@@ -63,6 +66,32 @@ def count_iteration(iteration: int, done: wp.array(dtype=wp.int32), iterations: 
         iterations[f] = iteration + 1
 
 
+@wp.func
+def local_bound(start: int, n: int, b: wp.float64, entry_loc: wp.array(dtype=wp.int32),
+                entry_delta: wp.array(dtype=wp.float32), rho: wp.array(dtype=wp.float64),
+                upper: wp.array(dtype=wp.float64), evidence: wp.array(dtype=wp.float64), excess: Any,
+                clear: Any):
+    """bound_pass on one pixel's list of n <= len(excess) entries, with D_j - Bmin_j in
+    `excess` and 1 - rmax_j in `clear` (fresh stack vectors of one tier, as
+    mean_field.local_evidence)."""
+    for jj in range(n):
+        j = n - 1 - jj
+        rmax = wp.max(rho[entry_loc[start + j]], upper[entry_loc[start + j]])
+        x = f64(entry_delta[start + j]) - b
+        excess[j] = x
+        clear[j] = f64(1.0) - rmax
+        if x < f64(0.0):
+            b = b + rmax * x
+    t = f64(1.0)
+    for j in range(n):
+        x = excess[j]
+        if x >= f64(0.0):
+            wp.atomic_add(evidence, entry_loc[start + j], x)
+        else:
+            wp.atomic_add(evidence, entry_loc[start + j], t * x)
+        t = t * clear[j]
+
+
 @wp.kernel(enable_backward=False)
 def bound_pass(
     offsets: wp.array(dtype=wp.int32),
@@ -76,12 +105,15 @@ def bound_pass(
     evidence: wp.array(dtype=wp.float64),
     pixels: int,
     done: wp.array(dtype=wp.int32),
+    local: int,
 ):
     """One round of the pruning bound (reference.evidence_bound): with rmax = max(rho, upper)
     (rho: the start; no iteration takes a location above it), a back-to-front pass gives
     Bmin_j, the least B_j can be, and a front-to-back pass Tmin_j, the least T_j can be; pixel
     i adds to k_j's `evidence` x = D_j - Bmin_j where x >= 0, else Tmin_j x: at least what it
-    adds in any iteration. One thread per pixel of the batch, skipping frames that are done."""
+    adds in any iteration. One thread per pixel of the batch, skipping frames that are done.
+    With `local` (CPU) the scratch of lists up to LOCAL_ENTRIES is on the stack, as in
+    mean_field.evidence_pass; otherwise in the global `behind`."""
     p = wp.tid()
     n = counts[p]
     if n == 0:
@@ -90,6 +122,14 @@ def bound_pass(
         return
     start = offsets[p]
     b = delta_bg[p]
+    if local != 0 and n <= LOCAL_ENTRIES:
+        if n <= LOCAL_SHORT:
+            local_bound(start, n, b, entry_loc, entry_delta, rho, upper, evidence, LocalScratch16(), LocalScratch16())
+        elif n <= LOCAL_MEDIUM:
+            local_bound(start, n, b, entry_loc, entry_delta, rho, upper, evidence, LocalScratch48(), LocalScratch48())
+        else:
+            local_bound(start, n, b, entry_loc, entry_delta, rho, upper, evidence, LocalScratch(), LocalScratch())
+        return
     for jj in range(n):
         j = start + n - 1 - jj
         behind[j] = b

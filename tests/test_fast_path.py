@@ -121,25 +121,45 @@ def test_config_stride_reduce_and_exact(tmp_path):
         assert str(e.value) == f"{DEMO}: {message}"
 
 
+def check_bound_against_reference(device, seed, shape, step=0.3):
+    """The pruning bound's kernels, with the global scratch and with the stack's (CPU), equal
+    reference.evidence_bound; returns the per-pixel list lengths."""
+    geom, params, depth, bg_frames = random_scene(seed, shape=shape, step=step)
+    params = dataclasses.replace(params, sparse_epsilon=1e-3, bound_rounds=1 + seed % 3)
+    valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, ref.background_from_frames(bg_frames, params), params)
+    start = np.random.default_rng(seed).uniform(0, 2 * params.prior, len(geom.rect))  # a warm start
+    want = ref.evidence_bound(valid, L, D, dbg, start, params)
+    for local in (0, 1):
+        engine = Engine(geom, params, device)
+        engine.local_scratch = local
+        engine.set_background_frames(bg_frames)
+        engine.build_lists(depth)
+        lengths = engine.counts.numpy().copy()
+        engine.rho.assign(start)
+        engine.done.zero_()
+        engine.prune(math.log(params.prior) - math.log1p(-params.prior))
+        np.testing.assert_allclose(engine.upper.numpy(), want, rtol=1e-6, atol=1e-12)
+        pruned = engine.live.numpy() == PRUNED
+        np.testing.assert_array_equal(pruned, want < params.sparse_epsilon)
+        assert 0 < pruned.sum() < len(pruned)
+        assert (engine.rho.numpy()[pruned] == 0).all()
+    return lengths
+
+
 @pytest.mark.parametrize("shape", ["plane", "solid"])
 @pytest.mark.parametrize("seed", range(4))
 def test_pruning_bound_kernel_matches_reference(device, seed, shape):
-    geom, params, depth, bg_frames = random_scene(seed, shape=shape)
-    params = dataclasses.replace(params, sparse_epsilon=1e-3, bound_rounds=1 + seed % 3)
-    engine = Engine(geom, params, device)
-    engine.set_background_frames(bg_frames)
-    engine.build_lists(depth)
-    start = np.random.default_rng(seed).uniform(0, 2 * params.prior, len(geom.rect))  # a warm start
-    engine.rho.assign(start)
-    engine.done.zero_()
-    engine.prune(math.log(params.prior) - math.log1p(-params.prior))
-    valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, ref.background_from_frames(bg_frames, params), params)
-    want = ref.evidence_bound(valid, L, D, dbg, start, params)
-    np.testing.assert_allclose(engine.upper.numpy(), want, rtol=1e-6, atol=1e-12)
-    pruned = engine.live.numpy() == PRUNED
-    np.testing.assert_array_equal(pruned, want < params.sparse_epsilon)
-    assert 0 < pruned.sum() < len(pruned)
-    assert (engine.rho.numpy()[pruned] == 0).all()
+    check_bound_against_reference(device, seed, shape)
+
+
+def test_pruning_bound_stack_scratch_of_every_size(device):
+    """On a 0.06 m grid the lists fill every stack size of the bound pass and the global
+    scratch; both paths still equal the reference."""
+    from kernels.mean_field import LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT
+
+    lengths = check_bound_against_reference(device, 2, "plane", step=0.06)
+    tiers = np.digitize(lengths[lengths > 0], [LOCAL_SHORT + 1, LOCAL_MEDIUM + 1, LOCAL_ENTRIES + 1])
+    assert set(tiers) == {0, 1, 2, 3}, np.bincount(tiers)
 
 
 @pytest.mark.parametrize("shape", ["plane", "solid"])
