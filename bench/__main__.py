@@ -11,9 +11,9 @@ Scenes (rendered once into .cache/bench/, seeded):
 - drones: 512x424, 4 x 4.5 x 2.4 m voxel grid at 0.1 m (the drone demo's room).
 Each scene runs two ways: the fast defaults (input.stride auto, sparse iterations) and the
 exact path (engine.exact: full resolution, every pass full), each scored for MODA over the
-first --moda-frames frames of the scene's sequence; the sparse iterations, the pruning bound and
-the pixel table are measured against full passes, no bound and the tile index at the same
-stride (time and max |rho* difference|). Each Warp figure is
+first --moda-frames frames of the scene's sequence; the sparse iterations, the pruning bound,
+the pixel table and the sized stack scratch are measured against full passes, no bound, the tile
+index and one stack size at the same stride (time and max |rho* difference|). Each Warp figure is
 the median of `--repeats` runs after a warm-up run (which compiles the kernels and sizes the
 lists); the NumPy reference, with --reference, runs once on kinect_v2 and kinect_v2_far (full
 resolution).
@@ -163,17 +163,19 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
 
 
 INGREDIENTS = {"full_passes": ["model.sparse_epsilon=0"], "no_bound": ["model.bound_rounds=0"],
-               "tiles": ["engine.mask_index=tiles"], "fast": []}
+               "tiles": ["engine.mask_index=tiles"], "one_stack": [], "fast": []}
 
 
 def ingredient_times(name, stride, device, repeats, table=True):
     """{ingredient: (median whole-frame seconds, rho*, median lists seconds)} at the fast
     path's stride: every pass full, sparse iterations without the pruning bound, the lists
     from the tile index instead of the pixel table (only where the fast path has a `table`),
-    and the fast path; the engines are timed in turn, `repeats` rounds, so each median sees
+    the passes' stack scratch in one size instead of sized to each list (CPU only), and the
+    fast path; the engines are timed in turn, `repeats` rounds, so each median sees
     the same machine."""
     import dataclasses as dc
 
+    from dpom_warp import kernels as K
     from dpom_warp.pipeline import make_engine
 
     engines = {}
@@ -183,6 +185,10 @@ def ingredient_times(name, stride, device, repeats, table=True):
         cfg, depth, bg = load_scene(name, [f"input.stride={stride}"] + sets)
         cfg = dc.replace(cfg, engine=dc.replace(cfg.engine, graph="off"))
         engine = make_engine(cfg, cfg.camera, device, 1)
+        if key == "one_stack":  # the passes' stack scratch in one size (CPU; a GPU has none)
+            if engine.local_scratch == 0:
+                continue
+            engine.local_scratch = K.ONE_STACK
         engine.set_background_frames(engine.resolution.frames(bg))
         engines[key] = (engine, depth, engine.infer(engine.resolution.frames(depth)).rho_star, [], [])
     for _ in range(repeats):
@@ -394,6 +400,11 @@ def main():
                         f"{1000 * f['tiles_same_stride_whole_frame_s']:.1f} ms; the same lists: max |rho* "
                         f"difference| {f['tiles_vs_fast_max_rho_star_difference']:.0e}); " if f["mask_index"] == "table"
                         else "lists from the tile index (facing planes: no pixel table); ")
+                     + (f"the passes' stack scratch in one size (2 KiB zeroed a pixel) "
+                        f"{1000 * f['one_stack_same_stride_whole_frame_s']:.1f} ms, sized to the list "
+                        f"{1000 * f['fast_same_stride_whole_frame_s']:.1f} ms (max |rho* difference| "
+                        f"{f['one_stack_vs_fast_max_rho_star_difference']:.0e}); "
+                        if "one_stack_same_stride_whole_frame_s" in f else "")
                      + 
                      f"fast vs exact max |rho* difference| {f['fast_vs_exact_max_rho_star_difference']:.2f} "
                      "(another resolution: judged by MODA)")

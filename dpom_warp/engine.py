@@ -162,7 +162,8 @@ class Engine:
         self.n_locations = len(geometry.rect)
         self.batch = batch
         self.graph = wp.get_device(device).is_cuda if graph is None else graph
-        self.local_scratch = 0 if wp.get_device(device).is_cuda else 1  # see kernels.evidence_pass
+        # the passes' scratch (kernels.evidence_pass): global on a GPU, on the stack on the CPU
+        self.local_scratch = 0 if wp.get_device(device).is_cuda else K.SIZED_STACK
         self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
         self._graph, self._graph_lists = None, None
         self._last_rho = None  # the last frame's rho, for params.warm_start

@@ -30,6 +30,7 @@ LOCAL_ENTRIES = 128  # lists up to this long keep their scratch in registers / s
 # a stack vector is zeroed where it is declared: tiers keep a short list's zeroing short
 # (a 128-entry pair is 2 KiB a pixel, most lists hold 5 to 30 entries)
 LOCAL_SHORT, LOCAL_MEDIUM = 16, 48
+ONE_STACK, SIZED_STACK = 1, 2  # `local` of the passes: one stack size (LOCAL_ENTRIES), or three
 LocalScratch16 = wp.types.vector(length=LOCAL_SHORT, dtype=wp.float64)
 LocalScratch48 = wp.types.vector(length=LOCAL_MEDIUM, dtype=wp.float64)
 LocalScratch = wp.types.vector(length=LOCAL_ENTRIES, dtype=wp.float64)
@@ -83,7 +84,10 @@ def evidence_pass(
     with a non-empty `active`, one per pixel it lists (kernels.sparse.compact_once).
     With `local` (CPU), lists of up to LOCAL_ENTRIES keep D_j - B_j and 1 - r_j on the stack,
     in cache, instead of the global scratch `behind` (~15 % faster on one CPU thread); longer
-    lists, and every list on a GPU (where a big stack spills), use `behind`."""
+    lists, and every list on a GPU (where a big stack spills), use `behind`. The stack vectors
+    are zeroed where declared: SIZED_STACK takes the smallest of 16, 48 and LOCAL_ENTRIES that
+    holds the list (ONE_STACK: always LOCAL_ENTRIES, 2 KiB zeroed a pixel; python -m bench
+    compares them)."""
     p = wp.tid()
     if active.shape[0] > 0:
         p = active[p]
@@ -95,9 +99,9 @@ def evidence_pass(
     start = offsets[p]
     b = delta_bg[p]  # B_n: what lies behind the last entry
     if local != 0 and n <= LOCAL_ENTRIES:
-        if n <= LOCAL_SHORT:
+        if local == SIZED_STACK and n <= LOCAL_SHORT:
             local_evidence(start, n, b, entry_loc, entry_delta, rho, evidence, LocalScratch16(), LocalScratch16())
-        elif n <= LOCAL_MEDIUM:
+        elif local == SIZED_STACK and n <= LOCAL_MEDIUM:
             local_evidence(start, n, b, entry_loc, entry_delta, rho, evidence, LocalScratch48(), LocalScratch48())
         else:
             local_evidence(start, n, b, entry_loc, entry_delta, rho, evidence, LocalScratch(), LocalScratch())

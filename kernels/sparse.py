@@ -25,8 +25,8 @@ from typing import Any
 
 import warp as wp
 
-from .mean_field import (LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT, LocalScratch, LocalScratch16, LocalScratch48,
-                         frame_of, sigmoid)
+from .mean_field import (LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT, SIZED_STACK, LocalScratch, LocalScratch16,
+                         LocalScratch48, frame_of, sigmoid)
 from .pixel_model import f64
 
 PRUNED = -1  # live[k] of a location the pruning bound removed for the whole frame
@@ -123,9 +123,9 @@ def bound_pass(
     start = offsets[p]
     b = delta_bg[p]
     if local != 0 and n <= LOCAL_ENTRIES:
-        if n <= LOCAL_SHORT:
+        if local == SIZED_STACK and n <= LOCAL_SHORT:
             local_bound(start, n, b, entry_loc, entry_delta, rho, upper, evidence, LocalScratch16(), LocalScratch16())
-        elif n <= LOCAL_MEDIUM:
+        elif local == SIZED_STACK and n <= LOCAL_MEDIUM:
             local_bound(start, n, b, entry_loc, entry_delta, rho, upper, evidence, LocalScratch48(), LocalScratch48())
         else:
             local_bound(start, n, b, entry_loc, entry_delta, rho, upper, evidence, LocalScratch(), LocalScratch())

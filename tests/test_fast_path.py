@@ -122,14 +122,16 @@ def test_config_stride_reduce_and_exact(tmp_path):
 
 
 def check_bound_against_reference(device, seed, shape, step=0.3):
-    """The pruning bound's kernels, with the global scratch and with the stack's (CPU), equal
-    reference.evidence_bound; returns the per-pixel list lengths."""
+    """The pruning bound's kernels, with the global scratch and with the stack's in one size
+    and in three (CPU), equal reference.evidence_bound; returns the per-pixel list lengths."""
+    from kernels.mean_field import ONE_STACK, SIZED_STACK
+
     geom, params, depth, bg_frames = random_scene(seed, shape=shape, step=step)
     params = dataclasses.replace(params, sparse_epsilon=1e-3, bound_rounds=1 + seed % 3)
     valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, ref.background_from_frames(bg_frames, params), params)
     start = np.random.default_rng(seed).uniform(0, 2 * params.prior, len(geom.rect))  # a warm start
     want = ref.evidence_bound(valid, L, D, dbg, start, params)
-    for local in (0, 1):
+    for local in (0, ONE_STACK, SIZED_STACK):
         engine = Engine(geom, params, device)
         engine.local_scratch = local
         engine.set_background_frames(bg_frames)

@@ -238,14 +238,14 @@ def test_graph_is_recaptured_when_the_lists_grow(device):
 
 
 def test_evidence_scratch_on_stack_or_global_agree(device):
-    """Both scratch paths of the evidence pass (stack on CPU, in three sizes by the list's
-    length, and the global array on GPUs and for long lists) give the reference's result, on a
-    grid fine enough (0.06 m) that lists of every size occur."""
-    from kernels.mean_field import LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT
+    """Every scratch path of the evidence pass (the global array, as on GPUs and for long
+    lists; the stack in one size; the stack in three sizes by the list's length) gives the
+    reference's result, on a grid fine enough (0.06 m) that lists of every size occur."""
+    from kernels.mean_field import LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT, ONE_STACK, SIZED_STACK
 
     geom, params, depth, _ = random_scene(2, step=0.06)
     want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
-    for local in (0, 1):
+    for local in (0, ONE_STACK, SIZED_STACK):
         engine = Engine(geom, params, device)
         engine.local_scratch = local
         got = engine.infer(depth)
