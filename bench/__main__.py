@@ -116,6 +116,8 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     engine.set_background_frames(reduce(bg))
     setup = time.perf_counter() - t
     warm = engine.infer(reduce(depth))
+    lengths = engine.counts.numpy()  # after the bound: what the passes walk
+    median_list = float(np.median(lengths[lengths > 0])) if (lengths > 0).any() else 0.0
     small = reduce(depth)
 
     def one_iteration():
@@ -146,6 +148,7 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
               "locations": int(cfg.grid.size), "mask_entries": warm.entries,
               "entries_after_bound": warm.kept_entries, "pruned_locations": warm.pruned,
               "live_locations_at_end": warm.live, "iterations": warm.iterations,
+              "median_list_entries": median_list,
               "engine_setup_s": setup, "engine_memory_mb": engine.memory_bytes() / 2**20,
               "mask_index": "table" if engine.use_table else "tiles",
               "median_s": stages, "graph_error": graph_error}
@@ -402,7 +405,8 @@ def main():
                         else "lists from the tile index (facing planes: no pixel table); ")
                      + (f"the passes' stack scratch in one size (2 KiB zeroed a pixel) "
                         f"{1000 * f['one_stack_same_stride_whole_frame_s']:.1f} ms, sized to the list "
-                        f"{1000 * f['fast_same_stride_whole_frame_s']:.1f} ms (max |rho* difference| "
+                        f"{1000 * f['fast_same_stride_whole_frame_s']:.1f} ms (lists of median "
+                        f"{f['median_list_entries']:.0f} entries after the bound; max |rho* difference| "
                         f"{f['one_stack_vs_fast_max_rho_star_difference']:.0e}); "
                         if "one_stack_same_stride_whole_frame_s" in f else "")
                      + 
