@@ -124,7 +124,7 @@ def test_config_stride_reduce_and_exact(tmp_path):
 def check_bound_against_reference(device, seed, shape, step=0.3):
     """The pruning bound's kernels, with the global scratch and with the stack's in one size
     and in three (CPU), equal reference.evidence_bound; returns the per-pixel list lengths."""
-    from kernels.mean_field import ONE_STACK, SIZED_STACK
+    from dpom_warp.kernels.mean_field import ONE_STACK, SIZED_STACK
 
     geom, params, depth, bg_frames = random_scene(seed, shape=shape, step=step)
     params = dataclasses.replace(params, sparse_epsilon=1e-3, bound_rounds=1 + seed % 3)
@@ -157,7 +157,7 @@ def test_pruning_bound_kernel_matches_reference(device, seed, shape):
 def test_pruning_bound_stack_scratch_of_every_size(device):
     """On a 0.06 m grid the lists fill every stack size of the bound pass and the global
     scratch; both paths still equal the reference."""
-    from kernels.mean_field import LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT
+    from dpom_warp.kernels.mean_field import LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT
 
     lengths = check_bound_against_reference(device, 2, "plane", step=0.06)
     tiers = np.digitize(lengths[lengths > 0], [LOCAL_SHORT + 1, LOCAL_MEDIUM + 1, LOCAL_ENTRIES + 1])

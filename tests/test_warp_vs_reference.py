@@ -241,7 +241,7 @@ def test_evidence_scratch_on_stack_or_global_agree(device):
     """Every scratch path of the evidence pass (the global array, as on GPUs and for long
     lists; the stack in one size; the stack in three sizes by the list's length) gives the
     reference's result, on a grid fine enough (0.06 m) that lists of every size occur."""
-    from kernels.mean_field import LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT, ONE_STACK, SIZED_STACK
+    from dpom_warp.kernels.mean_field import LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT, ONE_STACK, SIZED_STACK
 
     geom, params, depth, _ = random_scene(2, step=0.06)
     want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
