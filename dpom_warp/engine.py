@@ -609,6 +609,8 @@ class Engine:
         location left in no list is marked idle."""
         p, dim, dev = self.params, self.batch * self.n_pixels, self.device
         if p.bound_rounds > 0:
+            if p.behind_cost > 0:  # a fixed part of each location's evidence: the bound's too
+                self._count_behind()
             self.upper.fill_(1.0)
             self.evidence.zero_()
             for _ in range(p.bound_rounds):
@@ -617,7 +619,7 @@ class Engine:
                                   self.delta_bg, self.rho, self.upper, self.behind, self.evidence,
                                   self.n_pixels, self.done, self.local_scratch])
                 wp.launch(K.update_bound, dim=len(self.upper), device=dev,
-                          inputs=[logit_prior, self.evidence, self.upper])
+                          inputs=[logit_prior, p.behind_cost, self.n_behind, self.evidence, self.upper])
             wp.launch(K.prune, dim=len(self.upper), device=dev,
                       inputs=[p.sparse_epsilon, self.upper, self.rho, self.live])
         self.per_location.zero_()
@@ -625,6 +627,19 @@ class Engine:
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
                           self.live, self.per_location])
         wp.launch(K.mark_idle, dim=len(self.live), device=dev, inputs=[self.per_location, self.live])
+
+    def _count_behind(self):
+        """n_behind: what the lists leave out, the readings behind each listed location's
+        object (kernels.behind_count), after counting each location's entries (prune_lists
+        with nothing pruned yet, or after the pruning)."""
+        self.per_location.zero_()
+        wp.launch(K.prune_lists, dim=self.batch * self.n_pixels, device=self.device,
+                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
+                          self.live, self.per_location])
+        p = self.params
+        wp.launch(K.behind_count, dim=len(self.live), device=self.device,
+                  inputs=[self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu,
+                          self.behind_var, p.behind_step, self.per_location, self.n_behind])
 
     def _gather(self, index, compact: str | None = None) -> int:
         """The live locations of the frames not done into `index` (kernels.sparse.gather_live);
@@ -741,15 +756,8 @@ class Engine:
             self.prune(logit_prior)
             if not self.graph:  # full passes update all but the pruned and idle ones
                 self.n_kept = self._gather(self.kept_index)
-        if p.behind_cost > 0:  # what the lists leave out: readings behind each listed location
-            if p.sparse_epsilon <= 0:  # (prune counted each location's entries)
-                self.per_location.zero_()
-                wp.launch(K.prune_lists, dim=self.batch * self.n_pixels, device=dev,
-                          inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
-                                  self.live, self.per_location])
-            wp.launch(K.behind_count, dim=len(self.live), device=dev,
-                      inputs=[self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu,
-                              self.behind_var, p.behind_step, self.per_location, self.n_behind])
+        if p.behind_cost > 0 and not bound:  # (with the bound, prune counted them first)
+            self._count_behind()
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()

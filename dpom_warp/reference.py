@@ -262,9 +262,11 @@ def pixel_lists(depth_m, geom: Geometry, bg: Background, params: ModelParams):
     return valid, L, D, background_delta(depth_m, bg, params).ravel()[pix], len(pixel)
 
 
-def evidence_bound(valid, L, D, dbg, rho0, params: ModelParams):
+def evidence_bound(valid, L, D, dbg, rho0, params: ModelParams, behind=0.0):
     """Upper bounds u_k of rho_new_k over every state the iterations can reach from rho0
-    (params.bound_rounds rounds; kernels.sparse.bound_pass): the pruning bound.
+    (params.bound_rounds rounds; kernels.sparse.bound_pass): the pruning bound. `behind`
+    ((K,) or 0): behind_cost x each location's readings behind its object (behind_count), a
+    fixed part of its evidence for the frame, subtracted as rho_new subtracts it.
 
     Every rho stays at or below max(rho0_k, u_k) (a damped update is a convex combination of
     the start and of rho_new values), so with r_m <= rmax_m = max(rho0_m, u_m):
@@ -286,7 +288,7 @@ def evidence_bound(valid, L, D, dbg, rho0, params: ModelParams):
         x = D - b_min
         contrib = np.where(x >= 0, x, t_min * x)
         bound = np.bincount(L[valid], weights=contrib[valid], minlength=K)
-        upper = np.minimum(upper, sigmoid(logit_prior + bound))
+        upper = np.minimum(upper, sigmoid(logit_prior + bound - behind))
     return upper
 
 
@@ -315,8 +317,12 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     logit_prior = np.log(params.prior) - np.log1p(-params.prior)
     rho = np.full(K, params.prior) if start is None else np.array(start, dtype=np.float64)
     kept = np.ones(K, bool)
+    # readings behind each location in a list (its core), the evidence the lists leave out:
+    # fixed for the frame, so the bound subtracts it too
+    listed = np.bincount(L[valid], minlength=K) > 0
+    behind = params.behind_cost * behind_count(depth_m, geom, params, listed) if params.behind_cost > 0 else 0.0
     if params.sparse_epsilon > 0 and params.bound_rounds > 0:
-        kept = evidence_bound(valid, L, D, dbg, rho, params) >= params.sparse_epsilon
+        kept = evidence_bound(valid, L, D, dbg, rho, params, behind) >= params.sparse_epsilon
         rho = np.where(kept, rho, 0.0)  # pruned: rho_new < epsilon at every iteration
         valid = valid & kept[L]
     pruned = int((~kept).sum())
@@ -324,8 +330,6 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     if params.sparse_epsilon > 0:  # in no list (idle): rho_new is the prior; left at its start
         kept = kept & listed
     live = kept.copy()
-    # readings behind each location in a list (its core), the evidence the lists leave out
-    behind = params.behind_cost * behind_count(depth_m, geom, params, listed) if params.behind_cost > 0 else 0.0
     if params.exclusion > 0:  # each location's neighbours within exclusion_radius
         start, neighbours = neighbour_lists(geom.locations, params.exclusion_radius)
         owner = np.repeat(np.arange(K), np.diff(start))

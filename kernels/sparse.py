@@ -151,12 +151,16 @@ def bound_pass(
 @wp.kernel(enable_backward=False)
 def update_bound(
     logit_prior: wp.float64,
+    behind_cost: wp.float64,
+    behind: wp.array(dtype=wp.int32),
     evidence: wp.array(dtype=wp.float64),
     upper: wp.array(dtype=wp.float64),
 ):
-    """upper <- min(upper, sigmoid(logit(prior) + the round's bound)); clears the evidence."""
+    """upper <- min(upper, sigmoid(logit(prior) + the round's bound - behind_cost x behind)),
+    behind[i] the location's readings behind its object (mean_field.behind_count), a fixed
+    part of its evidence (update_rho subtracts it the same way); clears the evidence."""
     i = wp.tid()
-    upper[i] = wp.min(upper[i], sigmoid(logit_prior + evidence[i]))
+    upper[i] = wp.min(upper[i], sigmoid(logit_prior + evidence[i] - behind_cost * f64(behind[i])))
     evidence[i] = f64(0.0)
 
 

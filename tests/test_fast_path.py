@@ -121,16 +121,23 @@ def test_config_stride_reduce_and_exact(tmp_path):
         assert str(e.value) == f"{DEMO}: {message}"
 
 
-def check_bound_against_reference(device, seed, shape, step=0.3):
+def check_bound_against_reference(device, seed, shape, step=0.3, behind_cost=0.0):
     """The pruning bound's kernels, with the global scratch and with the stack's in one size
-    and in three (CPU), equal reference.evidence_bound; returns the per-pixel list lengths."""
+    and in three (CPU), equal reference.evidence_bound (with `behind_cost`, its readings-behind
+    term: the counts of every location in a list); returns the per-pixel list lengths."""
     from dpom_warp.kernels.mean_field import ONE_STACK, SIZED_STACK
 
     geom, params, depth, bg_frames = random_scene(seed, shape=shape, step=step)
-    params = dataclasses.replace(params, sparse_epsilon=1e-3, bound_rounds=1 + seed % 3)
+    params = dataclasses.replace(params, sparse_epsilon=1e-3, bound_rounds=1 + seed % 3, behind_cost=behind_cost,
+                                 behind_side=0.2, behind_low=0.3)
     valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, ref.background_from_frames(bg_frames, params), params)
     start = np.random.default_rng(seed).uniform(0, 2 * params.prior, len(geom.rect))  # a warm start
-    want = ref.evidence_bound(valid, L, D, dbg, start, params)
+    listed = np.bincount(L[valid], minlength=len(geom.rect)) > 0
+    behind = behind_cost * ref.behind_count(depth, geom, params, listed) if behind_cost > 0 else 0.0
+    want = ref.evidence_bound(valid, L, D, dbg, start, params, behind)
+    if behind_cost > 0:  # not vacuous: the term prunes a location the bound alone keeps
+        alone = ref.evidence_bound(valid, L, D, dbg, start, params)
+        assert ((want < params.sparse_epsilon) & (alone >= params.sparse_epsilon)).any()
     for local in (0, ONE_STACK, SIZED_STACK):
         engine = Engine(geom, params, device)
         engine.local_scratch = local
@@ -148,10 +155,11 @@ def check_bound_against_reference(device, seed, shape, step=0.3):
     return lengths
 
 
+@pytest.mark.parametrize("behind_cost", [0.0, 3.0])
 @pytest.mark.parametrize("shape", ["plane", "solid"])
 @pytest.mark.parametrize("seed", range(4))
-def test_pruning_bound_kernel_matches_reference(device, seed, shape):
-    check_bound_against_reference(device, seed, shape)
+def test_pruning_bound_kernel_matches_reference(device, seed, shape, behind_cost):
+    check_bound_against_reference(device, seed, shape, behind_cost=behind_cost)
 
 
 def test_pruning_bound_stack_scratch_of_every_size(device):
@@ -164,17 +172,22 @@ def test_pruning_bound_stack_scratch_of_every_size(device):
     assert set(tiers) == {0, 1, 2, 3}, np.bincount(tiers)
 
 
+@pytest.mark.parametrize("behind_cost", [0.0, 3.0])
 @pytest.mark.parametrize("shape", ["plane", "solid"])
 @pytest.mark.parametrize("seed", range(6))
-def test_pruning_bound_holds_at_every_iteration_of_the_exact_path(seed, shape):
+def test_pruning_bound_holds_at_every_iteration_of_the_exact_path(seed, shape, behind_cost):
     """The bound's promise (reference.evidence_bound): from the start, no iteration's rho_new
     exceeds it, whatever the other locations do; so a location pruned (bound < epsilon) never
-    reaches epsilon."""
+    reaches epsilon. With model.behind_cost the bound subtracts the readings behind each
+    location, as every update does."""
     geom, params, depth, bg_frames = random_scene(seed, shape=shape)
+    params = dataclasses.replace(params, behind_cost=behind_cost, behind_side=0.2, behind_low=0.3)
     bg = ref.background_from_frames(bg_frames, params)
     valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, bg, params)
     params = dataclasses.replace(params, bound_rounds=4)
-    upper = ref.evidence_bound(valid, L, D, dbg, np.full(len(geom.rect), params.prior), params)
+    listed = np.bincount(L[valid], minlength=len(geom.rect)) > 0
+    behind = behind_cost * ref.behind_count(depth, geom, params, listed) if behind_cost > 0 else 0.0
+    upper = ref.evidence_bound(valid, L, D, dbg, np.full(len(geom.rect), params.prior), params, behind)
     trace = []
     ref.mean_field(depth, geom, bg, dataclasses.replace(params, sparse_epsilon=0.0), trace=trace)
     assert len(trace) > 10

@@ -343,8 +343,9 @@ def test_behind_table_serves_every_frame_and_counts_in_memory(device, seed):
 def test_behind_cost_matches_reference(device, seed, shape, path):
     """model.behind_cost (each location loses evidence for the pixels of its silhouette's core
     that read behind its object) on the Warp path equals the reference: the counts of every
-    location in a list, and rho / rho* after the iterations; the location with the most
-    such readings gets a lower first update than without the cost."""
+    location in a list (before the pruning bound, which subtracts them too), and rho / rho*
+    after the iterations; the location with the most such readings gets a lower first update
+    than without the cost."""
     geom, params, depth, bg_frames = random_scene(seed, shape=shape)
     params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4, behind_cost=3.0,
                                  behind_side=0.2, behind_low=0.3, behind_step=1 + seed % 2)
@@ -353,17 +354,19 @@ def test_behind_cost_matches_reference(device, seed, shape, path):
     bg = ref.background_from_frames(bg_frames, params)
     want = ref.mean_field(depth, geom, bg, params)
     got = engine.infer(depth)
-    moving = engine.per_location.numpy() > 0  # in a list (after the bound on the fast path)
-    counts = ref.behind_count(depth, geom, params, moving)
-    np.testing.assert_array_equal(engine.n_behind.numpy()[moving], counts[moving])
+    valid, L = ref.pixel_lists(depth, geom, bg, params)[:2]
+    listed = np.bincount(L[valid], minlength=len(geom.rect)) > 0  # in a list before the bound
+    counts = ref.behind_count(depth, geom, params, listed)
+    np.testing.assert_array_equal(engine.n_behind.numpy()[listed], counts[listed])
     assert counts.max() > 0, "no reading behind any location: the count is not exercised"
     assert got.iterations == want["iterations"]
     np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     first, first_plain = [], []  # each iteration's rho_new: the first from the same start
-    ref.mean_field(depth, geom, bg, params, trace=first)
-    ref.mean_field(depth, geom, bg, dataclasses.replace(params, behind_cost=0.0), trace=first_plain)
-    k = int(np.argmax(np.where(moving, counts, -1)))
+    exact = dataclasses.replace(params, sparse_epsilon=0.0)  # (the model's update, nothing pruned)
+    ref.mean_field(depth, geom, bg, exact, trace=first)
+    ref.mean_field(depth, geom, bg, dataclasses.replace(exact, behind_cost=0.0), trace=first_plain)
+    k = int(np.argmax(np.where(listed, counts, -1)))
     assert first[0][k] < first_plain[0][k], "the location with the most readings behind it lost nothing"
 
 
