@@ -412,8 +412,9 @@ def behind_count(
     table from first[k] to first[k + 1]) whose reading lies behind its object beyond the mask
     test (reading_class BEHIND: were the object there it would hide them), each standing for
     step^2 pixels. One thread per location of the batch; 0 for the locations in no list
-    (entries[i], their entries in the lists, 0: no reading supports them, and on the fast path
-    the pruned and idle ones, kernels.sparse), which stay where they start as before."""
+    (entries[i], their entries in the lists, 0: no reading supports them), which stay where
+    they start. Counted before the pruning bound, which subtracts it too (kernels.sparse
+    update_bound)."""
     i = wp.tid()
     n_loc = first.shape[0] - 1
     b = i / n_loc
