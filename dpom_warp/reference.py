@@ -317,10 +317,7 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     logit_prior = np.log(params.prior) - np.log1p(-params.prior)
     rho = np.full(K, params.prior) if start is None else np.array(start, dtype=np.float64)
     kept = np.ones(K, bool)
-    # readings behind each location in a list (its core), the evidence the lists leave out:
-    # fixed for the frame, so the bound subtracts it too
-    listed = np.bincount(L[valid], minlength=K) > 0
-    behind = params.behind_cost * behind_count(depth_m, geom, params, listed) if params.behind_cost > 0 else 0.0
+    behind = behind_evidence(depth_m, geom, params, valid, L)  # (the bound subtracts it too)
     if params.sparse_epsilon > 0 and params.bound_rounds > 0:
         kept = evidence_bound(valid, L, D, dbg, rho, params, behind) >= params.sparse_epsilon
         rho = np.where(kept, rho, 0.0)  # pruned: rho_new < epsilon at every iteration
@@ -475,6 +472,16 @@ def reading_classes(z, mu, passes, params: ModelParams):
     three boolean arrays, all False without a reading (kernels.mean_field.reading_class)."""
     valid = valid_reading(z, params)
     return valid & passes, valid & ~passes & (z > mu), valid & ~passes & (z <= mu)
+
+
+def behind_evidence(depth_m, geom: Geometry, params: ModelParams, valid, L):
+    """behind_cost x behind_count of every location in a list (pixel_lists' valid, L), the
+    evidence the lists leave out: fixed for the frame, subtracted by every update and by the
+    pruning bound (evidence_bound's `behind`); 0.0 without the cost."""
+    if params.behind_cost <= 0:
+        return 0.0
+    listed = np.bincount(L[valid], minlength=len(geom.rect)) > 0
+    return params.behind_cost * behind_count(depth_m, geom, params, listed)
 
 
 def behind_count(depth_m, geom: Geometry, params: ModelParams, which):

@@ -132,8 +132,7 @@ def check_bound_against_reference(device, seed, shape, step=0.3, behind_cost=0.0
                                  behind_side=0.2, behind_low=0.3)
     valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, ref.background_from_frames(bg_frames, params), params)
     start = np.random.default_rng(seed).uniform(0, 2 * params.prior, len(geom.rect))  # a warm start
-    listed = np.bincount(L[valid], minlength=len(geom.rect)) > 0
-    behind = behind_cost * ref.behind_count(depth, geom, params, listed) if behind_cost > 0 else 0.0
+    behind = ref.behind_evidence(depth, geom, params, valid, L)
     want = ref.evidence_bound(valid, L, D, dbg, start, params, behind)
     if behind_cost > 0:  # not vacuous: the term prunes a location the bound alone keeps
         alone = ref.evidence_bound(valid, L, D, dbg, start, params)
@@ -185,8 +184,7 @@ def test_pruning_bound_holds_at_every_iteration_of_the_exact_path(seed, shape, b
     bg = ref.background_from_frames(bg_frames, params)
     valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, bg, params)
     params = dataclasses.replace(params, bound_rounds=4)
-    listed = np.bincount(L[valid], minlength=len(geom.rect)) > 0
-    behind = behind_cost * ref.behind_count(depth, geom, params, listed) if behind_cost > 0 else 0.0
+    behind = ref.behind_evidence(depth, geom, params, valid, L)
     upper = ref.evidence_bound(valid, L, D, dbg, np.full(len(geom.rect), params.prior), params, behind)
     trace = []
     ref.mean_field(depth, geom, bg, dataclasses.replace(params, sparse_epsilon=0.0), trace=trace)
