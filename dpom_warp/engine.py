@@ -57,8 +57,8 @@ LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 60 + 4 + 4  # rec
 # readings behind
 # A batch counts pixel and location bytes once per frame (the geometry is shared: an overestimate).
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
-TABLE_BYTES = 4 + 4 + 8 + 8 + 8 + 4  # pixel table: location, float32 mu, mu, sigma, log sigma, half-width
-TABLE_PIXEL_BYTES = 4 + 8  # its start and reach
+TABLE_BYTES = 8 + 32  # pixel table: the walk's key (two float32), the pair (mu, sigma, log sigma, location, W)
+TABLE_PIXEL_BYTES = 4  # its start
 BEHIND_POINT_BYTES = 4 + 8 + 8  # model.behind_cost's lattice point: pixel, mu, var (Engine._fill_behind_table)
 TABLE_BUDGET = 256 * 2**20  # table=None: the pixel table where it holds at most this
 
@@ -378,20 +378,16 @@ class Engine:
                 # sort as its value (mu > 0 here). np.lexsort of the three: ~2x slower
                 key = (pixel.astype(np.int64) << 32) | mu32.view(np.int32).astype(np.int64)
                 order = np.argsort(key, kind="stable")
-                pixel, half = pixel[order], half[order]
-                start = np.searchsorted(pixel, np.arange(self.n_pixels + 1)).astype(np.int32)
-                reach = np.zeros(self.n_pixels)
-                held = np.flatnonzero(start[1:] > start[:-1])
-                if len(held):
-                    reach[held] = np.maximum.reduceat(half, start[held]).astype(np.float64)
-                t.start, t.reach = wp.array(start), wp.array(reach, dtype=wp.float64)
-                t.loc, t.mu32 = wp.array(loc[order]), wp.array(mu32[order])
-                t.mu, t.sigma, t.log_sigma = (wp.array(a[order]) for a in (mu, sigma, log_sigma))
-                t.half = wp.array(half)
+                start = np.searchsorted(pixel[order], np.arange(self.n_pixels + 1)).astype(np.int32)
+                pairs = np.empty(n, dtype=K.TablePair.numpy_dtype())
+                for name, a in (("mu", mu), ("sigma", sigma), ("log_sigma", log_sigma), ("loc", loc), ("half", half)):
+                    pairs[name] = a[order]
+                t.start, t.pair = wp.array(start), wp.array(pairs, dtype=K.TablePair)
+                t.key = wp.zeros(n, dtype=wp.vec2f)  # the walk's window (kernels.masks)
+                wp.launch(K.table_window, dim=self.n_pixels, inputs=[t.start, t.pair, t.key])
             else:
-                t.start = wp.zeros(1, dtype=wp.int32)
-                t.reach, t.mu, t.sigma, t.log_sigma = (wp.zeros(0, dtype=wp.float64) for _ in range(4))
-                t.loc, t.mu32, t.half = (wp.zeros(0, dtype=d) for d in (wp.int32, wp.float32, wp.float32))
+                t.start, t.key, t.pair = wp.zeros(1, dtype=wp.int32), wp.zeros(0, dtype=wp.vec2f), wp.zeros(
+                    0, dtype=K.TablePair)
         self.n_table = n
         return t
 

@@ -226,6 +226,22 @@ def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | 
     return pixel[order].astype(np.int64), loc[order].astype(np.int64), mu32[order], delta32[order]
 
 
+def table_window(start, mu, half):
+    """The pixel table's walk keys (kernels.masks.table_window): for the pairs of each pixel
+    (start[p] to start[p + 1], in table order), the running maximum of mu + W from the front
+    and the running minimum of mu - W from the back, each moved outwards by 1e-6 (1 + |x|)
+    and rounded to float32. Returns (n, 2) float32."""
+    mu, half = np.asarray(mu, np.float64), np.asarray(half, np.float32).astype(np.float64)
+    key = np.zeros((len(mu), 2), np.float32)
+    for a, b in zip(start[:-1], start[1:]):
+        if b > a:
+            hi = np.maximum.accumulate(mu[a:b] + half[a:b])
+            lo = np.minimum.accumulate((mu[a:b] - half[a:b])[::-1])[::-1]
+            key[a:b, 0] = (hi + 1e-6 * (1 + np.abs(hi))).astype(np.float32)
+            key[a:b, 1] = (lo - 1e-6 * (1 + np.abs(lo))).astype(np.float32)
+    return key
+
+
 def sigmoid(x):
     x = np.asarray(x, dtype=np.float64)
     e = np.exp(-np.abs(x))

@@ -14,7 +14,7 @@
 
 from .background import (background_delta, background_from_frames, cluster_background, cluster_frames,
                          floor_background)
-from .masks import PixelTable, TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once, table_pairs
+from .masks import PixelTable, TablePair, TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once, table_pairs, table_window
 from .mean_field import (ONE_STACK, SIZED_STACK, behind_count, behind_points, check_converged, evidence_pass, exclusion_pass,
                          keep_better_top, soft_threshold, top_band, transparency_pass, update_rho)
 from .pixel_model import GeometryArrays, PixelModel
@@ -22,7 +22,7 @@ from .sparse import (IDLE, PRUNED, bound_pass, compact_again, compact_once, coun
                      gather_live, mark_idle, prune, prune_lists, update_bound)
 
 __all__ = [
-    "GeometryArrays", "IDLE", "ONE_STACK", "PRUNED", "SIZED_STACK", "PixelModel", "PixelTable", "TileIndex", "background_delta", "background_from_frames",
+    "GeometryArrays", "IDLE", "ONE_STACK", "PRUNED", "SIZED_STACK", "PixelModel", "PixelTable", "TablePair", "TileIndex", "table_window", "background_delta", "background_from_frames",
     "behind_count", "behind_points", "bound_pass", "check_converged", "compact_again", "compact_once", "count_iteration", "gather_live", "mark_idle", "cluster_background", "cluster_frames", "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background", "keep_better_top",
     "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "table_pairs", "prune", "prune_lists", "soft_threshold", "top_band", "transparency_pass",
     "update_bound", "update_rho",

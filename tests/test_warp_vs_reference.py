@@ -88,6 +88,23 @@ def test_sorted_lists_match_reference(device, tile, one_pass):
         np.testing.assert_allclose(got[3], want[3], rtol=1e-6, atol=1e-6)
 
 
+def test_pixel_table_window_matches_reference(device):
+    """The pixel table's walk keys (kernels.masks.table_window) equal the reference's, are
+    monotonic along each pixel's pairs, and bracket every pair: a reading that passes a pair's
+    test lies inside the window the keys give, so the walk misses no entry."""
+    geom, params, depth, _ = random_scene(7, shape="solid")
+    engine = Engine(geom, params, device, table=True)
+    t = engine.table
+    start, pair, key = t.start.numpy(), t.pair.numpy(), t.key.numpy()
+    assert len(pair) > 1000
+    np.testing.assert_array_equal(key, ref.table_window(start, pair["mu"], pair["half"]))
+    half = pair["half"].astype(np.float64)
+    assert np.all(key[:, 0] >= pair["mu"] + half) and np.all(key[:, 1] <= pair["mu"] - half)
+    same = np.repeat(np.arange(len(start) - 1), np.diff(start))
+    along = same[1:] == same[:-1]  # consecutive pairs of one pixel
+    assert np.all(np.diff(key[:, 0])[along] >= 0) and np.all(np.diff(key[:, 1])[along] >= 0)
+
+
 def test_background_kernels_match_reference(device):
     geom, params, depth, frames = random_scene(3)
     frames[:, :5, :5] = 0  # never a reading: broad distribution
