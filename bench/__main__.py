@@ -2,6 +2,7 @@
 
     python -m bench [--device cpu] [--repeats 5] [--batch 4] [--moda-frames 8] [--reference]
                     [--whole-run] [--sweep] [--output runs/bench]
+    python -m bench --kernels [--scenes ...] [--repeats 5]
 
 Scenes (rendered once into .cache/bench/, seeded):
 - kinect_v2: 512x424, people, 6 x 6.5 m ground grid at 0.1 m (the people demo);
@@ -23,7 +24,9 @@ different frames of the scene in one engine call (time per frame = batch time / 
 --whole-run times `dpom-warp run` with pictures on kinect_v2 and kinect_v2_far (32 frames against
 2: the marginal frame; the engine's setup, ~2 s and noisy, cancels). --sweep also times whole
 frames against the number of locations (grid step) and the image resolution on kinect_v2, and
-plots both.
+plots both. --kernels instead times each kernel of the fast path's frame (every launch followed
+by a device sync, so the sum exceeds the whole frame a little), summed over a frame, median of
+--repeats frames.
 """
 
 from __future__ import annotations
@@ -233,6 +236,44 @@ def score_scene(cfg, device, seq, n):
 LONG_RUN = 32  # whole_run_marginal: frames of the long run
 
 
+def kernel_times(cfg, depth, bg, device, repeats):
+    """{kernel: (median ms a frame, launches a frame)} of `cfg`'s frame `depth` (background
+    frames `bg`): every launch (wp.launch and the engine's recorded ones) timed with a device
+    sync after it, summed over the frame; the most costly first."""
+    import warp as wp
+
+    from dpom_warp import engine as E
+    from dpom_warp.pipeline import make_engine
+
+    cfg = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, graph="off"))
+    engine = make_engine(cfg, cfg.camera, device, 1)
+    engine.set_background_frames(engine.resolution.frames(bg))
+    frame = engine.resolution.frames(depth)
+    engine.infer(frame)
+    frames, acc = [], {}
+
+    def timed(key, launch):
+        t = time.perf_counter()
+        out = launch()
+        wp.synchronize_device(device)
+        acc.setdefault(key, []).append(time.perf_counter() - t)
+        return out
+
+    launch, recorded = wp.launch, E.Engine._launch
+    wp.launch = lambda kernel, *x, **k: timed(kernel.key, lambda: launch(kernel, *x, **k))
+    E.Engine._launch = lambda self, kernel, *x: timed(kernel.key, lambda: recorded(self, kernel, *x))
+    try:
+        for _ in range(repeats):
+            acc = {}
+            engine.infer(frame)
+            frames.append(acc)
+    finally:
+        wp.launch, E.Engine._launch = launch, recorded
+    keys = sorted({k for f in frames for k in f}, key=lambda k: -statistics.median(sum(f.get(k, [0])) for f in frames))
+    return {k: (1000 * statistics.median(sum(f.get(k, [0])) for f in frames),
+                statistics.median(len(f.get(k, [])) for f in frames)) for k in keys}
+
+
 def whole_run_marginal(repeats, name="kinect_v2"):
     """Marginal per-frame time of `dpom-warp run` on a people scene with pictures on, the
     defaults otherwise: (time for LONG_RUN frames - time for 2) / (LONG_RUN - 2), medians of
@@ -320,6 +361,8 @@ def main():
     ap.add_argument("--whole-run", action="store_true",
                     help="marginal per-frame time of dpom-warp run on the people scenes given, pictures on (CPU)")
     ap.add_argument("--sweep", action="store_true", help="time against locations and resolution, with a plot")
+    ap.add_argument("--kernels", action="store_true",
+                    help="only: each kernel's time in the fast path's frame of each scene (a sync after each launch)")
     ap.add_argument("--output", default="runs/bench")
     a = ap.parse_args()
 
@@ -332,6 +375,18 @@ def main():
     device = resolve_device(a.device)
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)
+    if a.kernels:
+        lines = [f"Machine: {platform.machine()}, {platform.node()}; device {device} ({wp.get_device(device).name}); "
+                 f"Warp {wp.__version__}; fast path; each kernel's time summed over a frame, median of {a.repeats} "
+                 "frames after a warm-up, a device sync after every launch"]
+        for name in a.scenes:
+            lines += ["", f"| {name}: kernel | ms a frame | launches a frame |", "|---|---|---|"]
+            times = kernel_times(*load_scene(name), device, a.repeats)
+            lines += [f"| {k} | {ms:.2f} | {n:g} |" for k, (ms, n) in times.items()]
+            lines.append(f"| all | {sum(ms for ms, _ in times.values()):.2f} | |")
+        print("\n".join(lines))
+        (out / f"kernels_{device.replace(':', '')}.md").write_text("\n".join(lines) + "\n")
+        return
     result = {"machine": f"{platform.machine()}, {platform.node()}", "device": device,
               "device_name": wp.get_device(device).name, "python": platform.python_version(),
               "warp": wp.__version__, "repeats": a.repeats, "scenes": {}}

@@ -59,7 +59,7 @@ LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 60 + 4 + 4  # rec
 PAIR_BYTES = 4 + 8 + 8  # tile index: location, lo, hi
 TABLE_BYTES = 8 + 32  # pixel table: the walk's key (two float32), the pair (mu, sigma, log sigma, location, W)
 TABLE_PIXEL_BYTES = 4  # its start
-BEHIND_POINT_BYTES = 4 + 8 + 8  # model.behind_cost's lattice point: pixel, mu, var (Engine._fill_behind_table)
+BEHIND_POINT_BYTES = 4 + 8 + 8 + 8  # model.behind_cost's lattice point: pixel, mu, var, W (Engine._fill_behind_table)
 TABLE_BUDGET = 256 * 2**20  # table=None: the pixel table where it holds at most this
 
 
@@ -180,6 +180,7 @@ class Engine:
         self.extra_bytes = background_auto.state_bytes(self.n_pixels) if background_auto else 0
         with wp.ScopedDevice(device):
             self.geo = self._geometry_arrays(geometry)
+        self.pm = pixel_model(params)
         behind_points = self._count_behind_points()  # counted first: the table is in the budget
         self.behind_table = int(behind_points.sum())
         self.extra_bytes += BEHIND_POINT_BYTES * self.behind_table + 4 * (self.n_locations + 1)  # and its starts
@@ -208,7 +209,6 @@ class Engine:
                     f"{memory_gb:g} GiB")
         self.max_entries = cap
         self.grown: list[int] = []
-        self.pm = pixel_model(params)
         with wp.ScopedDevice(device):
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
@@ -295,7 +295,8 @@ class Engine:
         """behind_points' inputs that describe the core: geometry, band, side share, lattice."""
         p = self.params
         low, high = self._behind_band()
-        return [self.geo, float(self.geometry.centre[2]), p.behind_side, low, high, p.behind_step, self.forward]
+        return [self.geo, self.pm, float(self.geometry.centre[2]), p.behind_side, low, high, p.behind_step,
+                self.forward]
 
     def _count_behind_points(self) -> np.ndarray:
         """How many lattice points of each location's silhouette core model.behind_cost counts
@@ -307,25 +308,26 @@ class Engine:
             counts = wp.zeros(L, dtype=wp.int32)
             none_i, none_f = wp.zeros(0, dtype=wp.int32), wp.zeros(0, dtype=wp.float64)
             wp.launch(K.behind_points, dim=L, inputs=self._behind_statics() + [0, none_i, counts, none_i, none_f,
-                                                                               none_f])
+                                                                               none_f, none_f])
         return counts.numpy().astype(np.int64)
 
     def _fill_behind_table(self, counts: np.ndarray):
         """The table of those points (`counts` from _count_behind_points): each one's pixel,
-        the object's depth and variance there (behind_points, fill 1). Static, so built once
-        here and only classified against each frame's readings (behind_count)."""
+        the object's depth, variance and the mask test's half-width there (behind_points, fill
+        1). Static, so built once here and only classified against each frame's readings
+        (behind_count)."""
         with wp.ScopedDevice(self.device):
             first = np.zeros(self.n_locations + 1, np.int32)  # all 0: no points (no behind_cost)
             first[1:len(counts) + 1] = np.cumsum(counts)
             self.behind_first = wp.array(first, dtype=wp.int32)
             n = int(first[-1])
             self.behind_pixel = wp.zeros(n, dtype=wp.int32)
-            self.behind_mu, self.behind_var = (wp.zeros(n, dtype=wp.float64) for _ in range(2))
+            self.behind_mu, self.behind_var, self.behind_half = (wp.zeros(n, dtype=wp.float64) for _ in range(3))
             if n:
                 none_i = wp.zeros(0, dtype=wp.int32)
                 wp.launch(K.behind_points, dim=len(counts),
                           inputs=self._behind_statics() + [1, self.behind_first, none_i, self.behind_pixel,
-                                                           self.behind_mu, self.behind_var])
+                                                           self.behind_mu, self.behind_var, self.behind_half])
 
     def _tile_index(self, pair_loc, pair_tile, tiles_x) -> K.TileIndex:
         """Depth bounds of every (location, tile) pair, sorted by tile then lo (kernels.masks)."""
@@ -635,7 +637,7 @@ class Engine:
         p = self.params
         wp.launch(K.behind_count, dim=len(self.live), device=self.device,
                   inputs=[self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu,
-                          self.behind_var, p.behind_step, self.per_location, self.n_behind])
+                          self.behind_var, self.behind_half, p.behind_step, self.per_location, self.n_behind])
 
     def _gather(self, index, compact: str | None = None) -> int:
         """The live locations of the frames not done into `index` (kernels.sparse.gather_live);

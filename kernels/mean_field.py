@@ -14,6 +14,7 @@ from typing import Any
 
 import warp as wp
 
+from .masks import test_half_width
 from .pixel_model import (GeometryArrays, PixelModel, f64, is_reading, object_depth, object_log_inlier,
                           object_sigma)
 
@@ -308,6 +309,7 @@ def reading_class(pm: PixelModel, z: wp.float64, mu: wp.float64, var: wp.float64
 @wp.kernel(enable_backward=False)
 def behind_points(
     geo: GeometryArrays,
+    pm: PixelModel,
     centre_z: wp.float64,
     side: wp.float64,
     low: wp.float64,
@@ -320,6 +322,7 @@ def behind_points(
     pixel: wp.array(dtype=wp.int32),
     mu: wp.array(dtype=wp.float64),
     var: wp.array(dtype=wp.float64),
+    half: wp.array(dtype=wp.float64),
 ):
     """The static half of behind_count, once per camera and grid: the pixels of location k's
     silhouette (its solid's projection) counted in its core, on the lattice of pixels whose row
@@ -328,8 +331,8 @@ def behind_points(
     (arms, a narrower body than the solid), as are object points below height `low` (the gap
     between the legs) or above `high` (heads: people are shorter or taller than the solid).
     With fill 0, counts[k] = how many; with fill 1 they are written from first[k] on: the
-    pixel (v x width + u), the object's depth mu and extra variance var there (object_depth).
-    One thread per location. `forward`: the camera's optical axis (a ray's parameter is its
+    pixel (v x width + u), the object's depth mu and extra variance var there (object_depth)
+    and the mask test's half-width there (masks.test_half_width). One thread per location. `forward`: the camera's optical axis (a ray's parameter is its
     z-depth, d . forward = 1): a lattice row none of whose points can lie between `low` and
     `high` on the solid (the z-depths of the solid's bounding box times the row's vertical ray
     components) is skipped without walking it, which changes no point."""
@@ -391,6 +394,7 @@ def behind_points(
                             pixel[j] = v * width + u
                             mu[j] = o[0]
                             var[j] = o[1]
+                            half[j] = test_half_width(pm, object_sigma(pm, o[0], o[1]))
                         n += 1
     if fill == 0:
         counts[k] = n
@@ -404,6 +408,7 @@ def behind_count(
     pixel: wp.array(dtype=wp.int32),
     mu: wp.array(dtype=wp.float64),
     var: wp.array(dtype=wp.float64),
+    half: wp.array(dtype=wp.float64),
     step: int,
     entries: wp.array(dtype=wp.int32),
     behind: wp.array(dtype=wp.int32),
@@ -414,7 +419,10 @@ def behind_count(
     step^2 pixels. One thread per location of the batch; 0 for the locations in no list
     (entries[i], their entries in the lists, 0: no reading supports them), which stay where
     they start. Counted before the pruning bound, which subtracts it too (kernels.sparse
-    update_bound)."""
+    update_bound). The mask test passes exactly where |z - mu| < W, the point's stored
+    half-width (masks.test_half_width): a reading clearly inside or outside it (by 1e-9
+    relative) is classed from W, one within rounding of it by the test itself (the same
+    classes, without a logarithm and a square root a point)."""
     i = wp.tid()
     n_loc = first.shape[0] - 1
     b = i / n_loc
@@ -425,8 +433,16 @@ def behind_count(
         for j in range(first[k], first[k + 1]):
             v = pixel[j] / width
             u = pixel[j] - v * width
-            if reading_class(pm, f64(depth[b, v, u]), mu[j], var[j], f64(0.0)) == BEHIND:
-                n += step * step
+            z = f64(depth[b, v, u])
+            if is_reading(pm, z):
+                gap = z - mu[j]
+                w = half[j]
+                if wp.abs(gap) > w * f64(1.000000001) + f64(1.0e-12):
+                    if gap > f64(0.0):
+                        n += step * step
+                elif wp.abs(gap) >= w * f64(0.999999999) - f64(1.0e-12):  # at the edge: the test
+                    if reading_class(pm, z, mu[j], var[j], f64(0.0)) == BEHIND:
+                        n += step * step
     behind[i] = n
 
 

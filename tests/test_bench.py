@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from bench.__main__ import time_scene
+from bench.__main__ import kernel_times, time_scene
 from dpom_warp.config import load_config
 from dpom_warp.io import read_depth
 from dpom_warp.pipeline import expand, make_engine
@@ -30,6 +30,30 @@ def test_bench_times_every_stage_and_batches_honestly(tmp_path):
     alone.set_background_frames(alone.resolution.frames(bg))
     assert r["batch_iterations"] == [alone.infer(alone.resolution.frames(f)).iterations for f in frames]
     assert r["frames_per_s_batched"] == 1 / r["median_s"]["per frame, batched"]
+
+
+def test_kernel_times_count_every_launch_of_a_frame(tmp_path):
+    """bench --kernels: each kernel's launches in a frame (the evidence pass and the update
+    once an iteration), every one timed, and Warp's launch functions given back after."""
+    import warp as wp
+
+    from dpom_warp import engine as E
+
+    cfg = load_config(small_config(tmp_path), ["input.stride=2"])
+    generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
+    shape = (cfg.camera.height, cfg.camera.width)
+    depth = read_depth(expand(cfg.inputs.frames, "input.frames")[0], cfg.inputs.depth_scale, shape)
+    bg = np.stack([read_depth(f, cfg.inputs.depth_scale, shape) for f in expand(cfg.inputs.background, "input.background")])
+    launch, recorded = wp.launch, E.Engine._launch
+    times = kernel_times(cfg, depth, bg, "cpu", 3)
+    assert wp.launch is launch and E.Engine._launch is recorded
+    engine = make_engine(cfg, cfg.camera, "cpu", 1)
+    engine.set_background_frames(engine.resolution.frames(bg))
+    iterations = engine.infer(engine.resolution.frames(depth)).iterations
+    assert times["evidence_pass"][1] == times["update_rho"][1] == iterations > 1
+    assert times["pixel_entries_once"][1] == 1 and all(ms > 0 for ms, _ in times.values())
+    ms = [ms for ms, _ in times.values()]
+    assert ms == sorted(ms, reverse=True)  # the most costly first
 
 
 def test_errors_sorts_each_error_by_its_kind(tmp_path):

@@ -354,6 +354,29 @@ def test_behind_table_serves_every_frame_and_counts_in_memory(device, seed):
     assert engine.memory_bytes() - plain.memory_bytes() == BEHIND_POINT_BYTES * engine.behind_table
 
 
+def test_behind_count_at_the_mask_tests_edge(device):
+    """behind_count classes a reading from the point's stored half-width W (kernels.mean_field):
+    readings a millionth of W inside and outside mu +- W, in front and behind, get the
+    reference's classes (the mask test itself), so the counts are the reference's."""
+    geom, params, depth, bg_frames = random_scene(1, shape="solid")
+    params = dataclasses.replace(params, sparse_epsilon=0.0, behind_cost=3.0, behind_low=0.3, behind_step=1)
+    engine = Engine(geom, params, device)
+    engine.set_background_frames(bg_frames)
+    pixel, mu, half = (a.numpy() for a in (engine.behind_pixel, engine.behind_mu, engine.behind_half))
+    rng = np.random.default_rng(1)
+    frame = depth.copy().reshape(-1)
+    pick = rng.permutation(len(pixel))
+    side = rng.choice([-1.0, 1.0], len(pixel)) * rng.choice([1 - 1e-6, 1 + 1e-6], len(pixel))
+    frame[pixel[pick]] = (mu[pick] + side[pick] * half[pick]).astype(np.float32)  # the last pick of a pixel stays
+    frame = frame.reshape(depth.shape)
+    engine.infer(frame)
+    listed = engine.per_location.numpy() > 0
+    want = ref.behind_count(frame, geom, params, np.ones(len(geom.rect), bool))
+    np.testing.assert_array_equal(engine.n_behind.numpy()[listed], want[listed])
+    near = np.abs(np.abs(frame.reshape(-1)[pixel] - mu) / half - 1) < 1e-5
+    assert near.sum() > 100 and want[listed].max() > 0  # many readings at the edge, some behind
+
+
 @pytest.mark.parametrize("path", ["exact", "sparse", "graph"])
 @pytest.mark.parametrize("shape", ["plane", "solid"])
 @pytest.mark.parametrize("seed", range(3))
