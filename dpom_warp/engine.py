@@ -171,6 +171,7 @@ class Engine:
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
         self.sparse_on_lists = False  # the sparse passes walk the lists (nothing has died yet)
         self.n_kept = None  # locations neither pruned nor idle, for the full passes' updates
+        self.n_listed = None  # pixels with entries after the pruning, for the passes over the lists
         self.tile, tiles_x = tile, -(-self.width // tile)
         self.n_tiles = tiles_x * -(-self.height // tile)
         P, L = batch * self.n_pixels, batch * self.n_locations
@@ -250,6 +251,8 @@ class Engine:
             self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
             self.kept_index = wp.zeros(L, dtype=wp.int32)
             self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.prune_lists
+            self.listed = wp.zeros(P, dtype=wp.int32)  # pixels whose list keeps an entry (prune_lists)
+            self.n_listed_out = wp.zeros(1, dtype=wp.int32)
             self.live_count = wp.zeros(3, dtype=wp.int32)  # live locations, compact entries, active pixels
             self.active = wp.zeros(P, dtype=wp.int32)  # pixels with live entries (kernels.sparse.compact_once)
             self.live_changed = wp.zeros(2, dtype=wp.int32)  # live set changed, a location revived
@@ -547,6 +550,8 @@ class Engine:
         pixels, active = self.batch * self.n_pixels, self.no_index
         if not full_lists and self.n_active is not None:  # the pixels with live entries alone
             pixels, active = self.n_active, self.active
+        elif full_lists and self.n_listed is not None:  # the pixels with entries alone
+            pixels, active = self.n_listed, self.listed
         launch, p = self._launch, self.params
         if pixels:
             launch(K.evidence_pass, pixels, [*lists, self.delta_bg, self.rho, self.behind, self.evidence,
@@ -621,19 +626,19 @@ class Engine:
             wp.launch(K.prune, dim=len(self.upper), device=dev,
                       inputs=[p.sparse_epsilon, self.upper, self.rho, self.live])
         self.per_location.zero_()
+        self.n_listed_out.zero_()
         wp.launch(K.prune_lists, dim=dim, device=dev,
                   inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
-                          self.live, self.per_location])
+                          self.live, self.per_location, self.listed, self.n_listed_out])
         wp.launch(K.mark_idle, dim=len(self.live), device=dev, inputs=[self.per_location, self.live])
 
     def _count_behind(self):
         """n_behind: what the lists leave out, the readings behind each listed location's
-        object (kernels.behind_count), after counting each location's entries (prune_lists
-        with nothing pruned yet, or after the pruning)."""
+        object (kernels.behind_count), after counting each location's entries in the lists
+        (before the pruning, or after it: the pruned ones are in no list)."""
         self.per_location.zero_()
-        wp.launch(K.prune_lists, dim=self.batch * self.n_pixels, device=self.device,
-                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
-                          self.live, self.per_location])
+        wp.launch(K.count_entries, dim=self.batch * self.n_pixels, device=self.device,
+                  inputs=[self.offsets, self.counts, self.entry_loc, self.per_location])
         p = self.params
         wp.launch(K.behind_count, dim=len(self.live), device=self.device,
                   inputs=[self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu,
@@ -749,11 +754,13 @@ class Engine:
         self.done.assign(np.arange(self.batch, dtype=np.int32) >= n)  # padding frames: done
         logit_prior = math.log(p.prior) - math.log1p(-p.prior)
         bound = p.sparse_epsilon > 0 and p.bound_rounds > 0
-        self.n_kept = None
+        self.n_kept = self.n_listed = None
         if p.sparse_epsilon > 0:  # the bound, then locations in no list stay where they start
             self.prune(logit_prior)
-            if not self.graph:  # full passes update all but the pruned and idle ones
+            if not self.graph:  # full passes update all but the pruned and idle ones, and the
+                # passes over the lists run over the pixels with entries (read after one sync)
                 self.n_kept = self._gather(self.kept_index)
+                self.n_listed = int(self.n_listed_out.numpy()[0])
         if p.behind_cost > 0 and not bound:  # (with the bound, prune counted them first)
             self._count_behind()
         self._run_loop(logit_prior)

@@ -14,16 +14,20 @@
 
 from .background import (background_delta, background_from_frames, cluster_background, cluster_frames,
                          floor_background)
-from .masks import PixelTable, TablePair, TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once, table_pairs, table_window
+from .masks import (PixelTable, TablePair, TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once, table_pairs,
+                    table_window)
 from .mean_field import (ONE_STACK, SIZED_STACK, behind_count, behind_points, check_converged, evidence_pass, exclusion_pass,
                          keep_better_top, soft_threshold, top_band, transparency_pass, update_rho)
 from .pixel_model import GeometryArrays, PixelModel
-from .sparse import (IDLE, PRUNED, bound_pass, compact_again, compact_once, count_iteration, count_live, fill_live,
+from .sparse import (IDLE, PRUNED, bound_pass, compact_again, compact_once, count_entries, count_iteration, count_live,
+                     fill_live,
                      gather_live, mark_idle, prune, prune_lists, update_bound)
 
 __all__ = [
-    "GeometryArrays", "IDLE", "ONE_STACK", "PRUNED", "SIZED_STACK", "PixelModel", "PixelTable", "TablePair", "TileIndex", "table_window", "background_delta", "background_from_frames",
-    "behind_count", "behind_points", "bound_pass", "check_converged", "compact_again", "compact_once", "count_iteration", "gather_live", "mark_idle", "cluster_background", "cluster_frames", "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background", "keep_better_top",
-    "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "table_pairs", "prune", "prune_lists", "soft_threshold", "top_band", "transparency_pass",
-    "update_bound", "update_rho",
+    "GeometryArrays", "IDLE", "ONE_STACK", "PRUNED", "SIZED_STACK", "PixelModel", "PixelTable", "TablePair", "TileIndex",
+    "background_delta", "background_from_frames", "behind_count", "behind_points", "bound_pass", "check_converged",
+    "cluster_background", "cluster_frames", "compact_again", "compact_once", "count_entries", "count_iteration",
+    "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background", "gather_live", "keep_better_top",
+    "mark_idle", "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "prune", "prune_lists", "soft_threshold",
+    "table_pairs", "table_window", "top_band", "transparency_pass", "update_bound", "update_rho",
 ]

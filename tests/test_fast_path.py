@@ -208,6 +208,13 @@ def test_sparse_path_matches_sparse_reference(device, seed, streak):
     assert got.live < len(geom.rect) // 2, "nothing was dropped: the sparse path is not exercised"
     np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    # the passes over the lists ran over the pixels with entries after the pruning, all of them
+    held = np.flatnonzero(engine.counts.numpy())
+    listed = engine.listed.numpy()[:engine.n_listed]
+    assert 0 < engine.n_listed < engine.n_pixels
+    np.testing.assert_array_equal(np.sort(listed), held)
+    if device == "cpu":
+        np.testing.assert_array_equal(listed, held)  # in pixel order: the sums' order
 
 
 @pytest.mark.parametrize("eps", [1e-3, 1e-4])
