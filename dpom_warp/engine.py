@@ -620,9 +620,10 @@ class Engine:
                 wp.launch(K.bound_pass, dim=dim, device=dev,
                           inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
                                   self.delta_bg, self.rho, self.upper, self.behind, self.evidence,
-                                  self.n_pixels, self.done, self.local_scratch])
+                                  self.n_pixels, self.done, self.local_scratch, p.sparse_epsilon])
                 wp.launch(K.update_bound, dim=len(self.upper), device=dev,
-                          inputs=[logit_prior, p.behind_cost, self.n_behind, self.evidence, self.upper])
+                          inputs=[logit_prior, p.behind_cost, self.n_behind, self.evidence, self.upper,
+                                  p.sparse_epsilon, self.rho])
             wp.launch(K.prune, dim=len(self.upper), device=dev,
                       inputs=[p.sparse_epsilon, self.upper, self.rho, self.live])
         self.per_location.zero_()

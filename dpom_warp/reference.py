@@ -289,11 +289,15 @@ def evidence_bound(valid, L, D, dbg, rho0, params: ModelParams, behind=0.0):
     T_j >= Tmin_j = prod_{m<j} (1 - rmax_m), and B_j >= Bmin_j (Bmin_n = Delta_bg,i,
     Bmin_j = Bmin_{j+1} + min(0, rmax_{j+1} (D_{j+1} - Bmin_{j+1}))); with x = D_j - Bmin_j
     pixel i adds to k_j's evidence at most x if x >= 0, else Tmin_j x. u_k = sigmoid(logit(prior)
-    + those sums); each round starts from the last round's u (u = 1 before the first)."""
+    + those sums); each round starts from the last round's u (u = 1 before the first). A
+    location already settled at a round's start (u below params.sparse_epsilon and at or below
+    its rho0: pruned whatever follows, and its rmax is rho0 either way) keeps its u: the kernel
+    skips the pixels holding settled locations alone (the others' sums are the same)."""
     K = len(rho0)
     logit_prior = np.log(params.prior) - np.log1p(-params.prior)
     upper = np.ones(K)
     for _ in range(params.bound_rounds):
+        settled = (upper < params.sparse_epsilon) & (upper <= rho0)
         r = np.where(valid, np.maximum(rho0, upper)[L], 0.0)
         t_min = front_transparency(r)
         b_min = np.empty_like(D)
@@ -304,7 +308,7 @@ def evidence_bound(valid, L, D, dbg, rho0, params: ModelParams, behind=0.0):
         x = D - b_min
         contrib = np.where(x >= 0, x, t_min * x)
         bound = np.bincount(L[valid], weights=contrib[valid], minlength=K)
-        upper = np.minimum(upper, sigmoid(logit_prior + bound - behind))
+        upper = np.where(settled, upper, np.minimum(upper, sigmoid(logit_prior + bound - behind)))
     return upper
 
 

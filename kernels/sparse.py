@@ -106,6 +106,7 @@ def bound_pass(
     pixels: int,
     done: wp.array(dtype=wp.int32),
     local: int,
+    settle: wp.float64,
 ):
     """One round of the pruning bound (reference.evidence_bound): with rmax = max(rho, upper)
     (rho: the start; no iteration takes a location above it), a back-to-front pass gives
@@ -113,7 +114,11 @@ def bound_pass(
     i adds to k_j's `evidence` x = D_j - Bmin_j where x >= 0, else Tmin_j x: at least what it
     adds in any iteration. One thread per pixel of the batch, skipping frames that are done.
     With `local` (CPU) the scratch of lists up to LOCAL_ENTRIES is on the stack, as in
-    mean_field.evidence_pass; otherwise in the global `behind`."""
+    mean_field.evidence_pass; otherwise in the global `behind`. A location is settled when its
+    bound is below `settle` (epsilon) and at or below its start (so rmax is its start whatever
+    later rounds give): update_bound keeps its bound, and a pixel whose every location is
+    settled adds nothing anyone uses, so it is skipped (half the demo frame's entries in the
+    second and third rounds)."""
     p = wp.tid()
     n = counts[p]
     if n == 0:
@@ -121,6 +126,14 @@ def bound_pass(
     if done[frame_of(p, pixels)] != 0:
         return
     start = offsets[p]
+    settled = int(1)
+    for j in range(start, start + n):
+        k = entry_loc[j]
+        if upper[k] >= settle or upper[k] > rho[k]:
+            settled = 0
+            break
+    if settled == 1:
+        return
     b = delta_bg[p]
     if local != 0 and n <= LOCAL_ENTRIES:
         if local == SIZED_STACK and n <= LOCAL_SHORT:
@@ -155,12 +168,18 @@ def update_bound(
     behind: wp.array(dtype=wp.int32),
     evidence: wp.array(dtype=wp.float64),
     upper: wp.array(dtype=wp.float64),
+    settle: wp.float64,
+    rho: wp.array(dtype=wp.float64),
 ):
     """upper <- min(upper, sigmoid(logit(prior) + the round's bound - behind_cost x behind)),
     behind[i] the location's readings behind its object (mean_field.behind_count), a fixed
-    part of its evidence (update_rho subtracts it the same way); clears the evidence."""
+    part of its evidence (update_rho subtracts it the same way), except for a settled location
+    (bound_pass: upper < settle and upper <= rho, its start), whose bound stays as it is;
+    clears the evidence."""
     i = wp.tid()
-    upper[i] = wp.min(upper[i], sigmoid(logit_prior + evidence[i] - behind_cost * f64(behind[i])))
+    u = upper[i]
+    if u >= settle or u > rho[i]:
+        upper[i] = wp.min(u, sigmoid(logit_prior + evidence[i] - behind_cost * f64(behind[i])))
     evidence[i] = f64(0.0)
 
 

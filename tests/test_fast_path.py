@@ -137,6 +137,10 @@ def check_bound_against_reference(device, seed, shape, step=0.3, behind_cost=0.0
     if behind_cost > 0:  # not vacuous: the term prunes a location the bound alone keeps
         alone = ref.evidence_bound(valid, L, D, dbg, start, params)
         assert ((want < params.sparse_epsilon) & (alone >= params.sparse_epsilon)).any()
+    if params.bound_rounds > 1:  # not vacuous: the last round starts with settled locations
+        before = ref.evidence_bound(valid, L, D, dbg, start, dataclasses.replace(
+            params, bound_rounds=params.bound_rounds - 1), behind)
+        assert ((before < params.sparse_epsilon) & (before <= start)).sum() > 10
     for local in (0, ONE_STACK, SIZED_STACK):
         engine = Engine(geom, params, device)
         engine.local_scratch = local
