@@ -49,8 +49,8 @@ def pixel_model(params: ModelParams) -> K.PixelModel:
 
 INT32_MAX = 2**31 - 1  # list offsets are int32
 ENTRY_BYTES = 4 + 4 + 4 + 8 + 4 + 4  # location, object depth, Delta, B scratch, compact copy
-PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 8 + 4 + 4  # ray, depth, count, offset, Delta_bg, background,
-# compact, floor mask, active pixels
+PIXEL_BYTES = 24 + 4 + 4 + 4 + 8 + 32 + 32 + 8 + 4 + 4 + 4  # ray, depth, count, offset, Delta_bg, background
+# and its logarithms, compact, floor mask, active and listed pixels
 LOCATION_BYTES = 4 * 4 + 24 + 8 + 24 + 8 * 7 + 4 + 4 + 4 + 4 + 60 + 4 + 4  # rect, normal, plane,
 # centre, area, five accumulators and the pruning bound, live, live and kept indices, entries,
 # top-band, whole-silhouette and shorter band's counts (five each), the damping streak, the
@@ -219,6 +219,8 @@ class Engine:
             self.offsets = wp.zeros(P, dtype=wp.int32)
             self.delta_bg = wp.zeros(P, dtype=wp.float64)
             self.bg = wp.zeros((P, 4), dtype=wp.float64)
+            self.bg_logs = wp.zeros(P, dtype=wp.vec4d)  # its logarithms (kernels.background_delta)
+            self.bg_fresh = True  # bg changed since bg_logs were written
             self.floor_pixels = wp.ones(self.n_pixels, dtype=wp.int32)  # floor-only model here
             self.rho = wp.zeros(L, dtype=wp.float64)
             self.upper = wp.zeros(L, dtype=wp.float64)  # the pruning bound (kernels.sparse)
@@ -428,6 +430,7 @@ class Engine:
         wp.launch(K.floor_background, dim=self.depth.shape, device=self.device,
                   inputs=[self.geo.rays, self.centre, self.depth, self.bounds, outside_is_static,
                           self.pm, self.floor_pixels, self.bg])
+        self.bg_fresh = True
 
     def set_background_estimate(self, estimator):
         """Use an auto background (background.BackgroundEstimator at this engine's
@@ -446,7 +449,7 @@ class Engine:
             scratch = wp.zeros((self.n_pixels, frames.shape[0]), dtype=wp.float64)
             wp.launch(K.background_from_frames, dim=(self.height, self.width),
                       inputs=[f, self.pm, scratch, self.batch, self.bg])
-        self.floor_mode, self.fallback_pixels = False, 0
+        self.floor_mode, self.fallback_pixels, self.bg_fresh = False, 0, True
 
     def set_background(self, bg: Background, fallback: np.ndarray | None = None):
         """Use a given per-pixel background distribution (arrays of shape (H, W)); pixels
@@ -454,6 +457,7 @@ class Engine:
         how many pixels those are."""
         b = np.stack([bg.mu, bg.sigma, bg.missing, bg.outlier], -1).reshape(self.n_pixels, 4)
         self.bg.assign(np.ascontiguousarray(np.tile(b, (self.batch, 1)), dtype=np.float64))
+        self.bg_fresh = True
         mask = np.zeros(self.n_pixels, np.int32) if fallback is None else np.asarray(fallback).ravel()
         self.floor_pixels.assign(mask.astype(np.int32))
         self.fallback_pixels = int(mask.sum())
@@ -498,7 +502,8 @@ class Engine:
         if self.floor_mode and self.params.background_outside_grid:
             self._floor_background(1)
         wp.launch(K.background_delta, dim=self.depth.shape, device=dev,
-                  inputs=[self.depth, self.pm, self.bg, self.delta_bg])
+                  inputs=[self.depth, self.pm, self.bg, int(self.bg_fresh), self.bg_logs, self.delta_bg])
+        self.bg_fresh = False
         lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
         inputs = [self.depth, self.geo, self.pm, self.bg, self.tiles, self.table, self.n_locations]
         if self.one_pass_lists:  # CPU: each mask test once (kernels.masks.pixel_entries_once)

@@ -6,14 +6,24 @@ mu, sigma, pi_inf, pi_out (pi_out = 1 is a broad, uniform distribution over the 
 
 import warp as wp
 
-from .pixel_model import PixelModel, f64, gaussian_logpdf, is_reading, logaddexp, sensor_sigma
+from .pixel_model import PixelModel, f64, gaussian_logpdf_from_log, is_reading, logaddexp, sensor_sigma
 
 
 @wp.func
-def log_theta(pm: PixelModel, z: wp.float64, mu: wp.float64, sigma: wp.float64,
-              missing: wp.float64, outlier: wp.float64) -> wp.float64:
-    gauss = wp.log(f64(1.0) - outlier) + gaussian_logpdf(z, mu, sigma)
-    return wp.log(f64(1.0) - missing) + logaddexp(wp.log(outlier) - wp.log(pm.z_max), gauss)
+def background_logs(pm: PixelModel, sigma: wp.float64, missing: wp.float64, outlier: wp.float64) -> wp.vec4d:
+    """The logarithms log theta_bg,i takes of a pixel's background: log(1 - pi_out),
+    log(sigma), log(1 - pi_inf), log(pi_out) - log(z_max); the same from frame to frame while
+    the background is (background_delta keeps them)."""
+    return wp.vec4d(wp.log(f64(1.0) - outlier), wp.log(sigma), wp.log(f64(1.0) - missing),
+                    wp.log(outlier) - wp.log(pm.z_max))
+
+
+@wp.func
+def log_theta_from_logs(z: wp.float64, mu: wp.float64, sigma: wp.float64, logs: wp.vec4d) -> wp.float64:
+    """log theta_bg,i(z) (MODEL.md): log(1 - pi_inf) + logaddexp(log(pi_out / z_max),
+    log(1 - pi_out) + log N(z | mu, sigma^2)), from the pixel's background_logs."""
+    gauss = logs[0] + gaussian_logpdf_from_log(z, mu, sigma, logs[1])
+    return logs[2] + logaddexp(logs[3], gauss)
 
 
 @wp.func
@@ -36,13 +46,21 @@ def background_delta(
     depth: wp.array3d(dtype=wp.float32),
     pm: PixelModel,
     bg: wp.array2d(dtype=wp.float64),
+    fresh: int,
+    logs: wp.array(dtype=wp.vec4d),
     delta_bg: wp.array(dtype=wp.float64),
 ):
+    """Delta_bg,i = log theta_bg,i(z_i) of every pixel's reading (0 without one). The
+    background's logarithms (background_logs) are kept in `logs`: written with `fresh` (the
+    background changed since the last frame), read otherwise: the same values, without four
+    logarithms a pixel a frame."""
     b, v, u = wp.tid()
     p = (b * depth.shape[1] + v) * depth.shape[2] + u
+    if fresh != 0:
+        logs[p] = background_logs(pm, bg[p, 1], bg[p, 2], bg[p, 3])
     z = f64(depth[b, v, u])
     if is_reading(pm, z):
-        delta_bg[p] = log_theta(pm, z, bg[p, 0], bg[p, 1], bg[p, 2], bg[p, 3])
+        delta_bg[p] = log_theta_from_logs(z, bg[p, 0], bg[p, 1], logs[p])
     else:
         delta_bg[p] = f64(0.0)
 

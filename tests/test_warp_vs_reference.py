@@ -123,6 +123,37 @@ def test_background_kernels_match_reference(device):
     np.testing.assert_allclose(engine.delta_bg.numpy().size, depth.size)
 
 
+@pytest.mark.parametrize("outside", [False, True])  # the floor-only model completed from each frame or not
+def test_background_delta_follows_every_change_of_background(device, outside):
+    """Delta_bg (kernels.background_delta keeps the background's logarithms from frame to
+    frame) equals the reference on the engine's background of the moment, frame after frame,
+    after each way of setting it: frames, the floor-only model, a given distribution, frames
+    again."""
+    from dpom_warp.model import Background
+
+    geom, params, depth, frames = random_scene(3)
+    params = dataclasses.replace(params, background_outside_grid=outside)
+    engine = Engine(geom, params, device)
+    given = ref.background_from_frames(frames[::-1] * 1.05, params)
+    given = Background(mu=given.mu, sigma=2 * given.sigma, missing=np.full_like(given.missing, 0.2),
+                       outlier=np.clip(given.outlier, 0.05, 1.0))
+    before = None
+    for setting in ("frames", "floor", "given", "frames"):
+        if setting == "frames":
+            engine.set_background_frames(frames)
+        elif setting == "floor":
+            engine.set_floor_background()
+        else:
+            engine.set_background(given)
+        for frame in (depth, np.roll(depth, 5, axis=1) * 1.1):
+            engine.build_lists(frame)
+            got = engine.delta_bg.numpy().copy()  # (on the CPU a view of the engine's array)
+            want = ref.background_delta(frame, engine.background(), params).ravel()
+            np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+            assert before is None or not np.array_equal(got, before)
+            before = got
+
+
 def test_lists_longer_than_the_one_pass_buffer(device):
     """Pixels with more entries than pixel_entries_once keeps on its stack are filled by the
     two-pass kernel, alone; the lists are the reference's either way."""
