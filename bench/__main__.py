@@ -376,14 +376,18 @@ def main():
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)
     if a.kernels:
+        times = {name: kernel_times(*load_scene(name), device, a.repeats) for name in a.scenes}
+        first = times[a.scenes[0]]
+        kernels = list(first) + sorted({k for t in times.values() for k in t} - set(first))
         lines = [f"Machine: {platform.machine()}, {platform.node()}; device {device} ({wp.get_device(device).name}); "
-                 f"Warp {wp.__version__}; fast path; each kernel's time summed over a frame, median of {a.repeats} "
-                 "frames after a warm-up, a device sync after every launch"]
-        for name in a.scenes:
-            lines += ["", f"| {name}: kernel | ms a frame | launches a frame |", "|---|---|---|"]
-            times = kernel_times(*load_scene(name), device, a.repeats)
-            lines += [f"| {k} | {ms:.2f} | {n:g} |" for k, (ms, n) in times.items()]
-            lines.append(f"| all | {sum(ms for ms, _ in times.values()):.2f} | |")
+                 f"Warp {wp.__version__}", "",
+                 "| kernel | " + " | ".join(f"{name}: ms a frame | launches" for name in a.scenes) + " |",
+                 "|---|" + "---|---|" * len(a.scenes)]
+        for k in kernels:
+            lines.append(f"| `{k}` | " + " | ".join(f"{t[k][0]:.2f} | {t[k][1]:g}" if k in t else "- | -"
+                                                   for t in times.values()) + " |")
+        lines.append("| all | " + " | ".join(f"**{sum(ms for ms, _ in t.values()):.1f}** | "
+                                             f"{sum(n for _, n in t.values()):g}" for t in times.values()) + " |")
         print("\n".join(lines))
         (out / f"kernels_{device.replace(':', '')}.md").write_text("\n".join(lines) + "\n")
         return

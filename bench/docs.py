@@ -14,6 +14,8 @@ the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/
 - real: the real Kinect frame (pose fitted, floor-only background), its picture;
 - eval: `dpom-warp eval` of the demo against its floor-only run, with two of its plots;
 - speed: `python -m bench` on the demo frame and the drone frame, against the NumPy reference;
+- kernels: where the fast path's frame goes, kernel by kernel, on both people scenes
+  (`python -m bench --kernels`);
 - scaleout: one process, `--workers 2` and `--ray` on the demo (`python -m bench.scaleout`);
 - tracking: tracks on five long rendered sequences, KSP, online and naive linking, and the
   tracker's time and memory on a 10,000-frame run (`python -m bench.tracking`), its picture;
@@ -314,6 +316,15 @@ def speed_block(out: Path) -> str:
                      stamp("fast (defaults) and exact paths as labelled; median of 3 runs after a warm-up")])
 
 
+def kernels_block(out: Path) -> str:
+    md = bench_markdown("bench", out / "bench", "kernels_cpu.md", "--kernels", "--scenes", "kinect_v2",
+                        "kinect_v2_far", "--repeats", "5")
+    table = [line for line in md.splitlines() if line.startswith("|")]
+    return "\n".join(table + ["", stamp("fast path (defaults); `python -m bench --kernels`; each kernel's time "
+                                         "summed over a frame, a device sync after every launch; median of 5 "
+                                         "frames after a warm-up")])
+
+
 def _drop_empty_columns(table: list[str]) -> list[str]:
     cells = [line.strip("|").split("|") for line in table]
     n = max(len(c) for c in cells)
@@ -356,7 +367,8 @@ def live_block(out: Path) -> str:
 BUILDERS = {"config": lambda out, jobs: config_block(), "demo": lambda out, jobs: demo_block(out),
             "robustness": robustness_block, "drones": lambda out, jobs: drones_block(out),
             "real": lambda out, jobs: real_block(out), "eval": lambda out, jobs: eval_block(out),
-            "speed": lambda out, jobs: speed_block(out), "scaleout": lambda out, jobs: scaleout_block(out),
+            "speed": lambda out, jobs: speed_block(out), "kernels": lambda out, jobs: kernels_block(out),
+            "scaleout": lambda out, jobs: scaleout_block(out),
             "tracking": lambda out, jobs: tracking_block(out),
             "recordings": lambda out, jobs: recordings_block(out),
             "live": lambda out, jobs: live_block(out), "ground": lambda out, jobs: ground_block(out)}
