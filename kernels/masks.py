@@ -63,8 +63,8 @@ class TileIndex:
 @wp.struct
 class TablePair:
     """One pair of the pixel table, its fields side by side: a pixel's walk reads one record
-    a pair (32 bytes, two a cache line) instead of five arrays (module doc: the table is tens
-    of MB, so the walk waits on memory)."""
+    a pair (32 bytes, two a cache line) instead of five arrays (the table is tens of MB, more
+    than a CPU's cache, so the walk waits on memory)."""
 
     mu: wp.float64  # the object depth (object_depth)
     sigma: wp.float64  # its object sigma (object_sigma)
