@@ -789,7 +789,7 @@ class Engine:
         def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
             wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
                       inputs=[self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]),
-                              lo, hi, TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate, *counts])
+                              lo, hi, TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate, *counts, self.forward])
 
         if unhidden:
             top_band(-BAND_ALL, BAND_ALL, self.rho,

@@ -306,6 +306,49 @@ def reading_class(pm: PixelModel, z: wp.float64, mu: wp.float64, var: wp.float64
     return IN_FRONT
 
 
+@wp.func
+def solid_depth_span(geo: GeometryArrays, k: int, forward: wp.vec3d) -> wp.vec2d:
+    """The z-depths (ray parameters, t = (X - centre) . forward) that location k's solid's
+    bounding box spans, the nearest floored at 0: every point of the solid lies between."""
+    p = geo.location[k]
+    reach = wp.max(wp.max(geo.body_radius, geo.depth_radius), wp.max(geo.head_radius, geo.leg_radius))
+    t_lo = f64(1.0e30)
+    t_hi = f64(0.0)
+    for corner in range(8):
+        dx = reach
+        if corner % 2 == 0:
+            dx = -reach
+        dy = reach
+        if (corner / 2) % 2 == 0:
+            dy = -reach
+        dz = geo.top
+        if corner / 4 == 0:
+            dz = geo.bottom
+        t = wp.dot(wp.vec3d(p[0] + dx, p[1] + dy, p[2] + dz) - geo.centre, forward)
+        t_lo = wp.min(t_lo, t)
+        t_hi = wp.max(t_hi, t)
+    return wp.vec2d(wp.max(t_lo, f64(0.0)), t_hi)
+
+
+@wp.func
+def row_may_reach(geo: GeometryArrays, v: int, u0: int, u1: int, step: int, centre_z: wp.float64,
+                  span: wp.vec2d, low: wp.float64, high: wp.float64) -> bool:
+    """Whether a point of the solid seen in image row v (columns u0 to u1 every `step`) can
+    lie between heights `low` and `high`: its height is centre_z + t d_z for a z-depth t in
+    `span` (solid_depth_span) and the vertical component d_z of one of the row's rays, so the
+    products' extremes bound it (with a margin for rounding)."""
+    z_lo = f64(1.0e30)  # the row's vertical ray components
+    z_hi = f64(-1.0e30)
+    for u in range(u0, u1 + 1, step):
+        z_lo = wp.min(z_lo, geo.rays[v, u][2])
+        z_hi = wp.max(z_hi, geo.rays[v, u][2])
+    t_lo = span[0]
+    t_hi = span[1]
+    h_lo = centre_z + wp.min(wp.min(t_lo * z_lo, t_lo * z_hi), wp.min(t_hi * z_lo, t_hi * z_hi))
+    h_hi = centre_z + wp.max(wp.max(t_lo * z_lo, t_lo * z_hi), wp.max(t_hi * z_lo, t_hi * z_hi))
+    return not (h_hi + f64(1.0e-9) < low or h_lo - f64(1.0e-9) > high)
+
+
 @wp.kernel(enable_backward=False)
 def behind_points(
     geo: GeometryArrays,
@@ -342,34 +385,9 @@ def behind_points(
     r = geo.rect[k]
     u0 = (r[0] + step - 1) / step * step  # the first lattice column and row in the rectangle
     v0 = (r[1] + step - 1) / step * step
-    # the z-depths (ray parameters) the solid's bounding box spans, floored at 0
-    p = geo.location[k]
-    reach = wp.max(wp.max(geo.body_radius, geo.depth_radius), wp.max(geo.head_radius, geo.leg_radius))
-    t_lo = f64(1.0e30)
-    t_hi = f64(0.0)
-    for corner in range(8):
-        dx = reach
-        if corner % 2 == 0:
-            dx = -reach
-        dy = reach
-        if (corner / 2) % 2 == 0:
-            dy = -reach
-        dz = geo.top
-        if corner / 4 == 0:
-            dz = geo.bottom
-        t = wp.dot(wp.vec3d(p[0] + dx, p[1] + dy, p[2] + dz) - geo.centre, forward)
-        t_lo = wp.min(t_lo, t)
-        t_hi = wp.max(t_hi, t)
-    t_lo = wp.max(t_lo, f64(0.0))
+    span = solid_depth_span(geo, k, forward)
     for v in range(v0, r[3] + 1, step):
-        z_lo = f64(1.0e30)  # the row's vertical ray components
-        z_hi = f64(-1.0e30)
-        for u in range(u0, r[2] + 1, step):
-            z_lo = wp.min(z_lo, geo.rays[v, u][2])
-            z_hi = wp.max(z_hi, geo.rays[v, u][2])
-        h_lo = centre_z + wp.min(wp.min(t_lo * z_lo, t_lo * z_hi), wp.min(t_hi * z_lo, t_hi * z_hi))
-        h_hi = centre_z + wp.max(wp.max(t_lo * z_lo, t_lo * z_hi), wp.max(t_hi * z_lo, t_hi * z_hi))
-        if h_hi + f64(1.0e-9) < low or h_lo - f64(1.0e-9) > high:  # (a margin for rounding)
+        if not row_may_reach(geo, v, u0, r[2], step, centre_z, span, low, high):
             continue
         first_u = int(-1)
         for u in range(u0, r[2] + 1, step):
@@ -464,6 +482,7 @@ def top_band(
     hidden: wp.array(dtype=wp.int32),
     missing: wp.array(dtype=wp.int32),
     seen: wp.array(dtype=wp.int32),
+    forward: wp.vec3d,
 ):
     """The top band of a standing box (heights lo to hi on its facing plane): how many of its
     silhouette's pixels there pass the mask test (support), read behind the plane (against:
@@ -487,7 +506,11 @@ def top_band(
     n = int(0)
     if rho[i] >= min_rho:
         r = geo.rect[k]
+        span = solid_depth_span(geo, k, forward)
         for v in range(r[1], r[3] + 1):
+            # with the solid, a row none of whose points can lie in the band is skipped
+            if geo.solid == 1 and not row_may_reach(geo, v, r[0], r[2], 1, centre_z, span, lo, hi):
+                continue
             for u in range(r[0], r[2] + 1):
                 d = geo.rays[v, u]
                 o = object_depth(geo, k, d)

@@ -194,7 +194,7 @@ def test_band_out_of_view_counts_like_the_reference(device):
               inputs=[engine.depth, engine.geo, engine.pm, float(geom.centre[2]), params.top_band * h, h,
                       TOP_MIN_RHO, params.top_sigmas, engine.bg, MISSING_READ,
                       wp.array(gate, dtype=wp.float64, device=device),
-                      *counts])
+                      *counts, engine.forward])
     want = ref.top_band(depth, geom, params, gate, ref.floor_background(geom, params, depth))
     for got, w in zip(counts, want):
         np.testing.assert_array_equal(got.numpy(), w)
