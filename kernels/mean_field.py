@@ -375,10 +375,10 @@ def behind_points(
     between the legs) or above `high` (heads: people are shorter or taller than the solid).
     With fill 0, counts[k] = how many; with fill 1 they are written from first[k] on: the
     pixel (v x width + u), the object's depth mu and extra variance var there (object_depth)
-    and the mask test's half-width there (masks.test_half_width). One thread per location. `forward`: the camera's optical axis (a ray's parameter is its
-    z-depth, d . forward = 1): a lattice row none of whose points can lie between `low` and
-    `high` on the solid (the z-depths of the solid's bounding box times the row's vertical ray
-    components) is skipped without walking it, which changes no point."""
+    and the mask test's half-width there (masks.test_half_width). One thread per location.
+    `forward`: the camera's optical axis (a ray's parameter is its z-depth, d . forward = 1): a
+    lattice row none of whose points can lie between `low` and `high` on the solid
+    (row_may_reach) is skipped without walking it, which changes no point."""
     k = wp.tid()
     width = geo.rays.shape[1]
     n = int(0)
@@ -494,7 +494,9 @@ def top_band(
     region); `seen` counts the
     band's pixels in the image, with a reading or not (a band outside the image has none). One
     thread per location of the batch, for those with rho >= min_rho (the others: 0, 0, 0, 0
-    and seen -1)."""
+    and seen -1). With the solid, the rows of the rectangle that cannot reach the band
+    (row_may_reach, `forward` the optical axis as in behind_points) are skipped: the same
+    counts."""
     i = wp.tid()
     n_loc = geo.rect.shape[0]
     b = i / n_loc
