@@ -110,7 +110,8 @@ def _report(summary: dict, out: str) -> None:
     live = summary.get("live")
     if live:
         print(f"live: {live['frames']} frames inferred of {live['received']} received ({live['dropped']} "
-              f"dropped), {live['frames_per_s'] or 0:.1f} frames/s, latency median "
+              f"dropped), {live['frames_per_s_steady'] or live['frames_per_s'] or 0:.1f} frames/s once running "
+              f"({live['frames_per_s'] or 0:.1f} over the whole run), latency median "
               f"{live['latency_ms_median'] or 0:.0f} ms (stopped by {live['stopped_by']})")
     t = summary["timings"]
     print(f"{summary['frames']} frames, {summary['detections']} detections; median "

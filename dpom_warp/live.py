@@ -183,7 +183,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         view = RerunLog(cfg.output.rerun, spawn=bool(VIEW))
         view.camera(camera)
     slot = NewestFrame()
-    records, names, latencies, infer_s = {}, [], [], []
+    records, names, latencies, infer_s, finished = {}, [], [], [], []  # finished: when each was written
     done, taken, t_first, last_line, track_s = 0, 0, None, time.perf_counter(), 0.0
     # [frame, depth, small, FrameResult, future or None (being inferred here), inference s,
     # process], in the order the frames were taken
@@ -326,7 +326,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             t1 = time.perf_counter()
             tracker.push(res.rho_star)
             track_s += time.perf_counter() - t1
-        latencies.append(time.perf_counter() - fr.arrived)
+        finished.append(time.perf_counter())
+        latencies.append(finished[-1] - fr.arrived)
         infer_s.append(infer)
         done += 1
 
@@ -414,7 +415,12 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     summary["tracking"] = report
     summary["live"] = {"source": info.kind, "frames": done, "received": slot.received,
                        "dropped": slot.dropped, "dropped_share": slot.dropped / max(1, slot.received),
-                       "frames_per_s": done / wall if wall > 0 else None, "processes": workers,
+                       "frames_per_s": done / wall if wall > 0 else None,
+                       # the output rate once running: frames written from the first's record to
+                       # the last's (the pipeline's start and the run's shutdown left out)
+                       "frames_per_s_steady": ((done - 1) / (finished[-1] - finished[0])
+                                               if done > 1 and finished[-1] > finished[0] else None),
+                       "processes": workers,
                        "camera_fps": fps, "stopped_by": stopped_by, "stop_error": stop_error,
                        "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
                        "latency_ms_p95": 1000 * float(np.percentile(latencies, 95)) if latencies else None,

@@ -46,6 +46,8 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     assert live["frames"] == summary["frames"] == 12 and live["stopped_by"] == "max_frames"
     assert live["received"] >= 12 and live["dropped"] >= live["received"] - 13  # at most one pending
     assert live["latency_ms_median"] > 0 and live["frames_per_s"] > 0
+    # once running, the output cannot outpace a 30 frames/s stream for long (11 intervals)
+    assert 0 < live["frames_per_s_steady"] <= 1.5 * live["camera_fps"] == 45
     assert summary["config"]["camera"]["width"] == 128 and summary["config"]["input"]["depth_scale"] == 0.001
     names = sorted(p.stem for p in (out / "maps").glob("*.npy"))
     assert len(names) == 12 and all(len(n) == 6 and n.isdigit() for n in names)
