@@ -187,14 +187,15 @@ def table_pairs(
 
 
 @wp.func
-def table_first(table: PixelTable, p: int, z: wp.float64) -> int:
-    """The first pair of pixel p whose running maximum of mu + W exceeds z (binary search):
-    no earlier pair can take reading z."""
-    first = table.start[p]
-    last = table.start[p + 1]
+def table_search(table: PixelTable, c: int, first: int, last: int, z: wp.float64) -> int:
+    """The first pair in [first, last) whose walk key c has passed reading z (binary search,
+    the keys being monotonic along a pixel's pairs): for c = 0, the running maximum of mu + W,
+    the first above z (no earlier pair can take z); for c = 1, the running minimum of mu - W,
+    the first at or above z (the walk's end: no later pair can take z)."""
     while first < last:
         mid = (first + last) / 2
-        if f64(table.key[mid][0]) <= z:
+        k = f64(table.key[mid][c])
+        if k < z or (c == 0 and k == z):
             first = mid + 1
         else:
             last = mid
@@ -227,27 +228,13 @@ def prefetch_pairs(pair: wp.array(dtype=TablePair), first: int, last: int):
 
 
 @wp.func
-def table_last(table: PixelTable, first: int, p: int, z: wp.float64) -> int:
-    """The first pair of pixel p from `first` on whose running minimum of mu - W is not below
-    z (binary search): the walk's end, no later pair can take reading z."""
-    last = table.start[p + 1]
-    while first < last:
-        mid = (first + last) / 2
-        if f64(table.key[mid][1]) < z:
-            first = mid + 1
-        else:
-            last = mid
-    return first
-
-
-@wp.func
 def candidates(tiles: TileIndex, table: PixelTable, u: int, v: int, z: wp.float64) -> wp.vec2i:
-    """[first, last) of the pairs that pixel (u, v) with reading z scans: its table pairs from
-    table_first on, or its tile's from z - span on (each stops earlier, see `more`)."""
+    """[first, last) of the pairs that pixel (u, v) with reading z scans: its table window
+    (table_search), or its tile's pairs from z - span on (stopping earlier, see `more`)."""
     if table.use == 1:
         p = v * table.width + u
-        first = table_first(table, p, z)
-        return wp.vec2i(first, table_last(table, first, p, z))
+        first = table_search(table, 0, table.start[p], table.start[p + 1], z)
+        return wp.vec2i(first, table_search(table, 1, first, table.start[p + 1], z))
     t = (v / tiles.size) * tiles.tiles_x + u / tiles.size
     return wp.vec2i(first_pair(tiles, t, z), tiles.start[t + 1])
 
