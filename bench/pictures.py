@@ -3,13 +3,10 @@
 Draws the picture `dpom-warp run` writes for the first frame of a standard scene (rendered
 once into .cache/bench/, as `python -m bench` does) and times, median of `--repeats` runs on
 one core: the whole picture (render.frame_picture, drawing and encoding), the encoding alone
-by render.encode_png (level 1, rows unfiltered; ISA-L's deflate, and zlib's) and by Pillow
-(compress_level 1, its per-row filter choice) of the same image, with the PNG sizes.
+by render.encode_png (zlib level 1, rows unfiltered) and by Pillow (compress_level 1, its
+per-row filter choice) of the same image, with the PNG sizes.
 
-With --whole-run N, also the whole run's marginal frame with pictures (bench's
-whole_run_marginal, medians of 3) with ISA-L's deflate and with zlib's, taken in turn N times.
-
-    python -m bench.pictures [--scene kinect_v2_far] [--repeats 10] [--whole-run N]
+    python -m bench.pictures [--scene kinect_v2_far] [--repeats 10]
 """
 
 from __future__ import annotations
@@ -21,7 +18,7 @@ import time
 
 import numpy as np
 
-from bench.__main__ import SCENES, WHOLE_RUN_SCENES, load_scene
+from bench.__main__ import SCENES, load_scene
 
 
 def median_ms(fn, repeats: int) -> float:
@@ -38,14 +35,11 @@ def main():
     from PIL import Image
 
     from dpom_warp.api import Detector
-    from dpom_warp import render
     from dpom_warp.render import encode_png, frame_picture
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", choices=list(SCENES), default="kinect_v2_far")
     ap.add_argument("--repeats", type=int, default=10)
-    ap.add_argument("--whole-run", type=int, default=0, metavar="N",
-                    help="also the whole run's marginal frame, ISA-L against zlib, N pairs in turn")
     a = ap.parse_args()
     cfg, depth, _ = load_scene(a.scene)  # renders the scene once
     path, sets = SCENES[a.scene]
@@ -69,31 +63,10 @@ def main():
         image.save(out, format="PNG", compress_level=1)
         return out.getvalue()
 
-    import zlib
-
-    def with_zlib():
-        return encode_png(rgb, deflate=zlib.compress)
-
-    whole, ours, plain, theirs = (median_ms(fn, a.repeats)
-                                  for fn in (picture, lambda: encode_png(rgb), with_zlib, pillow))
+    whole, ours, theirs = (median_ms(fn, a.repeats) for fn in (picture, lambda: encode_png(rgb), pillow))
     print(f"{a.scene}: a {rgb.shape[1]} x {rgb.shape[0]} picture {whole:.1f} ms (drawing and encoding); "
-          f"encoding alone: render.encode_png {ours:.1f} ms ({len(encode_png(rgb)) / 1024:.0f} KiB; "
-          f"{render.DEFLATE_BY}), with zlib's deflate {plain:.1f} ms ({len(with_zlib()) / 1024:.0f} KiB), "
+          f"encoding alone: render.encode_png {ours:.1f} ms ({len(encode_png(rgb)) / 1024:.0f} KiB), "
           f"Pillow {theirs:.1f} ms ({len(pillow()) / 1024:.0f} KiB); median of {a.repeats}, one core")
-    if a.whole_run and a.scene in WHOLE_RUN_SCENES:
-        from bench.__main__ import whole_run_marginal
-
-        by = {"zlib": [], render.DEFLATE_BY: []}
-        default = render._deflate
-        for _ in range(a.whole_run):
-            for name, fn in (("zlib", zlib.compress), (render.DEFLATE_BY, default)):
-                render._deflate = fn
-                by[name].append(1000 * whole_run_marginal(3, a.scene)["marginal_per_frame_s"])
-        render._deflate = default
-        print(f"{a.scene}: the whole run's marginal frame with pictures, "
-              + "; ".join(f"{k} {statistics.median(v):.1f} ms ({', '.join(f'{x:.1f}' for x in v)})"
-                          for k, v in by.items()) + f", {a.whole_run} pairs taken in turn")
-
 
 if __name__ == "__main__":
     main()

@@ -23,20 +23,15 @@ PAD = 36  # margin around panels (titles above, axis labels below)
 BAR_W = 14  # colour bar width
 
 
-try:  # Intel's ISA-L deflate: zlib streams of the same size at level 1, ~4x faster
-    from isal.isal_zlib import compress as _deflate
-    DEFLATE_BY = "ISA-L"
-except ImportError:  # (a dependency; an install without it falls back to zlib)
-    from zlib import compress as _deflate
-    DEFLATE_BY = "zlib"
-
-
-def encode_png(rgb: np.ndarray, level: int = 1, deflate=None) -> bytes:
+def encode_png(rgb: np.ndarray, level: int = 1) -> bytes:
     """A PNG file's bytes of an (H, W, 3) uint8 image: 8-bit RGB, every row unfiltered, one
-    zlib stream at `level`, by `deflate` (default ISA-L's, else zlib's compress). Pillow's
-    writer chooses a filter per row, which on these flat plots costs more than it saves
-    (`python -m bench.pictures`: its encoding against this one's with each compressor).
-    Both compressors release the GIL while they compress."""
+    zlib stream at `level` by zlib's compress. Pillow's writer chooses a filter per row, which
+    on these flat plots costs more than it saves (`python -m bench.pictures`). zlib releases
+    the GIL while it compresses and gives the same bytes for the same image whatever the
+    thread or process: runs that resume, share frames between processes or run on Ray must
+    write a one-process run's files byte for byte. (Intel's ISA-L deflated ~4x faster, but
+    once wrote a different stream for the same image on CI, with pictures encoded on two
+    threads.)"""
     rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
     h, w, channels = rgb.shape
     if channels != 3:
@@ -49,7 +44,7 @@ def encode_png(rgb: np.ndarray, level: int = 1, deflate=None) -> bytes:
 
     header = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)  # 8 bits, RGB, deflate, no interlace
     return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
-            + chunk(b"IDAT", (deflate or _deflate)(rows.tobytes(), level)) + chunk(b"IEND", b""))
+            + chunk(b"IDAT", zlib.compress(rows.tobytes(), level)) + chunk(b"IEND", b""))
 
 
 @lru_cache(maxsize=None)

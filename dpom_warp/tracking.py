@@ -132,21 +132,27 @@ class Track:
 class FrameMaps:
     """A run's maps (maps/<stem>.npy, in frame order) read as the windows need them, flat,
     the last `keep` kept: a long run's maps are never all in memory. `maps[s:e]` is the
-    (e - s, K) array of frames s..e-1, `maps[t]` one frame."""
+    (e - s, K) array of frames s..e-1, `maps[t]` one frame. Safe to read from several threads
+    (the pictures are drawn on two)."""
 
     def __init__(self, paths, keep: int = 512):
+        import threading
+
         self.paths, self.keep, self._cache = list(paths), keep, {}
+        self._lock = threading.Lock()
 
     def __len__(self) -> int:
         return len(self.paths)
 
     def _one(self, t: int) -> np.ndarray:
-        m = self._cache.get(t)
+        with self._lock:
+            m = self._cache.get(t)
         if m is None:
             m = np.load(self.paths[t]).astype(np.float32).ravel()
-            if len(self._cache) >= self.keep:
-                self._cache.pop(next(iter(self._cache)))
-            self._cache[t] = m
+            with self._lock:
+                if t not in self._cache and len(self._cache) >= self.keep:
+                    self._cache.pop(next(iter(self._cache)))
+                self._cache[t] = m
         return m
 
     def __getitem__(self, index):

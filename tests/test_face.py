@@ -229,25 +229,29 @@ def test_picture_legend_and_labels():
             assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1]
 
 
-def test_pictures_png_encoder_round_trips():
-    """render.encode_png: Pillow reads back exactly the image given (odd sizes, every value),
-    with ISA-L's deflate (a dependency: the default) and with zlib's, and anything but RGB is
-    a clear error."""
+def test_pictures_png_encoder_round_trips_and_gives_the_same_bytes_on_any_thread():
+    """render.encode_png: Pillow reads back exactly the image given (odd sizes, every value);
+    the same image gives the same bytes encoded alone or on threads encoding at once (runs
+    that resume or share frames promise a one-process run's files byte for byte); anything
+    but RGB is a clear error."""
     import io
-    import zlib
+    from concurrent.futures import ThreadPoolExecutor
 
-    from dpom_warp import render
     from dpom_warp.render import encode_png
 
-    assert render.DEFLATE_BY == "ISA-L"
     rng = np.random.default_rng(3)
-    for h, w in ((1, 1), (7, 13), (106, 129)):
+    images = []
+    for h, w in ((1, 1), (7, 13), (106, 129), (504, 1017)):
         rgb = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
         rgb[: h // 2] = 200  # flat rows, as the pictures have
-        for deflate in (None, zlib.compress):
-            back = Image.open(io.BytesIO(encode_png(rgb, deflate=deflate)))
-            assert back.mode == "RGB" and back.size == (w, h)
-            assert np.array_equal(np.asarray(back), rgb)
+        back = Image.open(io.BytesIO(encode_png(rgb)))
+        assert back.mode == "RGB" and back.size == (w, h)
+        assert np.array_equal(np.asarray(back), rgb)
+        images.append(rgb)
+    alone = [encode_png(rgb) for rgb in images]
+    with ThreadPoolExecutor(2) as pool:
+        for _ in range(10):
+            assert list(pool.map(encode_png, images + images[::-1])) == alone + alone[::-1]
     with pytest.raises(ValueError, match="expected an \\(H, W, 3\\) image, found \\(4, 4, 4\\)"):
         encode_png(np.zeros((4, 4, 4), np.uint8))
 
