@@ -1,4 +1,5 @@
 import os
+import signal
 
 import numpy as np
 import pytest
@@ -10,6 +11,12 @@ from hypothesis import settings
 settings.register_profile("ci", derandomize=True, print_blob=True)
 settings.register_profile("dev", print_blob=True)
 settings.load_profile("ci" if os.environ.get("CI") else os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+# the Ctrl-C tests send SIGINT to this process and to runs it starts: a suite started as a
+# background job of a non-interactive shell (`pytest ... &` in a script) inherits SIGINT
+# ignored, Python then raises no KeyboardInterrupt, and its children inherit the ignoring
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 from dpom_warp.warp_setup import init_warp
 

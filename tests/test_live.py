@@ -182,20 +182,24 @@ def test_ctrl_c_writes_and_tracks_every_frame_taken(camera_config, workers):
     out, sent = tmp / "out", []
 
     def interrupt():
-        deadline = time.time() + 60
+        # the run may first compile its kernels (a fresh cache: a minute or more on CI); if the
+        # frames never come, the camera stops, so that the run ends and the test fails, not hangs
+        deadline = time.time() + 400
         while time.time() < deadline:
             if (out / "frames").exists() and len(list((out / "frames").glob("*.json"))) >= 5:
                 os.kill(os.getpid(), signal.SIGINT)
                 sent.append(True)
                 return
             time.sleep(0.01)
+        cam.stop()
 
     cam.fps = 100.0  # frames arriving while the finisher and the helper are busy
     cam.start()
     ctrl_c = threading.Thread(target=interrupt, daemon=True)
     ctrl_c.start()
     try:
-        assert main(["run", str(path), "--no-progress", "--workers", str(workers)]) == 0
+        # (--max-frames: a run that missed the Ctrl-C ends, and fails below, rather than hangs)
+        assert main(["run", str(path), "--no-progress", "--workers", str(workers), "--max-frames", "2000"]) == 0
     finally:
         cam.stop()
         ctrl_c.join(5)
