@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import math
 import time
 from dataclasses import dataclass, field
@@ -92,6 +93,27 @@ class ListOverflow(RuntimeError):
     """The mask entries of a frame exceed the list capacity and growth is not allowed."""
 
 
+
+def _direct(cmd):
+    """(entry point, argument block, field names, its address) of a recorded CPU launch that
+    Warp invokes with a ctypes block of its arguments (warp's `invoke`, whose block type it
+    caches per kernel at the first launch), for Engine._launch to call the entry point with
+    a block it keeps; None where the launch is not such (a GPU, tiles, another Warp)."""
+    try:
+        if not cmd.device.is_cpu or cmd.block_dim > 1 or cmd.adjoint:
+            return None
+        cached = cmd.kernel._invoke_cache.get((tuple(type(p) for p in cmd.params[1:]), False))
+        if cached is None:
+            return None
+        block_type, fields = cached
+        block = block_type()
+        names = [f[0] for f in fields]
+        for i, name in enumerate(names):
+            setattr(block, name, cmd.params[1 + i])
+        return cmd.hooks.forward, block, names, ctypes.byref(block)
+    except (AttributeError, TypeError, ValueError):
+        return None
+
 @dataclass
 class FrameResult:
     """Occupancy of one frame. Arrays are flat over locations (map order)."""
@@ -166,6 +188,8 @@ class Engine:
         self.local_scratch = 0 if wp.get_device(device).is_cuda else K.SIZED_STACK
         self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
         self._graph, self._graph_lists = None, None
+        # Engine._launch calls the CPU kernels' entry points itself (not inside a capture)
+        self.direct_launch = not self.graph
         self._last_rho = None  # the last frame's rho, for params.warm_start
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
@@ -497,20 +521,18 @@ class Engine:
     def build_lists(self, depth_m: np.ndarray) -> int:
         """Masks, Delta and depth-sorted per-pixel lists of a frame (H, W) or of up to `batch`
         frames (n, H, W); returns the number of entries."""
-        dev = self.device
         self.depth.assign(self._frames(depth_m))
         if self.floor_mode and self.params.background_outside_grid:
             self._floor_background(1)
-        wp.launch(K.background_delta, dim=self.depth.shape, device=dev,
-                  inputs=[self.depth, self.pm, self.bg, int(self.bg_fresh), self.bg_logs, self.delta_bg])
+        self._launch(K.background_delta, self.depth.shape, [self.depth, self.pm, self.bg, int(self.bg_fresh),
+                                                            self.bg_logs, self.delta_bg])
         self.bg_fresh = False
         lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
         inputs = [self.depth, self.geo, self.pm, self.bg, self.tiles, self.table, self.n_locations]
         if self.one_pass_lists:  # CPU: each mask test once (kernels.masks.pixel_entries_once)
             def one_pass():
                 self.reserved.zero_()
-                wp.launch(K.pixel_entries_once, dim=self.depth.shape, device=dev,
-                          inputs=inputs + lists + [self.reserved])
+                self._launch(K.pixel_entries_once, self.depth.shape, inputs + lists + [self.reserved])
                 return (int(x) for x in self.reserved.numpy())
 
             total, long_lists = one_pass()
@@ -519,18 +541,15 @@ class Engine:
                 lists[2:] = [self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
                 total, long_lists = one_pass()
             if long_lists:  # lists longer than its stack buffer: filled as on a GPU, alone
-                wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev,
-                          inputs=inputs + [1] + lists + [self.reserved])
+                self._launch(K.pixel_entries, self.depth.shape, inputs + [1] + lists + [self.reserved])
             return total
-        wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev,
-                  inputs=inputs + [0] + lists + [self.no_reserved])
+        self._launch(K.pixel_entries, self.depth.shape, inputs + [0] + lists + [self.no_reserved])
         wp.utils.array_scan(self.counts, self.offsets, inclusive=False)
         total = int(self.offsets[-1:].numpy()[0]) + int(self.counts[-1:].numpy()[0])
         if total > self.capacity:
             self._grow(total)
             lists[2:] = [self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
-        wp.launch(K.pixel_entries, dim=self.depth.shape, device=dev,
-                  inputs=inputs + [1] + lists + [self.no_reserved])
+        self._launch(K.pixel_entries, self.depth.shape, inputs + [1] + lists + [self.no_reserved])
         return total
 
     def _grow(self, total: int):
@@ -583,72 +602,77 @@ class Engine:
         """wp.launch of one of the iteration's kernels, recorded at its first launch and replayed
         after with only the arguments that changed: a launch from Python takes ~15 to 30 us on
         the CPU, a replay ~4 to 8, and an iteration makes three or four (kernels with a name of
-        their own here: one recorded launch each)."""
+        their own here: one recorded launch each). On the CPU outside a capture the replay
+        calls the kernel's entry point with an argument block kept between launches (its
+        changed fields rewritten), instead of Warp's Launch.launch, which builds the block
+        anew each time: ~200 launches a frame (`_direct`)."""
         rec = self._recorded.get(kernel.key)
         if rec is None:
             cmd = wp.launch(kernel, dim=dim, inputs=inputs, device=self.device, record_cmd=True)
-            self._recorded[kernel.key] = rec = [cmd, dim, list(inputs)]
+            cmd.launch()
+            self._recorded[kernel.key] = [cmd, dim, list(inputs), _direct(cmd) if self.direct_launch else None]
+            return
+        cmd, last, direct = rec[0], rec[2], rec[3]
+        for i, v in enumerate(inputs):
+            if v is not last[i] and not (type(v) is type(last[i]) and type(v) in (int, float) and v == last[i]):
+                cmd.set_param_at_index(i, v)
+                last[i] = v
+                if direct is not None:
+                    setattr(direct[1], direct[2][i], cmd.params[1 + i])
+        if dim != rec[1]:
+            cmd.set_dim(dim)
+            rec[1] = dim
+        if direct is None:
+            cmd.launch()
         else:
-            cmd, last = rec[0], rec[2]
-            for i, v in enumerate(inputs):
-                if v is not last[i] and not (type(v) is type(last[i]) and type(v) in (int, float) and v == last[i]):
-                    cmd.set_param_at_index(i, v)
-                    last[i] = v
-            if dim != rec[1]:
-                cmd.set_dim(dim)
-                rec[1] = dim
-        cmd.launch()
+            direct[0](ctypes.byref(cmd.params[0]), direct[3])
 
     def compact(self):
         """Copy each pixel's list, in order, keeping the live locations (count, scan, fill)."""
-        dim, dev = self.batch * self.n_pixels, self.device
-        wp.launch(K.count_live, dim=dim, device=dev,
-                  inputs=[self.offsets, self.counts, self.entry_loc, self.live, self.n_pixels,
-                          self.done, self.live_counts])
+        dim = self.batch * self.n_pixels
+        self._launch(K.count_live, dim, [self.offsets, self.counts, self.entry_loc, self.live, self.n_pixels,
+                                         self.done, self.live_counts])
         wp.utils.array_scan(self.live_counts, self.live_offsets, inclusive=False)
-        wp.launch(K.fill_live, dim=dim, device=dev,
-                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta, self.live,
-                          self.live_offsets, self.live_counts, self.live_loc, self.live_delta])
+        self._launch(K.fill_live, dim, [self.offsets, self.counts, self.entry_loc, self.entry_delta, self.live,
+                                        self.live_offsets, self.live_counts, self.live_loc, self.live_delta])
 
     def prune(self, logit_prior: float):
         """The pruning bound from the current rho (the start): params.bound_rounds rounds,
         then every location whose bound is below sparse_epsilon leaves the lists for the
         frame (kernels.sparse; no host sync). Without rounds nothing is pruned. Either way a
         location left in no list is marked idle."""
-        p, dim, dev = self.params, self.batch * self.n_pixels, self.device
+        p, dim = self.params, self.batch * self.n_pixels
         if p.bound_rounds > 0:
             if p.behind_cost > 0:  # a fixed part of each location's evidence: the bound's too
                 self._count_behind()
             self.upper.fill_(1.0)
             self.evidence.zero_()
             for _ in range(p.bound_rounds):
-                wp.launch(K.bound_pass, dim=dim, device=dev,
-                          inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta,
-                                  self.delta_bg, self.rho, self.upper, self.behind, self.evidence,
-                                  self.n_pixels, self.done, self.local_scratch, p.sparse_epsilon])
-                wp.launch(K.update_bound, dim=len(self.upper), device=dev,
-                          inputs=[logit_prior, p.behind_cost, self.n_behind, self.evidence, self.upper,
-                                  p.sparse_epsilon, self.rho])
-            wp.launch(K.prune, dim=len(self.upper), device=dev,
-                      inputs=[p.sparse_epsilon, self.upper, self.rho, self.live])
+                self._launch(K.bound_pass, dim, [self.offsets, self.counts, self.entry_loc, self.entry_delta,
+                                                 self.delta_bg, self.rho, self.upper, self.behind, self.evidence,
+                                                 self.n_pixels, self.done, self.local_scratch, p.sparse_epsilon])
+                self._launch(K.update_bound, len(self.upper),
+                             [logit_prior, p.behind_cost, self.n_behind, self.evidence, self.upper,
+                              p.sparse_epsilon, self.rho])
+            self._launch(K.prune, len(self.upper), [p.sparse_epsilon, self.upper, self.rho, self.live])
         self.per_location.zero_()
         self.n_listed_out.zero_()
-        wp.launch(K.prune_lists, dim=dim, device=dev,
-                  inputs=[self.offsets, self.counts, self.entry_loc, self.entry_mu, self.entry_delta,
-                          self.live, self.per_location, self.listed, self.n_listed_out])
-        wp.launch(K.mark_idle, dim=len(self.live), device=dev, inputs=[self.per_location, self.live])
+        self._launch(K.prune_lists, dim, [self.offsets, self.counts, self.entry_loc, self.entry_mu,
+                                          self.entry_delta, self.live, self.per_location, self.listed,
+                                          self.n_listed_out])
+        self._launch(K.mark_idle, len(self.live), [self.per_location, self.live])
 
     def _count_behind(self):
         """n_behind: what the lists leave out, the readings behind each listed location's
         object (kernels.behind_count), after counting each location's entries in the lists
         (before the pruning, or after it: the pruned ones are in no list)."""
         self.per_location.zero_()
-        wp.launch(K.count_entries, dim=self.batch * self.n_pixels, device=self.device,
-                  inputs=[self.offsets, self.counts, self.entry_loc, self.per_location])
+        self._launch(K.count_entries, self.batch * self.n_pixels,
+                     [self.offsets, self.counts, self.entry_loc, self.per_location])
         p = self.params
-        wp.launch(K.behind_count, dim=len(self.live), device=self.device,
-                  inputs=[self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu,
-                          self.behind_var, self.behind_half, p.behind_step, self.per_location, self.n_behind])
+        self._launch(K.behind_count, len(self.live), [self.depth, self.pm, self.behind_first, self.behind_pixel,
+                                                      self.behind_mu, self.behind_var, self.behind_half,
+                                                      p.behind_step, self.per_location, self.n_behind])
 
     def _gather(self, index, compact: str | None = None) -> int:
         """The live locations of the frames not done into `index` (kernels.sparse.gather_live);
@@ -658,17 +682,18 @@ class Engine:
         entries, is read back in the same sync."""
         self.live_count.zero_()
         if compact == "lists":
-            wp.launch(K.compact_once, dim=self.batch * self.n_pixels, device=self.device,
-                      inputs=[self.offsets, self.counts, self.entry_loc, self.entry_delta, self.live,
-                              self.n_pixels, self.done, self.live_offsets, self.live_counts,
-                              self.live_loc, self.live_delta, self.active, self.live_count])
+            self._launch(K.compact_once, self.batch * self.n_pixels,
+                         [self.offsets, self.counts, self.entry_loc, self.entry_delta, self.live, self.n_pixels,
+                          self.done, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
+                          self.active, self.live_count])
         elif compact == "again" and self.n_active:
-            wp.launch(K.compact_again, dim=self.n_active, device=self.device,
-                      inputs=[self.active, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
-                              self.live, self.n_pixels, self.done, self.active_next, self.live_count])
+            self._launch(K.compact_again, self.n_active, [self.active, self.live_offsets, self.live_counts,
+                                                          self.live_loc, self.live_delta, self.live,
+                                                          self.n_pixels, self.done, self.active_next,
+                                                          self.live_count])
             self.active, self.active_next = self.active_next, self.active
-        wp.launch(K.gather_live, dim=len(self.live), device=self.device,
-                  inputs=[self.live, self.n_locations, self.done, index, self.live_count])
+        self._launch(K.gather_live, len(self.live), [self.live, self.n_locations, self.done, index,
+                                                     self.live_count])
         counts = self.live_count.numpy()
         if compact:
             self.n_active = int(counts[2])
@@ -773,23 +798,23 @@ class Engine:
         wp.synchronize_device(dev)
         t2 = time.perf_counter()
         self.visible.zero_()
-        wp.launch(K.transparency_pass, dim=self.batch * self.n_pixels, device=dev,
-                  inputs=[self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
+        self._launch(K.transparency_pass, self.batch * self.n_pixels,
+                     [self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
         top = p.top_support if self.geometry.height > 0 else 0.0
         unhidden = int(p.share_of == "unhidden")
 
         def soft_threshold(top_share):
-            wp.launch(K.soft_threshold, dim=self.batch * self.n_locations, device=dev,
-                      inputs=[p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support,
-                              self.top_against, self.top_hidden, self.top_missing, self.top_seen, p.top_hidden,
-                              p.top_missing, top_share,
-                              p.top_slope, p.top_min_pixels, p.top_unseen, p.top_unseen_share, p.top_unseen_part,
-                              unhidden, self.all_support, self.all_against, self.share, self.rho_star])
+            self._launch(K.soft_threshold, self.batch * self.n_locations,
+                         [p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support, self.top_against,
+                          self.top_hidden, self.top_missing, self.top_seen, p.top_hidden, p.top_missing,
+                          top_share, p.top_slope, p.top_min_pixels, p.top_unseen, p.top_unseen_share,
+                          p.top_unseen_part, unhidden, self.all_support, self.all_against, self.share,
+                          self.rho_star])
 
         def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
-            wp.launch(K.top_band, dim=self.batch * self.n_locations, device=dev,
-                      inputs=[self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]),
-                              lo, hi, TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate, *counts, self.forward])
+            self._launch(K.top_band, self.batch * self.n_locations,
+                         [self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]),
+                          lo, hi, TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate, *counts, self.forward])
 
         if unhidden:
             top_band(-BAND_ALL, BAND_ALL, self.rho,
@@ -804,9 +829,9 @@ class Engine:
             top_band(p.top_band * h, h, gate, counts, p.top_sigmas)
             for short, geo in self.shorter_top:  # shorter people: the band whose factor is larger
                 top_band(p.top_band * short, short, gate, self.other_top, p.top_sigmas, geo)
-                wp.launch(K.keep_better_top, dim=self.batch * self.n_locations, device=dev,
-                          inputs=[*counts, *self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
-                                  p.top_min_pixels, p.top_unseen, self.area, p.top_unseen_part])
+                self._launch(K.keep_better_top, self.batch * self.n_locations,
+                             [*counts, *self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
+                              p.top_min_pixels, p.top_unseen, self.area, p.top_unseen_part])
         soft_threshold(top)
         rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))

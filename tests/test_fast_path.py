@@ -221,6 +221,30 @@ def test_sparse_path_matches_sparse_reference(device, seed, streak):
         np.testing.assert_array_equal(listed, held)  # in pixel order: the sums' order
 
 
+def test_direct_launches_give_warps_launches_results():
+    """Engine._launch on the CPU calls the iteration's kernels through argument blocks it keeps
+    (engine._direct): the same rho and rho*, bit for bit, as Warp's Launch.launch, frame after
+    frame with other depths, a batch and lists that grow (new arrays in the blocks)."""
+    geom, params, depth, bg_frames = random_scene(3, shape="solid")
+    params = dataclasses.replace(params, sparse_epsilon=1e-3)
+    rng = np.random.default_rng(7)
+    frames = [depth, np.where(rng.random(depth.shape) < 0.1, 0.0, depth * 0.97), depth[::-1].copy()]
+    got = {}
+    for direct in (True, False):
+        engine = Engine(geom, params, "cpu", batch=2)
+        engine.direct_launch = direct
+        engine.set_background_frames(bg_frames)
+        engine._allocate_lists(16)  # grown by the first frame: the blocks see new arrays
+        got[direct] = [engine.infer(f) for f in frames] + engine.infer_batch(np.stack(frames[:2]))
+        used = [rec[3] is not None for rec in engine._recorded.values()]
+        assert all(used) if direct else not any(used)
+        assert engine.grown
+    for a, b in zip(got[True], got[False]):
+        np.testing.assert_array_equal(a.rho, b.rho)
+        np.testing.assert_array_equal(a.rho_star, b.rho_star)
+        assert a.iterations == b.iterations
+
+
 @pytest.mark.parametrize("eps", [1e-3, 1e-4])
 @pytest.mark.parametrize("seed", range(8))
 def test_sparse_path_stays_within_bound_of_exact(seed, eps):
