@@ -615,9 +615,13 @@ class Engine:
         cmd, last, direct = rec[0], rec[2], rec[3]
         for i, v in enumerate(inputs):
             if v is not last[i] and not (type(v) is type(last[i]) and type(v) in (int, float) and v == last[i]):
-                cmd.set_param_at_index(i, v)
                 last[i] = v
-                if direct is not None:
+                if direct is None:
+                    cmd.set_param_at_index(i, v)
+                elif type(v) in (int, float):  # (the iteration, the damping: the block's field takes it)
+                    setattr(direct[1], direct[2][i], v)
+                else:
+                    cmd.set_param_at_index(i, v)
                     setattr(direct[1], direct[2][i], cmd.params[1 + i])
         if dim != rec[1]:
             cmd.set_dim(dim)
