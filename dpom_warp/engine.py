@@ -610,7 +610,9 @@ class Engine:
         if rec is None:
             cmd = wp.launch(kernel, dim=dim, inputs=inputs, device=self.device, record_cmd=True)
             cmd.launch()
-            self._recorded[kernel.key] = [cmd, dim, list(inputs), _direct(cmd) if self.direct_launch else None]
+            bounds = ctypes.byref(cmd.params[0])  # (a direct launch's bounds, kept per dim)
+            self._recorded[kernel.key] = [cmd, dim, list(inputs), _direct(cmd) if self.direct_launch else None,
+                                          bounds, {dim: bounds}]
             return
         cmd, last, direct = rec[0], rec[2], rec[3]
         for i, v in enumerate(inputs):
@@ -624,12 +626,21 @@ class Engine:
                     cmd.set_param_at_index(i, v)
                     setattr(direct[1], direct[2][i], cmd.params[1 + i])
         if dim != rec[1]:
-            cmd.set_dim(dim)
             rec[1] = dim
+            if direct is None:
+                cmd.set_dim(dim)
+            else:  # the bounds of a dim seen before are reused (a few dims recur each frame)
+                bounds = rec[5].get(dim)
+                if bounds is None:
+                    if len(rec[5]) > 64:
+                        rec[5].clear()
+                    cmd.set_dim(dim)
+                    bounds = rec[5][dim] = ctypes.byref(cmd.params[0])
+                rec[4] = bounds
         if direct is None:
             cmd.launch()
         else:
-            direct[0](ctypes.byref(cmd.params[0]), direct[3])
+            direct[0](rec[4], direct[3])
 
     def compact(self):
         """Copy each pixel's list, in order, keeping the live locations (count, scan, fill)."""
