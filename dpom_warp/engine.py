@@ -188,8 +188,6 @@ class Engine:
         self.local_scratch = 0 if wp.get_device(device).is_cuda else K.SIZED_STACK
         self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
         self._graph, self._graph_lists = None, None
-        # Engine._launch calls the CPU kernels' entry points itself (not inside a capture)
-        self.direct_launch = not self.graph
         self._last_rho = None  # the last frame's rho, for params.warm_start
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
@@ -423,6 +421,19 @@ class Engine:
         return t
 
     # -- buffers -------------------------------------------------------------------------
+    @property
+    def graph(self) -> bool:
+        """Whether the iteration loop is captured once and replayed as a graph (engine.graph)."""
+        return self._graph_on
+
+    @graph.setter
+    def graph(self, on: bool):
+        # Engine._launch calls the CPU kernels' entry points itself, which a capture would not
+        # record: with a graph every launch is Warp's, and the launches recorded before are dropped
+        self._graph_on = bool(on)
+        self.direct_launch = not self._graph_on
+        self._recorded = {}
+
     def _allocate_lists(self, capacity: int):
         self._recorded = {}  # Engine._launch: the launches recorded with the old lists
         capacity = min(max(1024, capacity), self.max_entries)

@@ -224,7 +224,8 @@ def test_sparse_path_matches_sparse_reference(device, seed, streak):
 def test_direct_launches_give_warps_launches_results():
     """Engine._launch on the CPU calls the iteration's kernels through argument blocks it keeps
     (engine._direct): the same rho and rho*, bit for bit, as Warp's Launch.launch, frame after
-    frame with other depths, a batch and lists that grow (new arrays in the blocks)."""
+    frame with other depths, a batch and lists that grow (new arrays in the blocks); and an
+    engine switched to a graph afterwards replays what Warp's launches give."""
     geom, params, depth, bg_frames = random_scene(3, shape="solid")
     params = dataclasses.replace(params, sparse_epsilon=1e-3)
     rng = np.random.default_rng(7)
@@ -239,6 +240,13 @@ def test_direct_launches_give_warps_launches_results():
         used = [rec[3] is not None for rec in engine._recorded.values()]
         assert all(used) if direct else not any(used)
         assert engine.grown
+        if direct:  # the loop captured as a graph after direct launches: each launch recorded
+            engine.graph = True
+            got[direct].append(engine.infer(frames[0]))
+            got[direct].append(engine.infer(frames[0]))  # replayed
+            assert not any(rec[3] is not None for rec in engine._recorded.values())
+        else:
+            got[direct] += [got[direct][0], got[direct][0]]
     for a, b in zip(got[True], got[False]):
         np.testing.assert_array_equal(a.rho, b.rho)
         np.testing.assert_array_equal(a.rho_star, b.rho_star)
