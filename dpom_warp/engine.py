@@ -93,7 +93,6 @@ class ListOverflow(RuntimeError):
     """The mask entries of a frame exceed the list capacity and growth is not allowed."""
 
 
-
 def _direct(cmd):
     """(entry point, argument block, field names, its address) of a recorded CPU launch that
     Warp invokes with a ctypes block of its arguments (warp's `invoke`, whose block type it
@@ -113,6 +112,7 @@ def _direct(cmd):
         return cmd.hooks.forward, block, names, ctypes.byref(block)
     except (AttributeError, TypeError, ValueError):
         return None
+
 
 @dataclass
 class FrameResult:
@@ -610,20 +610,19 @@ class Engine:
                                    p.damping_streak_max, p.behind_cost, self.n_behind, p.sparse_drop])
 
     def _launch(self, kernel, dim: int, inputs: list):
-        """wp.launch of one of the iteration's kernels, recorded at its first launch and replayed
-        after with only the arguments that changed: a launch from Python takes ~15 to 30 us on
-        the CPU, a replay ~4 to 8, and an iteration makes three or four (kernels with a name of
-        their own here: one recorded launch each). On the CPU outside a capture the replay
-        calls the kernel's entry point with an argument block kept between launches (its
-        changed fields rewritten), instead of Warp's Launch.launch, which builds the block
-        anew each time: ~200 launches a frame (`_direct`)."""
-        rec = self._recorded.get(kernel.key)
+        """wp.launch of one of a frame's kernels, recorded at its first launch (one record a
+        kernel) and replayed after with only the arguments that changed: a launch from Python
+        takes ~15 to 30 us on the CPU, and a frame makes ~200. On the CPU outside a capture a
+        replay calls the kernel's entry point with an argument block kept between launches (its
+        changed fields rewritten, its bounds kept per dim) instead of Warp's Launch.launch,
+        which builds the block anew each time (`_direct`)."""
+        rec = self._recorded.get(kernel)
         if rec is None:
             cmd = wp.launch(kernel, dim=dim, inputs=inputs, device=self.device, record_cmd=True)
             cmd.launch()
             bounds = ctypes.byref(cmd.params[0])  # (a direct launch's bounds, kept per dim)
-            self._recorded[kernel.key] = [cmd, dim, list(inputs), _direct(cmd) if self.direct_launch else None,
-                                          bounds, {dim: bounds}]
+            self._recorded[kernel] = [cmd, dim, list(inputs), _direct(cmd) if self.direct_launch else None,
+                                      bounds, {dim: bounds}]
             return
         cmd, last, direct = rec[0], rec[2], rec[3]
         for i, v in enumerate(inputs):
