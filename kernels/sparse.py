@@ -67,6 +67,14 @@ def count_iteration(iteration: int, done: wp.array(dtype=wp.int32), iterations: 
 
 
 @wp.func
+def settled(upper: wp.float64, start: wp.float64, epsilon: wp.float64) -> bool:
+    """A location is settled in the pruning bound's rounds when its bound is below epsilon
+    and at or below its start rho (so rmax is its start whatever later rounds give): its
+    bound stays, and a pixel holding settled locations alone is skipped (bound_pass)."""
+    return upper < epsilon and upper <= start
+
+
+@wp.func
 def local_bound(start: int, n: int, b: wp.float64, entry_loc: wp.array(dtype=wp.int32),
                 entry_delta: wp.array(dtype=wp.float32), rho: wp.array(dtype=wp.float64),
                 upper: wp.array(dtype=wp.float64), evidence: wp.array(dtype=wp.float64), excess: Any,
@@ -126,13 +134,13 @@ def bound_pass(
     if done[frame_of(p, pixels)] != 0:
         return
     start = offsets[p]
-    settled = int(1)
+    skip = int(1)  # every location of the pixel settled
     for j in range(start, start + n):
         k = entry_loc[j]
-        if upper[k] >= settle or upper[k] > rho[k]:
-            settled = 0
+        if not settled(upper[k], rho[k], settle):
+            skip = 0
             break
-    if settled == 1:
+    if skip == 1:
         return
     b = delta_bg[p]
     if local != 0 and n <= LOCAL_ENTRIES:
@@ -178,7 +186,7 @@ def update_bound(
     clears the evidence."""
     i = wp.tid()
     u = upper[i]
-    if u >= settle or u > rho[i]:
+    if not settled(u, rho[i], settle):
         upper[i] = wp.min(u, sigmoid(logit_prior + evidence[i] - behind_cost * f64(behind[i])))
     evidence[i] = f64(0.0)
 
