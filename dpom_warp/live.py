@@ -61,7 +61,7 @@ class NewestFrame:
             return frame
 
 
-def _helper_start(spec, cache) -> None:
+def _helper_start(start_file: str) -> None:
     """A helper process of a live run: Ctrl-C is the main process's to handle; the engine is
     built from the run's spec with the kernels the main process compiled."""
     import signal
@@ -69,7 +69,7 @@ def _helper_start(spec, cache) -> None:
     from .worker import _pool_start
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _pool_start(spec, cache)
+    _pool_start(start_file)
 
 
 def _helper_infer(small: np.ndarray):
@@ -92,17 +92,22 @@ class Helpers:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        from .worker import kernel_cache
+        from .worker import helper_start_file
 
         spec = dataclasses.replace(spec, background=engine.background_state())
         engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))  # every kernel compiled
         self.n, self.running = n, []
+        self.start_file = helper_start_file(spec)
         self.pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"),
-                                        initializer=_helper_start, initargs=(spec, kernel_cache()))
-        warm = [self.pool.submit(_helper_infer, np.zeros((engine.height, engine.width), np.float32))
-                for _ in range(n)]
-        for w in warm:  # started, engines built: the first frames do not wait for them
-            w.result()
+                                        initializer=_helper_start, initargs=(str(self.start_file),))
+        try:
+            warm = [self.pool.submit(_helper_infer, np.zeros((engine.height, engine.width), np.float32))
+                    for _ in range(n)]
+            for w in warm:  # started, engines built: the first frames do not wait for them
+                w.result()
+        except BaseException:
+            self.close()
+            raise
 
     def busy(self) -> list:
         """The futures of the frames the helpers are inferring now."""
@@ -123,9 +128,12 @@ class Helpers:
         return fut
 
     def close(self):
+        from .worker import remove_start_file
+
         if self.pool is not None:
             self.pool.shutdown(wait=True, cancel_futures=True)
             self.pool = None
+            remove_start_file(self.start_file)
 
 
 def stop_threads(thread: threading.Thread | None, stop: threading.Event) -> None:
@@ -188,7 +196,12 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     # [frame, depth, small, FrameResult, future or None (being inferred here), inference s,
     # process], in the order the frames were taken
     pending: deque = deque()
-    helpers = Helpers(setup.spec, engine, workers - 1) if workers > 1 else None
+    helpers = None
+    if workers > 1:
+        try:
+            helpers = Helpers(setup.spec, engine, workers - 1)
+        except BrokenProcessPool as e:  # as one dying later: the run goes on in this process
+            log(f"live: a helper process died starting ({e}); the run goes on in one process")
     # the frames are taken one taker at a time (this loop, and the feeder thread that hands
     # the helpers theirs), each put in `pending` before the next is taken: stream order
     taking, state = threading.Lock(), threading.Condition()

@@ -22,7 +22,7 @@ from .ground import fit_ground_files
 from .io import TEMP_MARK, InputError, write_bytes_atomic, write_json_atomic, write_text_atomic
 from .resolution import Resolution
 from .sources.run import expand, render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
-from .worker import (FrameItem, FrameOutput, FrameWorker, WorkerSpec, kernel_cache, make_engine,
+from .worker import (FrameItem, FrameOutput, FrameWorker, WorkerSpec, make_engine,
                      pool_outcomes, read_frame, write_output)
 
 CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
@@ -167,7 +167,7 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1, keep_engine=workers > 1)
     open_output(plan, overwrite, resume, log)
     if workers > 1 and len(plan.todo) > 1:
-        outcomes = pool_outcomes(plan.spec, kernel_cache(), plan.chunks(), workers, plan.engine)
+        outcomes = pool_outcomes(plan.spec, plan.chunks(), workers, plan.engine)
         runner, desc = {"kind": "processes", "workers": workers}, f"dpom x{workers}"
     else:
         outcomes = _outcomes_here(plan)

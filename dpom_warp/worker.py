@@ -13,6 +13,7 @@ import atexit
 import dataclasses
 import io
 import os
+import pickle
 import shutil
 import tarfile
 import tempfile
@@ -281,11 +282,33 @@ def _remove_orphan_caches():
             shutil.rmtree(old, ignore_errors=True)
 
 
+def helper_start_file(spec: WorkerSpec) -> Path:
+    """A file of this process's holding `spec` and kernel_cache()'s archive, which a spawned
+    helper's initializer reads (_pool_start); removed by remove_start_file, else when this
+    process exits, else (killed) by the next process that starts a worker.
+
+    They travel by file, not as the initializer's arguments: spawning a process writes its
+    arguments into a pipe, and CPython keeps the pipe's read end open in the parent while it
+    writes, so a helper that dies before reading more than a pipe holds (64 KB; the kernels
+    are ~1 MB) would block the spawning thread for ever, holding the pool's lock."""
+    folder = Path(tempfile.mkdtemp(prefix=f"{CACHE_PREFIX}{os.getpid()}-"))
+    atexit.register(shutil.rmtree, folder, True)
+    path = folder / "helper.pickle"
+    path.write_bytes(pickle.dumps((spec, kernel_cache()), protocol=pickle.HIGHEST_PROTOCOL))
+    return path
+
+
+def remove_start_file(path: Path) -> None:
+    """Remove helper_start_file's file (every helper has read it or will never start)."""
+    shutil.rmtree(path.parent, ignore_errors=True)
+
+
 # -- `--workers N`: processes on this machine -----------------------------------------------
 _pool_worker: list[FrameWorker] = []
 
 
-def _pool_start(spec: WorkerSpec, cache: dict) -> None:
+def _pool_start(start_file: str) -> None:
+    spec, cache = pickle.loads(Path(start_file).read_bytes())
     install_kernel_cache(cache)
     _pool_worker.append(FrameWorker(spec, name=f"process {os.getpid()}"))
 
@@ -294,11 +317,11 @@ def _pool_process(items: list[FrameItem]):
     return _pool_worker[0].process(items)
 
 
-def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], workers: int, engine: Engine):
+def pool_outcomes(spec: WorkerSpec, chunks: list[list[FrameItem]], workers: int, engine: Engine):
     """The outcomes of FrameWorker.process over `chunks`, in chunk order, inferred by this
     process (with `engine`, set up from `spec`) and workers - 1 helper processes ('spawn': no
     Warp state is forked) that each build the engine once from `spec` and load the kernels
-    from `cache`; frames travel as paths (the processes share this disk). The helpers are
+    this process compiled (helper_start_file); frames travel as paths (the processes share this disk). The helpers are
     spawned on a thread (spawning one blocks until its interpreter reads the spec and the
     kernels, ~0.7 s) and get chunks, two queued each, once started (an empty task done), so
     that no chunk waits for a helper still starting; this process takes the next chunk
@@ -313,8 +336,9 @@ def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], 
 
     helpers = workers - 1
     here = FrameWorker(spec, engine=engine)
+    start_file = helper_start_file(spec)
     pool = ProcessPoolExecutor(helpers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_pool_start, initargs=(spec, cache))
+                               initializer=_pool_start, initargs=(str(start_file),))
     started: list = []
 
     def start():
@@ -357,6 +381,8 @@ def pool_outcomes(spec: WorkerSpec, cache: dict, chunks: list[list[FrameItem]], 
                           f"kept, continue with --resume") from None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)  # (returns at once after the above)
+        if not starting.is_alive():  # else a helper may not have read it yet: removed at exit
+            remove_start_file(start_file)
 
 
 def failed_future(error: BaseException) -> Future:

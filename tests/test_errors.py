@@ -6,6 +6,7 @@ import json
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -16,6 +17,7 @@ from PIL import Image
 
 from dpom_warp.cli import main
 from dpom_warp.io import write_depth_png
+from dpom_warp.worker import CACHE_PREFIX
 
 from test_cli import small_config
 import paths
@@ -335,6 +337,7 @@ def test_workers_give_the_same_files(tmp_path, scene, monkeypatch):
 
     monkeypatch.setattr(FrameWorker, "process", slow)
     assert main(["run", str(path), "--no-progress", "--workers", "2", "--output", str(tmp_path / "two")]) == 0
+    assert not own_start_files()  # the helpers' start file removed with them
     one, two = tmp_path / "one", tmp_path / "two"
     for name in ("detections.csv", "tracks.csv", "track_table.csv"):
         assert (one / name).read_bytes() == (two / name).read_bytes(), name
@@ -346,6 +349,39 @@ def test_workers_give_the_same_files(tmp_path, scene, monkeypatch):
     workers = summary["runner"]["frames_per_worker"]
     assert "main" in workers and any(w.startswith("process ") for w in workers), workers
     assert sum(workers.values()) == summary["frames"]
+
+
+def own_start_files() -> list:
+    """This process's files for its helpers to start from (worker.helper_start_file)."""
+    import os
+
+    return list(Path(tempfile.gettempdir()).glob(f"{CACHE_PREFIX}{os.getpid()}-*/helper.pickle"))
+
+
+def test_a_worker_process_that_dies_before_reading_its_start_is_one_line(tmp_path, scene):
+    """--workers 2, the helper dying as it is spawned, before it reads what it starts from
+    (here: a program that exits at once in place of Python): the run ends with the one line
+    (exit 1). It hung when the engine's spec and kernels (~1 MB) were the spawn's arguments:
+    CPython writes them into a pipe whose reading end it holds open itself, so the write never
+    ended and the pool's lock was never released. (A process of its own: a hang is a timeout.)"""
+    path = write_config(tmp_path, scene[1])
+    script = ("import multiprocessing.resource_tracker, multiprocessing.spawn, shutil, sys\n"
+              "from dpom_warp.cli import main\n"
+              "multiprocessing.resource_tracker.ensure_running()  # spawned with Python\n"
+              "multiprocessing.spawn.set_executable(shutil.which('true'))\n"
+              f"sys.exit(main(['run', {str(path)!r}, '--no-progress', '--workers', '2']))\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        err = proc.communicate(timeout=180)[1].strip()
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        pytest.fail("the run hung on a helper that died before reading its start")
+    assert proc.returncode == 1, err
+    assert "--workers: a worker process died" in err and "continue with --resume" in err and "\n" not in err
+    assert not list(Path(tempfile.gettempdir()).glob(f"{CACHE_PREFIX}{proc.pid}-*")), \
+        "the helpers' start file left behind"
 
 
 def test_a_worker_process_that_dies_is_one_line_and_resume_finishes(tmp_path, scene, monkeypatch, capsys):

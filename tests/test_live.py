@@ -167,6 +167,28 @@ def test_a_helper_process_that_dies_loses_no_frame(camera_config, capsys):
     assert summary["per_frame"][-1]["worker"] == "main"
 
 
+def test_a_helper_process_that_dies_starting_leaves_the_run_in_one_process(camera_config, capsys, monkeypatch):
+    """The helper dies as it is spawned (a program that exits at once in place of Python):
+    one line says so and the run goes on in one process, every map the plain run's."""
+    import multiprocessing.resource_tracker
+    import os
+    import multiprocessing.spawn
+    import shutil
+
+    path, cam, tmp = camera_config
+    want = plain_maps(tmp)
+    multiprocessing.resource_tracker.ensure_running()  # the tracker is spawned with Python
+    monkeypatch.setattr(multiprocessing.spawn, "_python_exe", os.fsencode(shutil.which("true")))
+    cam.start()
+    try:
+        assert main(["run", str(path), "--no-progress", "--max-frames", "6", "--workers", "2"]) == 0
+    finally:
+        cam.stop()
+    assert "live: a helper process died starting" in capsys.readouterr().out
+    summary = assert_plain_maps_in_stream_order(tmp / "out", want, 6)
+    assert {p["worker"] for p in summary["per_frame"]} == {"main"}
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_ctrl_c_writes_and_tracks_every_frame_taken(camera_config, workers):
     """Ctrl-C (SIGINT to the run's process) mid-run: the frames taken so far, the one being
