@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import atexit
 import dataclasses
+import functools
 import io
 import os
 import pickle
@@ -292,15 +293,22 @@ def helper_start_file(spec: WorkerSpec) -> Path:
     writes, so a helper that dies before reading more than a pipe holds (64 KB; the kernels
     are ~1 MB) would block the spawning thread for ever, holding the pool's lock."""
     folder = Path(tempfile.mkdtemp(prefix=f"{CACHE_PREFIX}{os.getpid()}-"))
-    atexit.register(shutil.rmtree, folder, True)
     path = folder / "helper.pickle"
+    _start_files[path] = functools.partial(shutil.rmtree, folder, True)
+    atexit.register(_start_files[path])
     path.write_bytes(pickle.dumps((spec, kernel_cache()), protocol=pickle.HIGHEST_PROTOCOL))
     return path
 
 
+_start_files: dict = {}  # helper_start_file's files -> their removal at exit
+
+
 def remove_start_file(path: Path) -> None:
     """Remove helper_start_file's file (every helper has read it or will never start)."""
-    shutil.rmtree(path.parent, ignore_errors=True)
+    remove = _start_files.pop(path, None)
+    if remove is not None:
+        atexit.unregister(remove)  # (a long-lived process makes many runs)
+        remove()
 
 
 # -- `--workers N`: processes on this machine -----------------------------------------------
