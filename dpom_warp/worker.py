@@ -329,10 +329,11 @@ def pool_outcomes(spec: WorkerSpec, chunks: list[list[FrameItem]], workers: int,
     """The outcomes of FrameWorker.process over `chunks`, in chunk order, inferred by this
     process (with `engine`, set up from `spec`) and workers - 1 helper processes ('spawn': no
     Warp state is forked) that each build the engine once from `spec` and load the kernels
-    this process compiled (helper_start_file); frames travel as paths (the processes share this disk). The helpers are
-    spawned on a thread (spawning one blocks until its interpreter reads the spec and the
-    kernels, ~0.7 s) and get chunks, two queued each, once started (an empty task done), so
-    that no chunk waits for a helper still starting; this process takes the next chunk
+    this process compiled (helper_start_file); frames travel as paths (the processes share
+    this disk). The helpers are spawned on a thread (a spawn blocked until the child had read
+    its arguments, ~0.7 s, when they held the spec and the kernels; a few ms now) and get
+    chunks, two queued each, once started (an empty task done), so that no chunk waits for a
+    helper still starting (~2 s to build its engine); this process takes the next chunk
     whenever they have theirs, and the last two itself (a helper's first chunk can take
     longer than those)."""
     import multiprocessing
