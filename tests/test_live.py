@@ -174,8 +174,8 @@ def test_a_helper_process_that_dies_starting_leaves_the_run_in_one_process(camer
     """The helper dies as it is spawned (a program that exits at once in place of Python):
     one line says so and the run goes on in one process, every map the plain run's."""
     import multiprocessing.resource_tracker
-    import os
     import multiprocessing.spawn
+    import os
     import shutil
 
     path, cam, tmp = camera_config
