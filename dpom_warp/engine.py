@@ -114,6 +114,19 @@ def _direct(cmd):
         return None
 
 
+class _Recorded:
+    """Engine._launch's record of one kernel: Warp's recorded command, the dim and inputs of
+    its last launch, its direct call (_direct's tuple; None: Warp's Launch.launch) and, for a
+    direct call, the bounds of the current dim and those of each dim seen (ctypes refs)."""
+
+    __slots__ = ("cmd", "dim", "inputs", "direct", "bounds", "bounds_of")
+
+    def __init__(self, cmd, dim: int, inputs: list, direct):
+        self.cmd, self.dim, self.inputs, self.direct = cmd, dim, list(inputs), direct
+        self.bounds = ctypes.byref(cmd.params[0])
+        self.bounds_of = {dim: self.bounds}
+
+
 @dataclass
 class FrameResult:
     """Occupancy of one frame. Arrays are flat over locations (map order)."""
@@ -620,11 +633,9 @@ class Engine:
         if rec is None:
             cmd = wp.launch(kernel, dim=dim, inputs=inputs, device=self.device, record_cmd=True)
             cmd.launch()
-            bounds = ctypes.byref(cmd.params[0])  # (a direct launch's bounds, kept per dim)
-            self._recorded[kernel] = [cmd, dim, list(inputs), _direct(cmd) if self.direct_launch else None,
-                                      bounds, {dim: bounds}]
+            self._recorded[kernel] = _Recorded(cmd, dim, inputs, _direct(cmd) if self.direct_launch else None)
             return
-        cmd, last, direct = rec[0], rec[2], rec[3]
+        cmd, last, direct = rec.cmd, rec.inputs, rec.direct
         for i, v in enumerate(inputs):
             if v is not last[i] and not (type(v) is type(last[i]) and type(v) in (int, float) and v == last[i]):
                 last[i] = v
@@ -635,22 +646,22 @@ class Engine:
                 else:
                     cmd.set_param_at_index(i, v)
                     setattr(direct[1], direct[2][i], cmd.params[1 + i])
-        if dim != rec[1]:
-            rec[1] = dim
+        if dim != rec.dim:
+            rec.dim = dim
             if direct is None:
                 cmd.set_dim(dim)
             else:  # the bounds of a dim seen before are reused (a few dims recur each frame)
-                bounds = rec[5].get(dim)
+                bounds = rec.bounds_of.get(dim)
                 if bounds is None:
-                    if len(rec[5]) > 64:
-                        rec[5].clear()
+                    if len(rec.bounds_of) > 64:
+                        rec.bounds_of.clear()
                     cmd.set_dim(dim)
-                    bounds = rec[5][dim] = ctypes.byref(cmd.params[0])
-                rec[4] = bounds
+                    bounds = rec.bounds_of[dim] = ctypes.byref(cmd.params[0])
+                rec.bounds = bounds
         if direct is None:
             cmd.launch()
         else:
-            direct[0](rec[4], direct[3])
+            direct[0](rec.bounds, direct[3])
 
     def compact(self):
         """Copy each pixel's list, in order, keeping the live locations (count, scan, fill)."""

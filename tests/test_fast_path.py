@@ -237,14 +237,14 @@ def test_direct_launches_give_warps_launches_results():
         engine.set_background_frames(bg_frames)
         engine._allocate_lists(16)  # grown by the first frame: the blocks see new arrays
         got[direct] = [engine.infer(f) for f in frames] + engine.infer_batch(np.stack(frames[:2]))
-        used = [rec[3] is not None for rec in engine._recorded.values()]
+        used = [rec.direct is not None for rec in engine._recorded.values()]
         assert all(used) if direct else not any(used)
         assert engine.grown
         if direct:  # the loop captured as a graph after direct launches: each launch recorded
             engine.graph = True
             got[direct].append(engine.infer(frames[0]))
             got[direct].append(engine.infer(frames[0]))  # replayed
-            assert not any(rec[3] is not None for rec in engine._recorded.values())
+            assert not any(rec.direct is not None for rec in engine._recorded.values())
         else:
             got[direct] += [got[direct][0], got[direct][0]]
     for a, b in zip(got[True], got[False]):
