@@ -89,17 +89,12 @@ class Helpers:
     the main process and the run goes on without helpers."""
 
     def __init__(self, spec, engine, n: int):
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        from .worker import helper_start_file
+        from .worker import helper_pool
 
         spec = dataclasses.replace(spec, background=engine.background_state())
         engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))  # every kernel compiled
         self.n, self.running = n, []
-        self.start_file = helper_start_file(spec)
-        self.pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"),
-                                        initializer=_helper_start, initargs=(str(self.start_file),))
+        self.pool, self.start_file = helper_pool(spec, n, _helper_start)
         try:
             warm = [self.pool.submit(_helper_infer, np.zeros((engine.height, engine.width), np.float32))
                     for _ in range(n)]

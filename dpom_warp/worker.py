@@ -283,6 +283,9 @@ def _remove_orphan_caches():
             shutil.rmtree(old, ignore_errors=True)
 
 
+_start_files: dict = {}  # helper_start_file's files -> their removal at exit
+
+
 def helper_start_file(spec: WorkerSpec) -> Path:
     """A file of this process's holding `spec` and kernel_cache()'s archive, which a spawned
     helper's initializer reads (_pool_start); removed by remove_start_file, else when this
@@ -300,7 +303,16 @@ def helper_start_file(spec: WorkerSpec) -> Path:
     return path
 
 
-_start_files: dict = {}  # helper_start_file's files -> their removal at exit
+def helper_pool(spec: WorkerSpec, n: int, initializer):
+    """(pool, start file): n helper processes ('spawn': no Warp state is forked), each running
+    `initializer` on the path of helper_start_file(spec) as it starts."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    start_file = helper_start_file(spec)
+    pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("spawn"), initializer=initializer,
+                               initargs=(str(start_file),))
+    return pool, start_file
 
 
 def remove_start_file(path: Path) -> None:
@@ -336,18 +348,14 @@ def pool_outcomes(spec: WorkerSpec, chunks: list[list[FrameItem]], workers: int,
     helper still starting (~2 s to build its engine); this process takes the next chunk
     whenever they have theirs, and the last two itself (a helper's first chunk can take
     longer than those)."""
-    import multiprocessing
     import threading
-    from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
     from .io import WorkerError
 
     helpers = workers - 1
     here = FrameWorker(spec, engine=engine)
-    start_file = helper_start_file(spec)
-    pool = ProcessPoolExecutor(helpers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_pool_start, initargs=(str(start_file),))
+    pool, start_file = helper_pool(spec, helpers, _pool_start)
     started: list = []
 
     def start():
