@@ -433,7 +433,8 @@ class ModelSection(Node):
 
     prior: Num = Field(_d(ModelParams, "prior"), gt=0, lt=1, description="prior occupancy of every cell")
     sigma_object: Num = Field(_d(ModelParams, "sigma_object"), gt=0,
-                              description="spread of an object's surface about its facing plane, metres")
+                              description="spread of an object's surface about the depth its model expects "
+                                          "(the solid's surface, or the facing plane), metres")
     sensor_noise: Pair = Field(_d(ModelParams, "sensor_noise"),
                                description="sensor sigma(z) = a + b z^2, metres; adds to sigma_object "
                                            "and floors the background spread")

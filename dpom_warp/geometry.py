@@ -1,4 +1,4 @@
-"""Camera, location grid and the per-location silhouette and facing plane (MODEL.md, Geometry).
+"""Camera, location grid and the per-location silhouette, facing plane and solid (MODEL.md, Geometry).
 
 Everything here is computed once per camera and grid, in float64 NumPy, and shared by the Warp
 engine and the NumPy reference, so both paths see exactly the same geometry.

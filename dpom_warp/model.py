@@ -22,7 +22,8 @@ class ModelParams:
 
     Attributes:
         prior: prior occupancy probability epsilon of every location.
-        sigma_object: spread of an object's surface about its facing plane, metres.
+        sigma_object: spread of an object's surface about the depth its model expects (the
+            solid's surface, or the facing plane), metres.
         sensor_noise: (a, b) of the sensor's depth noise sigma(z) = a + b z^2, metres.
         outlier_prob: pi_out, weight of the uniform outlier term.
         missing_prob: pi_inf of objects (and of the floor-only background).
@@ -87,9 +88,10 @@ class ModelParams:
         top_support: the top-band test of the soft threshold, for objects standing on the
             floor (kernels.mean_field.top_band). In the band of the box from top_band x its
             height to its top, the silhouette pixels with a reading either support the
-            object (s: within top_sigmas sigma of its depth), read behind its facing plane
-            (a: the object would hide them) or in front of it (f: hidden by something nearer, which may hide a
-            head: each counts as top_hidden of a supporting pixel; 0.25, chosen on the tuning
+            object (s: within top_sigmas sigma of its depth), read behind the object (its
+            solid, or its facing plane; a: the object would hide them) or in front of it (f:
+            hidden by something nearer, which may hide a head: each counts as top_hidden of a
+            supporting pixel; 0.25, chosen on the tuning
             draw for people hidden in crowds, README). rho* is multiplied by
             sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f); a
             band with fewer than top_min_pixels readings, a location whose rho* before the

@@ -484,10 +484,10 @@ def top_band(
     seen: wp.array(dtype=wp.int32),
     forward: wp.vec3d,
 ):
-    """The top band of a standing box (heights lo to hi on its facing plane): how many of its
-    silhouette's pixels there pass the mask test (support), read behind the plane (against:
-    the box would hide them, so nothing that tall stands there) or in front of it (hidden by
-    something nearer); with `support_sigmas` > 0 a pixel supports it when within that many
+    """The top band of a standing object (heights lo to hi where the pixels' rays meet it: its
+    solid, or its facing plane): how many of its silhouette's pixels there pass the mask test
+    (support), read behind the object (against: it would hide them, so nothing that tall
+    stands there) or in front of it (hidden by something nearer); with `support_sigmas` > 0 a pixel supports it when within that many
     sigma of the object instead; `missing` counts the pixels without a reading where the object
     lies within the sensor's range (mu <= z_max: it would be read there) and the background
     (bg, kernels.background) is mostly read (pi_inf < missing_read: not a sensor's dead
