@@ -8,9 +8,10 @@ The camera's frames arrive on the driver's thread into a one-frame slot; the loo
 the newest, infers it with the run's engine and FrameWorker (the plain run's code), writes its
 map and record, and feeds its map to the online tracker. The writing and tracking run on a
 finisher thread, in the order the frames were taken, as soon as each result is in; with
-helper processes (`--workers`) a feeder thread hands each helper the newest frame the moment
-it is free, while the loop infers its own. Stopping writes detections.csv, tracks.csv,
-track_table.csv and summary.json (with a `live` block) as a plain run does.
+helper processes (`--workers`; on the CPU two processes by default, default_workers) a
+feeder thread hands each helper the newest frame the moment it is free, while the loop infers
+its own. Stopping writes detections.csv, tracks.csv, track_table.csv and summary.json (with a
+`live` block) as a plain run does.
 
 A camera that stops sending (unplugged, or its stream stalled: no frame for STALL_S seconds)
 ends the run with every output of the frames inferred so far written, then one line and exit
@@ -20,6 +21,7 @@ code 1; its SDK failing to stop (as an unplugged camera does) loses nothing eith
 from __future__ import annotations
 
 import dataclasses
+import os
 import statistics
 import threading
 import time
@@ -35,6 +37,26 @@ from .config import ConfigError, RunConfig
 from .io import WorkerError, units_to_metres, write_json_atomic
 
 STALL_S = 5.0  # seconds without a frame after which a streaming camera has stopped sending
+# processes of a live run on the CPU without --workers: one infers the demo's frame in ~40 to
+# 60 ms on a 2-core VM, so a 30 fps stream needs both cores (README, live block)
+LIVE_WORKERS = 2
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may run on (its affinity where the platform has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+def default_workers(cfg: RunConfig, device: str) -> int:
+    """A live run's processes without --workers: on the CPU LIVE_WORKERS, or fewer where there
+    are fewer CPUs; one with warm starts (each frame starts from the one before: frames in
+    order in one process) and on a GPU (a frame takes milliseconds there)."""
+    if not str(device).startswith("cpu") or cfg.model.warm_start:
+        return 1
+    return max(1, min(LIVE_WORKERS, usable_cpus()))
 
 
 class NewestFrame:
@@ -140,10 +162,10 @@ def stop_threads(thread: threading.Thread | None, stop: threading.Event) -> None
 
 def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None = None, log=print,
              max_frames: int | None = None, overwrite: bool = False, first_frame_timeout: float = 10.0,
-             workers: int = 1) -> dict:
+             workers: int | None = None) -> dict:
     """Infer a live camera's frames until Ctrl-C or `max_frames`; returns the summary. With
     `workers` > 1, workers - 1 helper processes infer beside this one (Helpers); frames are
-    written and tracked in the order they were taken."""
+    written and tracked in the order they were taken. None: default_workers."""
     from .pipeline import _jsonable, prepare_output, set_up, summarise, track_table_files
     from .sources.realsense import RealSenseLive
     from .tracking import Cells, OnlineTracker
@@ -156,7 +178,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         raise ConfigError("camera.extrinsics: auto fits the floor on frames read before the run; expected "
                           "the live camera's pose ({height, pitch_deg, ...}; `dpom-warp fit-ground` on a "
                           "few saved frames gives it)")
-    if workers > 1 and cfg.model.warm_start:
+    if workers is not None and workers > 1 and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers with it")
     t_start = time.perf_counter()
@@ -165,6 +187,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     out = Path(output_dir or cfg.output.dir)
     setup = set_up(cfg, [], device, log)  # the plain run's setup: device, engine, background frames
     dev, camera, engine, background = setup.device, setup.spec.camera, setup.engine, setup.background
+    workers = workers or default_workers(cfg, dev)
     worker = FrameWorker(setup.spec, engine=engine)
     geometry = setup.geometry
     cells = Cells.for_run(geometry, cfg)
@@ -175,7 +198,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     fps = info.rate_hz or cfg.inputs.fps
     tracker = OnlineTracker(cells, cfg.grid.shape, cfg.tracking, 1.0 / fps, cfg.detection.threshold)
     prepare_output(out, cfg.resolved, overwrite, resume=False)
-    log(f"live: {info.kind}, {info.width}x{info.height} at {fps:g} frames/s; device {dev}; background: "
+    log(f"live: {info.kind}, {info.width}x{info.height} at {fps:g} frames/s; device {dev}, "
+        f"{workers} process{'es' * (workers > 1)}; background: "
         f"{background}; until Ctrl-C{f' or {max_frames} frames' if max_frames else ''}")
     from .pipeline import VIEW
 

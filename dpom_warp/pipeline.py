@@ -146,10 +146,10 @@ class RunPlan(Setup):
 
 def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None,
         progress: bool = True, log=print, strict: bool = False, overwrite: bool = False,
-        resume: bool = False, workers: int = 1, max_frames: int | None = None) -> dict:
+        resume: bool = False, workers: int | None = None, max_frames: int | None = None) -> dict:
     """Run DPOM over the configured frames; returns the summary also written to summary.json.
     A live camera (`input.frames: realsense[:SERIAL]`) runs until Ctrl-C or `max_frames`
-    (live.run_live).
+    (live.run_live; `workers` None: live.default_workers).
 
     A frame whose file is bad, or whose lists would exceed the memory budget, is reported
     and skipped (listed in summary.json), unless `strict`. Each frame's outputs (map,
@@ -164,6 +164,7 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         from .live import run_live
 
         return run_live(cfg, output_dir, device, log, max_frames, overwrite, workers=workers)
+    workers = workers or 1
     plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1, keep_engine=workers > 1)
     open_output(plan, overwrite, resume, log)
     if workers > 1 and len(plan.todo) > 1:

@@ -2,7 +2,9 @@
 RealSense camera, fed rendered frames at 30 fps on a thread; the run infers the newest frame, drops the rest
 (counted), tracks online and writes the usual outputs; no camera is a one-line error."""
 
+import dataclasses
 import json
+import os
 
 import pytest
 import yaml
@@ -36,14 +38,16 @@ def camera_config(tmp_path):
 def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, capsys):
     path, cam, tmp = camera_config
     cam.start()  # 30 frames a second on its own thread
-    try:
-        assert main(["run", str(path), "--no-progress", "--max-frames", "12"]) == 0
+    try:  # one process: at most one frame pending
+        assert main(["run", str(path), "--no-progress", "--max-frames", "12", "--workers", "1"]) == 0
     finally:
         cam.stop()
     out = tmp / "out"
     summary = json.loads((out / "summary.json").read_text())
     live = summary["live"]
     assert live["frames"] == summary["frames"] == 12 and live["stopped_by"] == "max_frames"
+    printed = capsys.readouterr().out
+    assert live["processes"] == 1 and "device cpu, 1 process;" in printed
     assert live["received"] >= 12 and live["dropped"] >= live["received"] - 13  # at most one pending
     assert live["latency_ms_median"] > 0 and live["frames_per_s"] > 0
     # once running, the output cannot outpace a 30 frames/s stream for long (11 intervals)
@@ -55,7 +59,7 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     assert len(list((out / "images").glob("*.png"))) == 3  # every 5th of 12
     assert summary["tracking"]["method"] == "online"
     assert (out / "tracks.csv").read_text().startswith("frame,track,x,y,z,rho")
-    assert "live: 12 frames inferred of" in capsys.readouterr().out
+    assert "live: 12 frames inferred of" in printed
     from rerun.chunk import RrdReader  # the live view's recording: every inferred frame
 
     rows = {}
@@ -318,6 +322,7 @@ def test_camera_unplugged_mid_run_is_one_line_and_loses_nothing(camera_config, c
     import time
 
     from dpom_warp import live
+    from dpom_warp.live import usable_cpus
     from dpom_warp.sources.realsense import RealSenseLive
 
     path, cam, tmp = camera_config
@@ -353,6 +358,7 @@ def test_camera_unplugged_mid_run_is_one_line_and_loses_nothing(camera_config, c
     assert (f"input.frames: realsense: the camera stopped sending (no frame for 1 s after {n} frames: "
             f"unplugged?)") in err and f"the {n} frames inferred are written to {out}" in err
     assert summary["live"]["stopped_by"] == "camera stopped sending"
+    assert summary["live"]["processes"] == min(2, usable_cpus())  # no --workers: both cores on the CPU
     assert summary["live"]["stop_error"] == "failed to set power state"
     assert "the camera did not stop cleanly (failed to set power state)" in captured.out
     names = sorted(p.stem for p in (out / "maps").glob("*.npy"))
@@ -360,3 +366,20 @@ def test_camera_unplugged_mid_run_is_one_line_and_loses_nothing(camera_config, c
     rows = (out / "tracks.csv").read_text().splitlines()
     assert rows[0].startswith("frame,track") and {r.split(",")[0] for r in rows[1:]} <= set(names)
     assert (out / "detections.csv").exists() and not [p for p in out.rglob(".*") if p.is_file()]
+
+
+def test_a_live_run_without_workers_uses_both_cores_on_the_cpu(tmp_path, monkeypatch):
+    """No --workers: two processes on the CPU (one infers half a 30 fps stream), fewer where
+    the machine has fewer CPUs; one on a GPU and with warm starts (frames in order, one
+    process), which then is no error."""
+    from dpom_warp import live
+    from dpom_warp.config import load_config
+    from test_cli import small_config
+
+    cfg = load_config(small_config(tmp_path, frames=2))
+    warm = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, warm_start=True))
+    assert 1 <= live.usable_cpus() <= (os.cpu_count() or 1)
+    for cpus, device, c, want in ((2, "cpu", cfg, 2), (16, "cpu", cfg, 2), (1, "cpu", cfg, 1),
+                                  (16, "cuda:0", cfg, 1), (16, "cpu", warm, 1)):
+        monkeypatch.setattr(live, "usable_cpus", lambda: cpus)
+        assert live.default_workers(c, device) == want, (cpus, device, c.model.warm_start)
