@@ -371,7 +371,7 @@ def test_camera_unplugged_mid_run_is_one_line_and_loses_nothing(camera_config, c
 def test_a_live_run_without_workers_uses_both_cores_on_the_cpu(tmp_path, monkeypatch):
     """No --workers: two processes on the CPU (one infers half a 30 fps stream), fewer where
     the machine has fewer CPUs; one on a GPU and with warm starts (frames in order, one
-    process), which then is no error."""
+    process). The unplugged-camera test runs the default end to end."""
     from dpom_warp import live
     from dpom_warp.config import load_config
     from test_cli import small_config
