@@ -356,7 +356,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             view.frame(done, fr.timestamp, depth, dets, rho_map)
         if tracking_on:
             t1 = time.perf_counter()
-            tracker.push(res.rho_star)
+            tracker.push(res.rho_star, fr.timestamp)  # frames dropped between: reach by the time apart
             track_s += time.perf_counter() - t1
         finished.append(time.perf_counter())
         latencies.append(finished[-1] - fr.arrived)

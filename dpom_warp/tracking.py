@@ -206,13 +206,16 @@ class PeakCache:
 
 
 def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
-                 anchors: dict | None = None, nodes: list | None = None
+                 anchors: dict | None = None, nodes: list | None = None, times: np.ndarray | None = None
                  ) -> tuple[list[list[tuple[int, int]]], dict]:
     """The optimal tracks over `maps` (T, K) rho*: a list of paths, each a list of (t, k)
     in frame order (frames a path skips are bridged). `anchors` (online): cell k -> the
     only cells where a path may start at t = 0 (the tracks committed there); without it a
     path may start anywhere at t = 0 and end anywhere at the last frame. `nodes`: each
-    frame's peaks when the caller has them (PeakCache)."""
+    frame's peaks when the caller has them (PeakCache). `times` (T,): each map's time in
+    seconds (a live run's frames, between which the camera's dropped frames lie): a move
+    from map a to map b reaches max_speed (times[b] - times[a]) + jitter instead of
+    max_speed (b - a) dt + jitter."""
     from ortools.graph.python import min_cost_flow
     from scipy.spatial import cKDTree
 
@@ -244,12 +247,17 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     gap = float(_costs(np.array([opt.min_rho]), opt)[0])
     src, snk = 2 * n, 2 * n + 1
     tails, heads, costs = [np.arange(n) * 2], [np.arange(n) * 2 + 1], [cost]  # in -> out
-    reach = [opt.max_speed * s * dt + max(opt.jitter, cells.step) for s in range(opt.max_gap + 2)]
+    base = max(opt.jitter, cells.step)
+    reach = [opt.max_speed * s * dt + base for s in range(opt.max_gap + 2)]
+    if times is not None:  # the longest time s maps apart in this window sets the query's radius
+        times = np.asarray(times, np.float64)
+        reach = [base] + [opt.max_speed * float(np.max(times[s:] - times[:-s])) + base if s < T else base
+                          for s in range(1, opt.max_gap + 2)]
     # moves to the next frame from every node, bridges of s frames between peaks: for each s
     # one KD-tree query over the window, frames kept apart by a time axis far larger than
     # any reach (a node of frame t, shifted by s, meets only the nodes of frame t + s)
     pos = cells.positions[all_k]
-    apart = 1e4 + 10 * reach[-1]
+    apart = 1e4 + 10 * max(reach)
     is_peak = np.concatenate(peak_of)
     for s in range(1, min(opt.max_gap + 1, T - 1) + 1):
         src_nodes = np.flatnonzero((all_t + s < T) & (is_peak if s > 1 else True))
@@ -259,6 +267,9 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
         a = cKDTree(np.c_[pos[src_nodes], (all_t[src_nodes] + s) * apart])
         b = cKDTree(np.c_[pos[dst_nodes], all_t[dst_nodes] * apart])
         pairs = a.sparse_distance_matrix(b, reach[s], output_type="ndarray")
+        if times is not None:  # each pair within its own maps' time apart
+            t_i = all_t[src_nodes[pairs["i"]]]
+            pairs = pairs[pairs["v"] <= opt.max_speed * (times[t_i + s] - times[t_i]) + base]
         i, j = src_nodes[pairs["i"]], dst_nodes[pairs["j"]]
         tails.append(i * 2 + 1)
         heads.append(j * 2)
@@ -407,12 +418,16 @@ class OnlineTracker:
         self.at: dict[int, tuple] = {}  # cell k of the last committed frame -> (id, xyz)
         self.next_id, self.committed, self.t = 0, -1, -1
         self.window: list[np.ndarray] = []  # maps from frame max(committed, 0) on
+        self.times: list = []  # their times (push), None where not given
         self.stats = {"solves": 0, "max_nodes": 0, "max_arcs": 0, "delay_frames": self.delay}
         self.cache = PeakCache(cells, shape, opt.prune, keep=2 * self.delay + 8)
 
-    def push(self, rho_map: np.ndarray) -> None:
+    def push(self, rho_map: np.ndarray, time_s: float | None = None) -> None:
+        """The next map; `time_s`: when its frame was taken (seconds, a camera's timestamp),
+        where frames were dropped between the maps (solve_window's `times`)."""
         self.t += 1
         self.window.append(np.asarray(rho_map, np.float32).ravel())
+        self.times.append(time_s)
         c = self.t - self.delay
         if c >= 0 and c > self.committed:
             self._commit(c)
@@ -427,7 +442,8 @@ class OnlineTracker:
         a = committed if committed >= 0 else 0
         anchors = dict(self.at) if committed >= 0 else None
         window = np.stack(self.window)
-        paths, st = solve_window(window, cells, self.shape, self.opt, self.dt, anchors, self.cache.window(a, window))
+        paths, st = solve_window(window, cells, self.shape, self.opt, self.dt, anchors, self.cache.window(a, window),
+                                 window_times(self.times))
         self.stats["solves"] += 1
         self.stats["max_nodes"] = max(self.stats["max_nodes"], st["nodes"])
         self.stats["max_arcs"] = max(self.stats["max_arcs"], st["arcs"])
@@ -451,6 +467,16 @@ class OnlineTracker:
                 new_at.setdefault(cells.nearest(last[1]), (tid, last[1]))
         self.at, self.committed = new_at, c
         self.window = self.window[c - a:]  # frame c is the next window's first
+        self.times = self.times[c - a:]
+
+
+def window_times(times: list) -> np.ndarray | None:
+    """A window's map times for solve_window: None unless every map has one and they rise
+    (a camera clock that jumps back or repeats says nothing of the time between frames)."""
+    if not times or any(t is None for t in times):
+        return None
+    t = np.asarray(times, np.float64)
+    return t if np.all(np.isfinite(t)) and np.all(np.diff(t) > 0) else None
 
 
 def track_online(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,

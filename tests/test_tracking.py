@@ -184,6 +184,41 @@ def test_online_is_causal_and_close_to_offline():
     assert before(again, 50) == before(online, 50)
 
 
+def test_online_reach_follows_the_maps_times_where_frames_were_dropped():
+    """A live run drops frames: a person walking 1.25 m/s is 0.5 m further at each map when the
+    maps lie 0.4 s apart, beyond the reach of one 0.1 s camera frame (1.5 x 0.1 + 0.2 m), within
+    that of 0.4 s. With the maps' times the online tracker keeps one track (each move judged by
+    its own two maps' times); without them, or with
+    a clock that does not rise, it has no such track; times 0.1 s apart give what no times give."""
+    from dpom_warp.tracking import OnlineTracker, window_times
+
+    a = walk(0.5, 1.5, 0.5, 0.0, 7)
+    maps, cells, opt = maps_of([a], 7), grid_cells(), TrackingOptions(max_speed=1.5, delay=3)
+
+    def online(times):
+        tracker = OnlineTracker(cells, (NY, NX), opt, 0.1)
+        for t in range(len(maps)):
+            tracker.push(maps[t], None if times is None else times[t])
+        return tracker.finish()[0]
+
+    whole = [[(t, *a[t]) for t in range(7)]]
+    assert as_paths(online([0.4 * t for t in range(7)])) == whole
+    assert as_paths(online(None)) != whole and as_paths(online([1.0] * 7)) != whole
+    # each move within its own maps' time apart: 0.5 m in the 0.1 s between maps 2 and 3 is not
+    # one (the track bridges that peak instead), 0.5 m in the 0.4 s between maps 0 and 1 is
+    moves = {(f, g) for tr in online([0.0, 0.4, 0.8, 0.9, 1.3, 1.7, 2.1])
+             for f, g, bf, bg in zip(tr.frames, tr.frames[1:], tr.bridged, tr.bridged[1:]) if not (bf or bg)}
+    assert (2, 3) not in moves and (5, 6) in moves
+    b, c = walk(0.5, 0.5, 0.1, 0.0, 12), walk(3.5, 2.5, -0.1, 0.0, 12)
+    near = maps_of([b, c], 12)
+    tracker = OnlineTracker(cells, (NY, NX), opt, 0.1)
+    for t in range(12):
+        tracker.push(near[t], 100.0 + 0.1 * t)
+    assert as_paths(tracker.finish()[0]) == as_paths(track_online(near, cells, (NY, NX), opt, 0.1)[0])
+    assert window_times([0.0, 0.1, None]) is None and window_times([0.0, 0.2, 0.1]) is None
+    assert window_times([0.0, float("nan")]) is None and list(window_times([0.0, 0.5])) == [0.0, 0.5]
+
+
 def test_naive_linking_breaks_at_a_missed_frame():
     pos = [np.array([[0.0, 0.0]]), np.array([[0.1, 0.0]]), np.zeros((0, 2)), np.array([[0.3, 0.0]])]
     assert link_naive(pos, 0.5) == [[1], [1], [], [2]]
