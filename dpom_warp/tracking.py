@@ -248,11 +248,12 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     src, snk = 2 * n, 2 * n + 1
     tails, heads, costs = [np.arange(n) * 2], [np.arange(n) * 2 + 1], [cost]  # in -> out
     base = max(opt.jitter, cells.step)
-    reach = [opt.max_speed * s * dt + base for s in range(opt.max_gap + 2)]
-    if times is not None:  # the longest time s maps apart in this window sets the query's radius
+    if times is None:
+        reach = [opt.max_speed * s * dt + base for s in range(opt.max_gap + 2)]
+    else:  # the longest time s maps apart in this window sets the query's radius (s < T)
         times = np.asarray(times, np.float64)
-        reach = [base] + [opt.max_speed * float(np.max(times[s:] - times[:-s])) + base if s < T else base
-                          for s in range(1, opt.max_gap + 2)]
+        reach = [base] + [opt.max_speed * float(np.max(times[s:] - times[:-s])) + base
+                          for s in range(1, min(opt.max_gap + 1, T - 1) + 1)]
     # moves to the next frame from every node, bridges of s frames between peaks: for each s
     # one KD-tree query over the window, frames kept apart by a time axis far larger than
     # any reach (a node of frame t, shifted by s, meets only the nodes of frame t + s)
