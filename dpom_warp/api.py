@@ -146,18 +146,25 @@ class Detector:
                                       res.iterations, res.converged, timings))
         return results
 
-    def track(self, results: list[Result], method: str | None = None):
+    def track(self, results: list[Result], method: str | None = None, times: list | None = None):
         """Tracks over consecutive frames' results, as `dpom-warp run` writes them to tracks.csv
         (the config's tracking.* and input.fps; `method`: ksp or online instead of the
-        config's). Returns (tracks, report): each track has `id`, `frames` (indices into
-        `results`), `xyz` (metres), `rho` and `bridged` (frames without a map peak)."""
+        config's; `times`: each result's frame timestamp in seconds, as a recording gives
+        them: the rate is then the timestamps' and frames dropped between two results count,
+        as in a run of the recording). Returns (tracks, report): each track has `id`, `frames`
+        (indices into `results`), `xyz` (metres), `rho` and `bridged` (frames without a map
+        peak)."""
+        from .pipeline import fps_of
         from .tracking import Cells, run_tracker
 
         cfg, geometry = self.config, self.worker.geometry
         cells = Cells.for_run(geometry, cfg)
         maps = np.stack([np.asarray(r.rho_star, np.float32).ravel() for r in results])
-        return run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, cfg.inputs.fps,
-                           cfg.detection.threshold, method)
+        if times is not None and len(times) != len(results):
+            raise ValueError(f"times: expected one timestamp per result ({len(results)}), found {len(times)}")
+        fps = (fps_of(list(times)) if times is not None else None) or cfg.inputs.fps
+        return run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, fps, cfg.detection.threshold, method,
+                           None if times is None else list(times))
 
     def _metres(self, depth, index: int) -> np.ndarray:
         depth = np.asarray(depth)

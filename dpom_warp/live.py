@@ -168,7 +168,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     written and tracked in the order they were taken. None: default_workers."""
     from .pipeline import _jsonable, prepare_output, set_up, summarise, track_table_files
     from .sources.realsense import RealSenseLive
-    from .tracking import Cells, OnlineTracker
+    from .tracking import Cells, OnlineTracker, frames_without_map
     from .worker import FrameItem, FrameWorker, failed_future, write_output
 
     if cfg.inputs.auto_background:
@@ -439,9 +439,11 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         t1 = time.perf_counter()
         tracks, report = tracker.finish()
         track_s += time.perf_counter() - t1
+        times = [records[n].get("timestamp") for n in names]
         report = {"method": "online", "tracks": len(tracks), "time_s": track_s,
-                  "ms_per_frame": 1000 * track_s / len(names), "fps": fps, "fps_from": "camera", **report}
-        track_table_files(out, tracks, names, fps)
+                  "ms_per_frame": 1000 * track_s / len(names), "fps": fps, "fps_from": "camera", **report,
+                  "frames_without_map": frames_without_map(times, 1.0 / fps)}
+        track_table_files(out, tracks, names, fps, times)
     else:
         report = {"method": "off"}
     summary["tracking"] = report

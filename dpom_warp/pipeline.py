@@ -413,7 +413,7 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
                          "frames_per_worker": dict(sorted(plan.by_worker.items()))}
     stamps = {f.name: plan.records[f.name].get("timestamp") for f in done}
     summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth, log=lambda *_: None,
-                                    fps=fps_of(list(stamps.values())), camera=plan.spec.camera,
+                                    fps=fps_of(list(stamps.values()), list(stamps)), camera=plan.spec.camera,
                                     timestamps=stamps)
     summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
@@ -430,12 +430,16 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     return summary
 
 
-def fps_of(timestamps: list) -> float | None:
-    """The frame rate of frames with timestamps (the median interval), None without."""
+def fps_of(timestamps: list, names: list | None = None) -> float | None:
+    """The frame rate of frames with timestamps (the median interval), None without. Where
+    the frames are named by their index in the stream (a recording's, a live run's), an
+    interval over frames skipped or dropped between counts as that many intervals."""
     ts = [t for t in timestamps if t is not None]
     if len(ts) < 2 or len(ts) < len(timestamps):
         return None
-    gaps = [b - a for a, b in zip(ts, ts[1:]) if b > a]
+    idx = [Path(n).stem for n in names] if names is not None and len(names) == len(ts) else []
+    idx = [int(i) for i in idx] if idx and all(i.isdigit() for i in idx) else list(range(len(ts)))
+    gaps = [(b - a) / (j - i) for a, b, i, j in zip(ts, ts[1:], idx, idx[1:]) if b > a and j > i]
     return 1.0 / statistics.median(gaps) if gaps else None
 
 
@@ -504,12 +508,13 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
         log.close()
 
 
-def track_table_files(out: Path, tracks, names: list[str], fps: float) -> None:
-    """tracks.csv and track_table.csv of `tracks` over the frames `names`."""
+def track_table_files(out: Path, tracks, names: list[str], fps: float, times: list | None = None) -> None:
+    """tracks.csv and track_table.csv of `tracks` over the frames `names` (`times`: their
+    timestamps, None where unknown)."""
     from .tracking import track_table, tracks_csv
 
     write_text_atomic(out / "tracks.csv", tracks_csv(tracks, names))
-    write_text_atomic(out / "track_table.csv", track_table(tracks, names, fps))
+    write_text_atomic(out / "track_table.csv", track_table(tracks, names, fps, times))
 
 
 def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None, log=print,
@@ -531,11 +536,12 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
         return {"method": "off"}
     cells = Cells.for_run(geometry, cfg)
     rate = fps or cfg.inputs.fps
-    tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, rate, cfg.detection.threshold,
-                                 method)
-    report["fps_from"] = "timestamps" if fps else "input.fps"
     names = [f.name for f in done]
-    track_table_files(out, tracks, names, rate)
+    times = [(timestamps or {}).get(n) for n in names]  # frames dropped or skipped between: by the clock
+    tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, rate, cfg.detection.threshold,
+                                 method, times)
+    report["fps_from"] = "timestamps" if fps else "input.fps"
+    track_table_files(out, tracks, names, rate, times)
     log(f"{len(tracks)} tracks ({method}) in {report['time_s']:.2f} s "
         f"({report['ms_per_frame']:.1f} ms per frame)")
     if cfg.output.images or cfg.output.rerun or VIEW:
@@ -588,7 +594,7 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
     report = track_run(cfg, run_dir, done, geometry, truth, log,
-                       fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]), camera=camera,
+                       fps=fps_of([p.get("timestamp") for p in summary["per_frame"]], names), camera=camera,
                        timestamps={p["frame"]: p.get("timestamp") for p in summary["per_frame"]})
     summary["config"], summary["tracking"] = cfg.resolved, report
     write_json_atomic(run_dir / "summary.json", _jsonable(summary))

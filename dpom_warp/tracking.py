@@ -206,16 +206,16 @@ class PeakCache:
 
 
 def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
-                 anchors: dict | None = None, nodes: list | None = None, times: np.ndarray | None = None
+                 anchors: dict | None = None, nodes: list | None = None, steps: np.ndarray | None = None
                  ) -> tuple[list[list[tuple[int, int]]], dict]:
     """The optimal tracks over `maps` (T, K) rho*: a list of paths, each a list of (t, k)
     in frame order (frames a path skips are bridged). `anchors` (online): cell k -> the
     only cells where a path may start at t = 0 (the tracks committed there); without it a
     path may start anywhere at t = 0 and end anywhere at the last frame. `nodes`: each
-    frame's peaks when the caller has them (PeakCache). `times` (T,): each map's time in
-    seconds (a live run's frames, between which the camera's dropped frames lie): a move
-    from map a to map b reaches max_speed (times[b] - times[a]) + jitter instead of
-    max_speed (b - a) dt + jitter."""
+    frame's peaks when the caller has them (PeakCache). `steps` (T,): each map's time in
+    camera frames of dt (frame_steps; frames dropped or skipped lie between the maps): a
+    move from map a to map b reaches max_speed (steps[b] - steps[a]) dt + jitter instead of
+    max_speed (b - a) dt + jitter (the same where the steps are a, a + 1, ...)."""
     from ortools.graph.python import min_cost_flow
     from scipy.spatial import cKDTree
 
@@ -248,11 +248,11 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     src, snk = 2 * n, 2 * n + 1
     tails, heads, costs = [np.arange(n) * 2], [np.arange(n) * 2 + 1], [cost]  # in -> out
     base = max(opt.jitter, cells.step)
-    if times is None:
+    if steps is None:
         reach = [opt.max_speed * s * dt + base for s in range(opt.max_gap + 2)]
     else:  # the longest time s maps apart in this window sets the query's radius (s < T)
-        times = np.asarray(times, np.float64)
-        reach = [base] + [opt.max_speed * float(np.max(times[s:] - times[:-s])) + base
+        steps = np.asarray(steps, np.float64)
+        reach = [base] + [opt.max_speed * float(np.max(steps[s:] - steps[:-s])) * dt + base
                           for s in range(1, min(opt.max_gap + 1, T - 1) + 1)]
     # moves to the next frame from every node, bridges of s frames between peaks: for each s
     # one KD-tree query over the window, frames kept apart by a time axis far larger than
@@ -268,9 +268,9 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
         a = cKDTree(np.c_[pos[src_nodes], (all_t[src_nodes] + s) * apart])
         b = cKDTree(np.c_[pos[dst_nodes], all_t[dst_nodes] * apart])
         pairs = a.sparse_distance_matrix(b, reach[s], output_type="ndarray")
-        if times is not None:  # each pair within its own maps' time apart
+        if steps is not None:  # each pair within its own maps' time apart
             t_i = all_t[src_nodes[pairs["i"]]]
-            pairs = pairs[pairs["v"] <= opt.max_speed * (times[t_i + s] - times[t_i]) + base]
+            pairs = pairs[pairs["v"] <= opt.max_speed * (steps[t_i + s] - steps[t_i]) * dt + base]
         i, j = src_nodes[pairs["i"]], dst_nodes[pairs["j"]]
         tails.append(i * 2 + 1)
         heads.append(j * 2)
@@ -344,12 +344,15 @@ def _tracks_from(rows_by_id: dict) -> list[Track]:
 
 
 def track_offline(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
-                  threshold: float = 0.5) -> tuple[list[Track], dict]:
+                  threshold: float = 0.5, times: list | None = None) -> tuple[list[Track], dict]:
     """KSP over the whole run in windows of opt.window frames overlapping by opt.overlap; a
     path of a later window takes the identity of the earlier window's path it agrees with
     most in the overlap (the same cell within one step, at least a quarter of the frames),
-    and the windows meet in the overlap's middle."""
+    and the windows meet in the overlap's middle. `times`: each map's time in seconds (a
+    recording's timestamps), where frames were dropped or skipped between the maps
+    (frame_steps); without them the maps lie dt apart."""
     T = len(maps)
+    steps = frame_steps(times, dt)
     win = max(2, opt.window)
     lap = min(max(0, opt.overlap), win - 1)
     starts = [0]
@@ -362,7 +365,8 @@ def track_offline(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpt
     for w, s in enumerate(starts):
         e = min(T, s + win)
         window = maps[s:e]
-        paths, st = solve_window(window, cells, shape, opt, dt, nodes=cache.window(s, window))
+        paths, st = solve_window(window, cells, shape, opt, dt, nodes=cache.window(s, window),
+                                 steps=None if steps is None else steps[s:e])
         for key in ("nodes", "arcs"):
             stats[key] += st[key]
             stats[f"max_{key}"] = max(stats[f"max_{key}"], st[key])
@@ -444,7 +448,7 @@ class OnlineTracker:
         anchors = dict(self.at) if committed >= 0 else None
         window = np.stack(self.window)
         paths, st = solve_window(window, cells, self.shape, self.opt, self.dt, anchors, self.cache.window(a, window),
-                                 window_times(self.times))
+                                 frame_steps(self.times, self.dt))
         self.stats["solves"] += 1
         self.stats["max_nodes"] = max(self.stats["max_nodes"], st["nodes"])
         self.stats["max_arcs"] = max(self.stats["max_arcs"], st["arcs"])
@@ -471,21 +475,35 @@ class OnlineTracker:
         self.times = self.times[c - a:]
 
 
-def window_times(times: list) -> np.ndarray | None:
-    """A window's map times for solve_window: None unless every map has one and they rise
-    (a camera clock that jumps back or repeats says nothing of the time between frames)."""
+def frame_steps(times: list | None, dt: float) -> np.ndarray | None:
+    """Maps' times (seconds, a camera's timestamps) as solve_window's steps: each map's time
+    from the first in whole camera frames of dt (rounded: the clock's jitter is not motion),
+    so that frames dropped or skipped between two maps count. None unless every map has a
+    finite time and the steps rise (a clock that jumps back or repeats, or frames closer
+    than the rate allows, say nothing of the time between frames)."""
     if not times or any(t is None for t in times):
         return None
     t = np.asarray(times, np.float64)
-    return t if np.all(np.isfinite(t)) and np.all(np.diff(t) > 0) else None
+    if not np.all(np.isfinite(t)):
+        return None
+    steps = np.round((t - t[0]) / dt)
+    return steps if np.all(np.diff(steps) > 0) else None
+
+
+def frames_without_map(times: list | None, dt: float) -> int:
+    """The camera frames between maps that have none (dropped, lost or skipped), by the
+    maps' timestamps (frame_steps); 0 without them."""
+    steps = frame_steps(times, dt)
+    return 0 if steps is None else int(np.sum(np.diff(steps) - 1))
 
 
 def track_online(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
-                 threshold: float = 0.5) -> tuple[list[Track], dict]:
-    """OnlineTracker over `maps` frame by frame (what a live run does as frames arrive)."""
+                 threshold: float = 0.5, times: list | None = None) -> tuple[list[Track], dict]:
+    """OnlineTracker over `maps` frame by frame (what a live run does as frames arrive), each
+    with its time in seconds where `times` are given."""
     tracker = OnlineTracker(cells, shape, opt, dt, threshold)
     for t in range(len(maps)):
-        tracker.push(maps[t])
+        tracker.push(maps[t], None if times is None else times[t])
     return tracker.finish()
 
 
@@ -513,16 +531,20 @@ def link_naive(positions: list[np.ndarray], gate: float) -> list[list[int]]:
 
 
 def run_tracker(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, fps: float,
-                threshold: float = 0.5, method: str | None = None) -> tuple[list[Track], dict]:
+                threshold: float = 0.5, method: str | None = None, times: list | None = None
+                ) -> tuple[list[Track], dict]:
     """Tracks of `maps` ((T, K) array or FrameMaps) by `method` (default opt's, resolved for
-    T frames) and a report for summary.json (method, tracks, time, graph size)."""
+    T frames) and a report for summary.json (method, tracks, time, graph size). `times`: each
+    map's timestamp in seconds (None where unknown): moves are judged by the camera frames
+    between two maps, dropped ones included (frame_steps)."""
     method = method or opt.resolved_method(len(maps))
     t = time.perf_counter()
     if method == "off":
         return [], {"method": "off"}
     dt = 1.0 / fps
     fn = track_offline if method == "ksp" else track_online
-    tracks, stats = fn(maps, cells, shape, opt, dt, threshold)
+    tracks, stats = fn(maps, cells, shape, opt, dt, threshold, times)
+    stats["frames_without_map"] = frames_without_map(times, dt)
     spent = time.perf_counter() - t
     return tracks, {"method": method, "tracks": len(tracks), "time_s": spent,
                     "ms_per_frame": 1000 * spent / max(1, len(maps)), "fps": fps, **stats}
@@ -539,13 +561,17 @@ def tracks_csv(tracks: list[Track], names: list[str]) -> str:
     return "\n".join([TRACKS_HEADER] + [r[2] for r in rows]) + "\n"
 
 
-def track_table(tracks: list[Track], names: list[str], fps: float) -> str:
+def track_table(tracks: list[Track], names: list[str], fps: float, times: list | None = None) -> str:
     """track_table.csv: per track its first and last frame, frames, bridged frames, path
-    length (metres, on the ground plane; in 3D for voxel grids) and mean speed (m/s)."""
+    length (metres, on the ground plane; in 3D for voxel grids) and mean speed (m/s), over
+    the camera frames from its first to its last (`times`, the frames' timestamps, count the
+    frames without a map between; frame_steps)."""
+    steps = frame_steps(times, 1.0 / fps)
+    at = np.arange(len(names), dtype=np.float64) if steps is None else steps
     lines = [TABLE_HEADER]
     for tr in tracks:
         path = float(np.sum(np.linalg.norm(np.diff(tr.xyz, axis=0), axis=1))) if len(tr.xyz) > 1 else 0.0
-        span = (tr.frames[-1] - tr.frames[0]) / fps
+        span = (at[tr.frames[-1]] - at[tr.frames[0]]) / fps
         speed = path / span if span > 0 else 0.0
         lines.append(f"{tr.id},{names[tr.frames[0]]},{names[tr.frames[-1]]},{len(tr.frames)},"
                      f"{int(tr.bridged.sum())},{path:.3f},{speed:.3f}")

@@ -64,6 +64,12 @@ def test_api_gives_the_cli_detections_on_the_demo(demo_run):
     tracks, report = det.track(results)  # the same tracks as tracks.csv
     assert report["method"] == "ksp" and len(tracks) >= 5
     assert tracks_csv(tracks, [f.name for f in frames]) == (demo_run / "tracks.csv").read_text()
+    fps = cfg.inputs.fps  # a recording's timestamps one frame apart: the same tracks, at their rate
+    stamped, report = det.track(results, times=[7.0 + k / fps for k in range(len(results))])
+    assert tracks_csv(stamped, [f.name for f in frames]) == (demo_run / "tracks.csv").read_text()
+    assert report["fps"] == pytest.approx(fps) and report["frames_without_map"] == 0
+    with pytest.raises(ValueError, match="one timestamp per result"):
+        det.track(results, times=[0.0])
 
 
 def test_api_float_metres_and_batches_match_single_frames(tmp_path):

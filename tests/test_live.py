@@ -58,6 +58,8 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     assert names != [f"{i:06d}" for i in range(12)] or live["dropped"] == 0  # frames named by stream index
     assert len(list((out / "images").glob("*.png"))) == 3  # every 5th of 12
     assert summary["tracking"]["method"] == "online"
+    # the camera frames dropped between the first map and the last, by the frames' timestamps
+    assert summary["tracking"]["frames_without_map"] == int(names[-1]) - int(names[0]) + 1 - 12
     assert (out / "tracks.csv").read_text().startswith("frame,track,x,y,z,rho")
     assert "live: 12 frames inferred of" in printed
     from rerun.chunk import RrdReader  # the live view's recording: every inferred frame

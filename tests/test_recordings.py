@@ -165,6 +165,7 @@ def test_16bit_bags_give_the_png_run(tmp_path, scene, kind):
     assert summary["config"]["camera"]["width"] == cfg["camera"]["width"]
     assert [p["timestamp"] for p in summary["per_frame"]] == pytest.approx([100.0, 100.1, 100.2, 100.3])
     assert summary["tracking"]["fps_from"] == "timestamps" and summary["tracking"]["fps"] == pytest.approx(10.0)
+    assert summary["tracking"]["frames_without_map"] == 0
 
 
 def test_compressed_depth_and_32fc1_bags(tmp_path, scene):
@@ -199,6 +200,8 @@ def test_a_truncated_message_is_skipped_with_its_reason(tmp_path, scene, capsys)
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["frames"] == 3 and summary["skipped"][0]["frame"] == "000002"
     assert "truncated image" in summary["skipped"][0]["reason"]
+    # the tracker knows a camera frame lies between the maps of 000001 and 000003 (their stamps)
+    assert summary["tracking"]["frames_without_map"] == 1 and summary["tracking"]["fps"] == pytest.approx(10.0)
     assert "skipping" in capsys.readouterr().out
     assert main(["run", str(path), "--no-progress", "--overwrite", "--strict"]) == 2
 

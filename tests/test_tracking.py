@@ -184,39 +184,64 @@ def test_online_is_causal_and_close_to_offline():
     assert before(again, 50) == before(online, 50)
 
 
-def test_online_reach_follows_the_maps_times_where_frames_were_dropped():
-    """A live run drops frames: a person walking 1.25 m/s is 0.5 m further at each map when the
-    maps lie 0.4 s apart, beyond the reach of one 0.1 s camera frame (1.5 x 0.1 + 0.2 m), within
-    that of 0.4 s. With the maps' times the online tracker keeps one track (each move judged by
-    its own two maps' times); without them, or with
-    a clock that does not rise, it has no such track; times 0.1 s apart give what no times give."""
-    from dpom_warp.tracking import OnlineTracker, window_times
+@pytest.mark.parametrize("method", ["online", "ksp"])
+def test_reach_follows_the_maps_times_where_frames_were_dropped(method):
+    """A live run drops frames, a recording loses or skips some: a person walking 1.25 m/s is
+    0.5 m further at each map when the maps lie 0.4 s apart, beyond the reach of one 0.1 s
+    camera frame (1.5 x 0.1 + 0.2 m), within that of 0.4 s. With the maps' times both
+    trackers keep one track (each move judged by its own two maps' times); without them, or
+    with a clock that does not rise, there is no such track; times 0.1 s apart (with the
+    clock's jitter) give what no times give."""
+    from dpom_warp.tracking import OnlineTracker
 
     a = walk(0.5, 1.5, 0.5, 0.0, 7)
-    maps, cells, opt = maps_of([a], 7), grid_cells(), TrackingOptions(max_speed=1.5, delay=3)
+    maps, cells, opt = maps_of([a], 7), grid_cells(), TrackingOptions(max_speed=1.5, delay=3, window=4, overlap=2)
 
-    def online(times):
-        tracker = OnlineTracker(cells, (NY, NX), opt, 0.1)
-        for t in range(len(maps)):
-            tracker.push(maps[t], None if times is None else times[t])
-        return tracker.finish()[0]
+    def tracked(times, maps=maps):
+        if method == "online":  # pushed one by one, as a live run does
+            tracker = OnlineTracker(cells, (NY, NX), opt, 0.1)
+            for t in range(len(maps)):
+                tracker.push(maps[t], None if times is None else times[t])
+            return tracker.finish()[0]
+        return run_tracker(maps, cells, (NY, NX), opt, 10.0, 0.5, method, times)[0]
 
     whole = [[(t, *a[t]) for t in range(7)]]
-    assert as_paths(online([0.4 * t for t in range(7)])) == whole
-    assert as_paths(online(None)) != whole and as_paths(online([1.0] * 7)) != whole
+    assert as_paths(tracked([0.4 * t for t in range(7)])) == whole
+    assert as_paths(tracked(None)) != whole and as_paths(tracked([1.0] * 7)) != whole
+    assert as_paths(tracked([0.4 * t for t in range(6)] + [None])) != whole  # one time missing
     # each move within its own maps' time apart: 0.5 m in the 0.1 s between maps 2 and 3 is not
     # one (the track bridges that peak instead), 0.5 m in the 0.4 s between maps 0 and 1 is
-    moves = {(f, g) for tr in online([0.0, 0.4, 0.8, 0.9, 1.3, 1.7, 2.1])
+    moves = {(f, g) for tr in tracked([0.0, 0.4, 0.8, 0.9, 1.3, 1.7, 2.1])
              for f, g, bf, bg in zip(tr.frames, tr.frames[1:], tr.bridged, tr.bridged[1:]) if not (bf or bg)}
     assert (2, 3) not in moves and (5, 6) in moves
     b, c = walk(0.5, 0.5, 0.1, 0.0, 12), walk(3.5, 2.5, -0.1, 0.0, 12)
     near = maps_of([b, c], 12)
-    tracker = OnlineTracker(cells, (NY, NX), opt, 0.1)
-    for t in range(12):
-        tracker.push(near[t], 100.0 + 0.1 * t)
-    assert as_paths(tracker.finish()[0]) == as_paths(track_online(near, cells, (NY, NX), opt, 0.1)[0])
-    assert window_times([0.0, 0.1, None]) is None and window_times([0.0, 0.2, 0.1]) is None
-    assert window_times([0.0, float("nan")]) is None and list(window_times([0.0, 0.5])) == [0.0, 0.5]
+    jitter = [100.0 + 0.1 * t + 0.004 * (-1) ** t for t in range(12)]
+    assert as_paths(tracked(jitter, near)) == as_paths(tracked(None, near)) and len(tracked(None, near)) == 2
+
+
+def test_frame_steps_count_the_camera_frames_between_maps():
+    from dpom_warp.tracking import frame_steps, frames_without_map, track_table
+
+    assert frame_steps([0.0, 0.1, None], 0.1) is None and frame_steps([0.0, 0.2, 0.1], 0.1) is None
+    assert frame_steps([0.0, float("nan")], 0.1) is None and frame_steps([], 0.1) is None
+    assert frame_steps([0.0, 0.1, 0.13], 0.1) is None  # closer than the rate: the rate is wrong
+    assert frame_steps([5.0, 5.104, 5.196, 5.5], 0.1).tolist() == [0, 1, 2, 5]  # jitter is not time
+    assert frames_without_map([5.0, 5.104, 5.196, 5.5], 0.1) == 2 and frames_without_map(None, 0.1) == 0
+    from dpom_warp.pipeline import fps_of
+
+    # the rate of a recording with frame 2 skipped: its stream indices count the interval twice
+    assert fps_of([100.0, 100.1, 100.3], ["000000", "000001", "000003"]) == pytest.approx(10.0)
+    assert fps_of([100.0, 100.1, 100.3]) == pytest.approx(1 / 0.15) and fps_of([1.0, None]) is None
+    a = walk(0.5, 1.5, 0.5, 0.0, 7)
+    tracks, report = run_tracker(maps_of([a], 7), grid_cells(), (NY, NX), TrackingOptions(max_speed=1.5), 10.0,
+                                 0.5, "ksp", [0.4 * t for t in range(7)])
+    assert report["frames_without_map"] == 18 and len(tracks) == 1
+    names = [f"{i:06d}" for i in range(0, 28, 4)]
+    # 3.0 m over the 2.4 s from the first map to the last (1.25 m/s), not over 0.6 s
+    assert track_table(tracks, names, 10.0, [0.4 * t for t in range(7)]).splitlines()[1] == \
+        "1,000000,000024,7,0,3.000,1.250"
+    assert track_table(tracks, names, 10.0).splitlines()[1] == "1,000000,000024,7,0,3.000,5.000"
 
 
 def test_naive_linking_breaks_at_a_missed_frame():
