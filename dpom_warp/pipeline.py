@@ -413,7 +413,7 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
                          "frames_per_worker": dict(sorted(plan.by_worker.items()))}
     stamps = {f.name: plan.records[f.name].get("timestamp") for f in done}
     summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth, log=lambda *_: None,
-                                    fps=fps_of(list(stamps.values()), list(stamps)), camera=plan.spec.camera,
+                                    fps=fps_of(list(stamps.values())), camera=plan.spec.camera,
                                     timestamps=stamps)
     summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
@@ -430,17 +430,18 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     return summary
 
 
-def fps_of(timestamps: list, names: list | None = None) -> float | None:
-    """The frame rate of frames with timestamps (the median interval), None without. Where
-    the frames are named by their index in the stream (a recording's, a live run's), an
-    interval over frames skipped or dropped between counts as that many intervals."""
+def fps_of(timestamps: list) -> float | None:
+    """The frame rate of frames with timestamps, None without: one over the median interval
+    between consecutive frames, the intervals over frames dropped or skipped between left
+    out (those over 1.5 times the intervals' 10th percentile: a short recording with a frame
+    skipped has as many of those as of the others)."""
     ts = [t for t in timestamps if t is not None]
     if len(ts) < 2 or len(ts) < len(timestamps):
         return None
-    idx = [Path(n).stem for n in names] if names is not None and len(names) == len(ts) else []
-    idx = [int(i) for i in idx] if idx and all(i.isdigit() for i in idx) else list(range(len(ts)))
-    gaps = [(b - a) / (j - i) for a, b, i, j in zip(ts, ts[1:], idx, idx[1:]) if b > a and j > i]
-    return 1.0 / statistics.median(gaps) if gaps else None
+    gaps = np.array([b - a for a, b in zip(ts, ts[1:]) if b > a])
+    if not len(gaps):
+        return None
+    return 1.0 / float(np.median(gaps[gaps <= 1.5 * np.percentile(gaps, 10)]))
 
 
 def pictures_deferred(cfg: RunConfig, frames: int) -> bool:
@@ -594,7 +595,7 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
     geometry = build_geometry(camera, cfg.grid, cfg.obj)
     report = track_run(cfg, run_dir, done, geometry, truth, log,
-                       fps=fps_of([p.get("timestamp") for p in summary["per_frame"]], names), camera=camera,
+                       fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]), camera=camera,
                        timestamps={p["frame"]: p.get("timestamp") for p in summary["per_frame"]})
     summary["config"], summary["tracking"] = cfg.resolved, report
     write_json_atomic(run_dir / "summary.json", _jsonable(summary))

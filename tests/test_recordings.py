@@ -202,6 +202,22 @@ def test_a_truncated_message_is_skipped_with_its_reason(tmp_path, scene, capsys)
     assert "truncated image" in summary["skipped"][0]["reason"]
     # the tracker knows a camera frame lies between the maps of 000001 and 000003 (their stamps)
     assert summary["tracking"]["frames_without_map"] == 1 and summary["tracking"]["fps"] == pytest.approx(10.0)
+    from dpom_warp import Detector
+    from dpom_warp.sources import open_source
+    from dpom_warp.tracking import tracks_csv
+
+    det = Detector.from_config(path)  # the Python API over the recording's frames: the run's results
+    results, times, names = [], [], []
+    for fr in open_source(bag).frames():
+        if fr.depth is not None:
+            results.append(det.detect(fr.depth))
+            times.append(fr.timestamp)
+            names.append(f"{fr.index:06d}")
+    assert [[n, f"{d.x:.4f}", f"{d.y:.4f}"] for n, r in zip(names, results) for d in r.detections] \
+        == [r[:3] for r in rows(tmp_path / "out")]
+    tracks, report = det.track(results, times=times)
+    assert report["frames_without_map"] == 1 and report["fps"] == pytest.approx(10.0)
+    assert tracks_csv(tracks, names) == (tmp_path / "out" / "tracks.csv").read_text()
     assert "skipping" in capsys.readouterr().out
     assert main(["run", str(path), "--no-progress", "--overwrite", "--strict"]) == 2
 

@@ -230,9 +230,11 @@ def test_frame_steps_count_the_camera_frames_between_maps():
     assert frames_without_map([5.0, 5.104, 5.196, 5.5], 0.1) == 2 and frames_without_map(None, 0.1) == 0
     from dpom_warp.pipeline import fps_of
 
-    # the rate of a recording with frame 2 skipped: its stream indices count the interval twice
-    assert fps_of([100.0, 100.1, 100.3], ["000000", "000001", "000003"]) == pytest.approx(10.0)
-    assert fps_of([100.0, 100.1, 100.3]) == pytest.approx(1 / 0.15) and fps_of([1.0, None]) is None
+    # the rate of a recording with frame 2 skipped: the interval over it is not one frame's
+    assert fps_of([100.0, 100.1, 100.3]) == pytest.approx(10.0) and fps_of([1.0, None]) is None
+    clock = 5.0 + np.cumsum([0.0] + [1 / 30 + 0.002 * (-1) ** k for k in range(40)] + [0.1, 1 / 30])
+    assert fps_of(list(clock)) == pytest.approx(30.0, rel=1e-3)  # jitter and 2 frames dropped
+    assert fps_of([0.0, 0.2, 0.4, 0.6]) == pytest.approx(5.0) and fps_of([1.0, 1.0]) is None
     a = walk(0.5, 1.5, 0.5, 0.0, 7)
     tracks, report = run_tracker(maps_of([a], 7), grid_cells(), (NY, NX), TrackingOptions(max_speed=1.5), 10.0,
                                  0.5, "ksp", [0.4 * t for t in range(7)])
