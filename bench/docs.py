@@ -21,7 +21,7 @@ the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/
   tracker's time and memory on a 10,000-frame run (`python -m bench.tracking`), its picture;
 - recordings: the demo's frames as ROS 1, ROS 2, MCAP and 32FC1 bags: reading cost and the
   detections against the PNG run (`python -m bench.recordings`);
-- live: the live mode on the demo's frames played at 30 fps by a software camera
+- live: the live mode on the demo's room rendered at 30 fps, played by a software camera
   (`python -m bench.live`);
 - ground: the floor fit with `camera.ground.up: auto` and the image's up on every robustness
   scene's empty-room frames (`python -m bench.ground`).
