@@ -1,8 +1,9 @@
 """A run on a live camera (`input.frames: realsense[:SERIAL]`): it goes on until Ctrl-C or
 `--max-frames N`, always infers the newest frame and drops those it cannot keep up with
 (counted), tracks online, writes the usual outputs (a picture of every
-`output.images_every`-th frame) and prints a live line with the rate, the drops and the
-latency (a frame's arrival to its record written).
+`output.images_every`-th frame: with tracks, drawn with them once the online tracker commits
+its frame, as the live view's identities) and prints a live line with the rate, the drops and
+the latency (a frame's arrival to its record written).
 
 The camera's frames arrive on the driver's thread into a one-frame slot; the loop here takes
 the newest, infers it with the run's engine and FrameWorker (the plain run's code), writes its
@@ -166,7 +167,10 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     """Infer a live camera's frames until Ctrl-C or `max_frames`; returns the summary. With
     `workers` > 1, workers - 1 helper processes infer beside this one (Helpers); frames are
     written and tracked in the order they were taken. None: default_workers."""
-    from .pipeline import _jsonable, prepare_output, set_up, summarise, track_table_files
+    from .detect import detect_map
+    from .io import write_bytes_atomic
+    from .pipeline import ShownTracks, _jsonable, prepare_output, set_up, summarise, track_table_files
+    from .render import frame_picture
     from .sources.realsense import RealSenseLive
     from .tracking import Cells, OnlineTracker, frames_without_map
     from .worker import FrameItem, FrameWorker, failed_future, write_output
@@ -211,6 +215,10 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         view.camera(camera)
     slot = NewestFrame()
     records, names, latencies, infer_s, finished = {}, [], [], [], []  # finished: when each was written
+    # with tracks, a frame's picture and its tracks on the view wait for the online tracker to
+    # commit it (tracking.delay frames later): frame index -> (name, timestamp, map as saved,
+    # depth where a picture is due)
+    trails, awaiting = ShownTracks(geometry, cfg.tracking.trail), {}
     done, taken, t_first, last_line, track_s = 0, 0, None, time.perf_counter(), 0.0
     # [frame, depth, small, FrameResult, future or None (being inferred here), inference s,
     # process], in the order the frames were taken
@@ -344,7 +352,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     def finish(item):
         nonlocal done, track_s
         fr, depth, _, res, _, infer, process = item
-        worker.pictures = cfg.output.images and done % cfg.output.images_every == 0
+        due = cfg.output.images and done % cfg.output.images_every == 0
+        worker.pictures = due and not tracking_on  # with tracks: drawn once committed (publish)
         name = f"{fr.index:06d}"
         _, output, _ = worker._finish(FrameItem(name), depth, res, 0.0, infer, [])
         output.record["timestamp"] = output.record["stats"]["timestamp"] = fr.timestamp
@@ -354,14 +363,36 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         if view is not None:
             rho_map, dets = worker.detections(res)
             view.frame(done, fr.timestamp, depth, dets, rho_map)
+        if tracking_on and (view is not None or due):
+            awaiting[done] = (name, fr.timestamp, output.map, depth if due else None)
         if tracking_on:
             t1 = time.perf_counter()
             tracker.push(res.rho_star, fr.timestamp)  # frames dropped between: reach by the time apart
             track_s += time.perf_counter() - t1
+            publish(tracker.take_committed())
         finished.append(time.perf_counter())
         latencies.append(finished[-1] - fr.arrived)
         infer_s.append(infer)
         done += 1
+
+    def publish(committed):
+        """Frames the online tracker has committed: their tracks (identities as in tracks.csv)
+        on the view and, where a picture is due, the picture with the tracks and trails."""
+        for f, rows in committed:
+            shown = trails.at(f, rows)
+            got = awaiting.pop(f, None)
+            if got is None:
+                continue
+            name, stamp, saved, depth = got
+            # as a finished run draws them (frames_out): from the map as maps/ holds it
+            rho_map = saved.reshape(cfg.grid.shape)
+            dets = detect_map(rho_map, geometry, cfg.detection)
+            if view is not None:
+                view.tracks(f, stamp, dets, shown)
+            if depth is not None:
+                write_bytes_atomic(out / "images" / f"{name}.png", frame_picture(
+                    depth, rho_map, cfg.grid, dets, geometry.centre[:2], None, name,
+                    in_view=geometry.rect_area > 0, tracks=shown, trail=cfg.tracking.trail))
 
     def mine(fr, depth, small):
         item = [fr, depth, small, None, None, None, worker.name]
@@ -385,7 +416,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     feeder = threading.Thread(target=feed, daemon=True) if helpers is not None else None
     finisher = threading.Thread(target=finishing, daemon=True)
     finisher.start()
-    stopped_by, stop_error = "max_frames", None
+    stopped_by, stop_error, clean = "max_frames", None, False
     try:
         while reserve():
             first = t_first is None
@@ -412,6 +443,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
                     f"{1000 * statistics.median(latencies[-30:]):.0f} ms")
         stop_threads(feeder, stop_feeding)
         close_finisher()
+        clean = True
     except KeyboardInterrupt:
         stopped_by = "Ctrl-C"
         stop_threads(feeder, stop_feeding)
@@ -419,6 +451,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             if item[3] is None and item[4] is None:
                 infer_here(item)
         close_finisher()  # the frames taken are inferred and written: nothing is lost
+        clean = True
     finally:
         stop_threads(feeder, stop_feeding)
         abandon.set()  # (the finisher is done here unless the run failed)
@@ -430,7 +463,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             log(f"live: the camera did not stop cleanly ({stop_error})")
         if helpers is not None:
             helpers.close()
-        if view is not None:
+        if view is not None and not clean:  # else closed once the last frames' tracks are on it
             view.close()
     wall = time.perf_counter() - (t_first or time.perf_counter())
     done_paths = [Path(n) for n in names]
@@ -439,6 +472,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         t1 = time.perf_counter()
         tracks, report = tracker.finish()
         track_s += time.perf_counter() - t1
+        publish(tracker.take_committed())  # the last tracking.delay frames
         times = [records[n].get("timestamp") for n in names]
         report = {"method": "online", "tracks": len(tracks), "time_s": track_s,
                   "ms_per_frame": 1000 * track_s / len(names), "fps": fps, "fps_from": "camera", **report,
@@ -446,6 +480,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         track_table_files(out, tracks, names, fps, times)
     else:
         report = {"method": "off"}
+    if view is not None:
+        view.close()
     summary["tracking"] = report
     summary["live"] = {"source": info.kind, "frames": done, "received": slot.received,
                        "dropped": slot.dropped, "dropped_share": slot.dropped / max(1, slot.received),

@@ -453,6 +453,29 @@ def pictures_deferred(cfg: RunConfig, frames: int) -> bool:
 VIEW: list = []  # --view: a Rerun viewer is spawned for the runs of this process
 
 
+class ShownTracks:
+    """What a frame's picture and Rerun log show of the tracks, frame after frame (`at`, in
+    order): each track's id, box (the silhouette of the cell nearest to it), bridged flag and
+    trail (its positions over the last tracking.trail frames, this one's included). Holds
+    only the trails' frames."""
+
+    def __init__(self, geometry, trail: int):
+        self.geometry, self.trail = geometry, max(1, trail)
+        self.history: dict[int, list] = {}
+
+    def at(self, i: int, rows: list) -> list[dict]:
+        """Frame i's tracks from rows [(id, xyz, bridged)]."""
+        shown = []
+        for tid, xyz, bridged in rows:
+            self.history.setdefault(tid, []).append((i, xyz))
+            past = [p for j, p in self.history[tid] if j > i - self.trail]
+            k = int(np.argmin(np.linalg.norm(self.geometry.locations - xyz, axis=1)))
+            shown.append({"id": tid, "box": self.geometry.rect[k], "bridged": bridged, "trail": past, "xyz": xyz})
+        self.history = {tid: [(j, p) for j, p in h if j > i - self.trail] for tid, h in self.history.items()
+                        if h[-1][0] > i - self.trail}
+        return shown
+
+
 def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, truth, tracks,
                pictures: bool, timestamps: dict | None = None, camera=None) -> None:
     """After the frames: each frame's picture (with `tracks`, their identities and trails)
@@ -469,16 +492,8 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
         log.camera(camera or cfg.camera)
     now = per_frame(tracks, len(done)) if tracks is not None else [[] for _ in done]
     trail = cfg.tracking.trail
-    history: dict[int, list] = {}
-    shown_all = []
-    for i in range(len(done)):
-        shown = []
-        for tid, xyz, bridged in now[i]:
-            history.setdefault(tid, []).append((i, xyz))
-            past = [p for j, p in history[tid] if j > i - max(1, trail)]
-            k = int(np.argmin(np.linalg.norm(geometry.locations - xyz, axis=1)))
-            shown.append({"id": tid, "box": geometry.rect[k], "bridged": bridged, "trail": past, "xyz": xyz})
-        shown_all.append(shown)
+    trails = ShownTracks(geometry, trail)
+    shown_all = [trails.at(i, now[i]) for i in range(len(done))]
 
     def one(i):
         """Frame i's detections, depth and (with `pictures`) picture file."""

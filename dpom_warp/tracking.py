@@ -326,6 +326,11 @@ def _expand(path, t0, maps, cells, threshold):
     return out
 
 
+def _first_key(rows: list) -> tuple:
+    """A track's place in the numbering: its first frame, then its position there."""
+    return rows[0][0], round(float(rows[0][1][0]), 4), round(float(rows[0][1][1]), 4)
+
+
 def _tracks_from(rows_by_id: dict) -> list[Track]:
     """Tracks numbered 1, 2, ... by first frame then position (deterministic)."""
     items = []
@@ -333,7 +338,7 @@ def _tracks_from(rows_by_id: dict) -> list[Track]:
         rows = sorted(rows, key=lambda r: r[0])
         if rows:
             items.append(rows)
-    items.sort(key=lambda rs: (rs[0][0], round(float(rs[0][1][0]), 4), round(float(rs[0][1][1]), 4)))
+    items.sort(key=_first_key)
     tracks = []
     for i, rows in enumerate(items, 1):
         frames = [r[0] for r in rows]
@@ -414,7 +419,10 @@ class OnlineTracker:
     """The causal tracker, fed one map at a time (`push`): when frame t arrives the flow is
     solved over the frames from the last committed one (whose tracks are the only starts
     there) to t, and frame t - delay is committed; `finish` commits the rest. Identities,
-    once committed, never change. Holds at most delay + 1 maps."""
+    once committed, never change, and are those `finish` returns (new tracks are numbered
+    as _tracks_from numbers them: by first frame, then position); `take_committed` gives
+    each committed frame's tracks as they are committed (a live run's pictures and view).
+    Holds at most delay + 1 maps."""
 
     def __init__(self, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float, threshold: float = 0.5):
         self.cells, self.shape, self.opt, self.dt, self.threshold = cells, shape, opt, dt, threshold
@@ -426,6 +434,7 @@ class OnlineTracker:
         self.times: list = []  # their times (push), None where not given
         self.stats = {"solves": 0, "max_nodes": 0, "max_arcs": 0, "delay_frames": self.delay}
         self.cache = PeakCache(cells, shape, opt.prune, keep=2 * self.delay + 8)
+        self.newly: list[tuple[int, list]] = []  # committed frames not yet taken (take_committed)
 
     def push(self, rho_map: np.ndarray, time_s: float | None = None) -> None:
         """The next map; `time_s`: when its frame was taken (seconds, a camera's timestamp),
@@ -442,6 +451,12 @@ class OnlineTracker:
             self._commit(self.t)
         return _tracks_from({k: v for k, v in self.ids.items() if v}), self.stats
 
+    def take_committed(self) -> list[tuple[int, list]]:
+        """The frames committed since the last call, in order: (frame index, [(id, xyz,
+        bridged)] by id), what per_frame of the final tracks gives for those frames."""
+        out, self.newly = self.newly, []
+        return out
+
     def _commit(self, c: int) -> None:
         committed, cells = self.committed, self.cells
         a = committed if committed >= 0 else 0
@@ -452,7 +467,7 @@ class OnlineTracker:
         self.stats["solves"] += 1
         self.stats["max_nodes"] = max(self.stats["max_nodes"], st["nodes"])
         self.stats["max_arcs"] = max(self.stats["max_arcs"], st["arcs"])
-        new_at = {}
+        new_at, fresh, added = {}, {}, []  # fresh: the new tracks' rows by a placeholder id (< 0)
         for p in paths:
             rows = _expand(p, a, window, cells, self.threshold)
             tid = None
@@ -463,13 +478,27 @@ class OnlineTracker:
             if not rows:
                 continue
             if tid is None:
-                self.next_id += 1
-                tid = self.next_id
-                self.ids[tid] = []
-            self.ids[tid] += rows
+                tid = -1 - len(fresh)
+                fresh[tid] = rows
+            else:
+                self.ids[tid] += rows
+            added.append((tid, rows))
             last = rows[-1]
             if last[0] == c:
                 new_at.setdefault(cells.nearest(last[1]), (tid, last[1]))
+        # every track starting in these frames starts here: numbered by first frame, then
+        # position, they get the numbers the run's tracks will have (_tracks_from)
+        number = {}
+        for tmp in sorted(fresh, key=lambda i: _first_key(fresh[i])):
+            self.next_id += 1
+            number[tmp] = self.next_id
+            self.ids[self.next_id] = fresh[tmp]
+        new_at = {k: (number.get(tid, tid), xyz) for k, (tid, xyz) in new_at.items()}
+        now: dict[int, list] = {}
+        for tid, rows in added:
+            for r in rows:
+                now.setdefault(r[0], []).append((number.get(tid, tid), r[1], bool(r[3])))
+        self.newly += [(f, sorted(now.get(f, []), key=lambda v: v[0])) for f in range(committed + 1, c + 1)]
         self.at, self.committed = new_at, c
         self.window = self.window[c - a:]  # frame c is the next window's first
         self.times = self.times[c - a:]

@@ -47,20 +47,28 @@ class RerunLog:
     def frame(self, index: int, timestamp: float | None, depth_m: np.ndarray, dets: list, rho_map: np.ndarray,
               tracks: list | None = None) -> None:
         """One frame: `dets` (detect.Detected), `tracks` dicts of id, xyz, trail (positions)."""
-        from .render import colourise, track_colour, track_identities
+        from .render import colourise
 
         rr, rec = self.rr, self.rec
-        rec.set_time("frame", sequence=index)
-        if timestamp is not None:
-            rec.set_time("time", duration=float(timestamp))
+        self._at(index, timestamp)
         rec.log("world/camera/depth", rr.DepthImage(np.asarray(depth_m, np.float32), meter=1.0))
+        top = rho_map.max(axis=0) if rho_map.ndim == 3 else rho_map
+        rec.log("world/occupancy", rr.Image(colourise(top[::-1], 0.0, 1.0, "magma")))
+        self.tracks(index, timestamp, dets, tracks)
+
+    def tracks(self, index: int, timestamp: float | None, dets: list, tracks: list | None) -> None:
+        """Frame `index`'s detection boxes, labelled with the identity of the track on each
+        (none without `tracks`), and its tracks and trails: with the frame (`frame`), or once
+        a live run's online tracker has committed it, logged again at its time."""
+        from .render import track_colour, track_identities
+
+        rr, rec = self.rr, self.rec
+        self._at(index, timestamp)
         ident = track_identities(dets, tracks or [])
         boxes = np.array([d.box for d in dets], float).reshape(-1, 4)
         labels = [(f"#{ident[i]} " if i in ident else "") + f"{d.rho:.2f}" for i, d in enumerate(dets)]
         rec.log("world/camera/depth/detections",
                 rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, labels=labels))
-        top = rho_map.max(axis=0) if rho_map.ndim == 3 else rho_map
-        rec.log("world/occupancy", rr.Image(colourise(top[::-1], 0.0, 1.0, "magma")))
         if tracks is not None:
             pos = np.array([t["xyz"] for t in tracks], float).reshape(-1, 3)
             colours = [track_colour(t["id"]) for t in tracks]
@@ -68,6 +76,11 @@ class RerunLog:
                                                 radii=0.15))
             rec.log("world/trails", rr.LineStrips3D([np.asarray(t["trail"], float).reshape(-1, 3) for t in tracks],
                                                     colors=colours))
+
+    def _at(self, index: int, timestamp: float | None) -> None:
+        self.rec.set_time("frame", sequence=index)
+        if timestamp is not None:
+            self.rec.set_time("time", duration=float(timestamp))
 
     def close(self) -> None:
         self.rec.flush()

@@ -67,7 +67,41 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     rows = {}
     for chunk in RrdReader(str(tmp / "live.rrd")).stream():
         rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
-    assert rows["/world/camera/depth"] == rows["/world/camera/depth/detections"] == 12
+    # each frame's boxes are logged with it, then again with their identities once the online
+    # tracker commits it (tracking.delay frames later, or at the end), with its tracks
+    assert rows["/world/camera/depth"] == rows["/world/tracks"] == 12 and rows["/world/camera/depth/detections"] == 24
+    # the pictures are drawn once their frame is committed, with the tracks of tracks.csv
+    import numpy as np
+
+    from dpom_warp.config import parse_config
+    from dpom_warp.detect import detect_map
+    from dpom_warp.geometry import build_geometry
+    from dpom_warp.io import units_to_metres
+    from dpom_warp.pipeline import ShownTracks
+    from dpom_warp.render import frame_picture
+    from dpom_warp.tracking import Cells, per_frame, run_tracker, tracks_csv
+
+    cfg = parse_config(summary["config"])
+    geometry = build_geometry(cfg.camera, cfg.grid, cfg.obj)
+    stamps = [p["timestamp"] for p in summary["per_frame"]]
+    assert [p["frame"] for p in summary["per_frame"]] == names
+    maps = np.stack([np.load(out / "maps" / f"{n}.npy").ravel() for n in names])
+    # the live tracker's tracks again from its maps and their times: tracks.csv, exactly
+    tracks, _ = run_tracker(maps, Cells.for_run(geometry, cfg), cfg.grid.shape, cfg.tracking,
+                            summary["tracking"]["fps"], cfg.detection.threshold, "online", stamps)
+    assert tracks and tracks_csv(tracks, names) == (out / "tracks.csv").read_text()
+    trails, drawn = ShownTracks(geometry, cfg.tracking.trail), 0
+    for i, (n, rows) in enumerate(zip(names, per_frame(tracks, len(names)))):
+        shown = trails.at(i, rows)
+        if i % 5 == 0:
+            rho_map = maps[i].reshape(cfg.grid.shape)
+            sent = round(stamps[i] * 30)  # the camera's frame number
+            depth = units_to_metres(cam.frames[sent % len(cam.frames)], 0.001)
+            png = frame_picture(depth, rho_map, cfg.grid, detect_map(rho_map, geometry, cfg.detection),
+                                geometry.centre[:2], None, n, in_view=geometry.rect_area > 0, tracks=shown,
+                                trail=cfg.tracking.trail)
+            drawn += png == (out / "images" / f"{n}.png").read_bytes()
+    assert drawn == 3
 
 
 def plain_maps(tmp):

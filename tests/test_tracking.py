@@ -184,6 +184,32 @@ def test_online_is_causal_and_close_to_offline():
     assert before(again, 50) == before(online, 50)
 
 
+def test_online_commits_show_the_final_identities():
+    """What a live run shows as frames are committed (take_committed) is per_frame of the
+    tracks it ends with, identities included: new tracks are numbered by first frame, then
+    position, as the final tracks are, not in the flow's cell order (two people appearing at
+    once at (3.0, 2.2) and (0.5, 2.8): the first has the lower cell index, the second the
+    lower x)."""
+    from dpom_warp.tracking import OnlineTracker, per_frame
+
+    people = random_people(60, 2, seed=4) + [walk(3.0, 2.2, -0.1, 0.0, 20, t0=30), walk(0.5, 2.8, 0.1, 0.0, 20, t0=30)]
+    maps = maps_of(people, 60)
+    tracker = OnlineTracker(grid_cells(), (NY, NX), TrackingOptions(max_speed=1.5, delay=6), 0.1)
+    shown = []
+    for t in range(60):
+        tracker.push(maps[t])
+        shown += tracker.take_committed()
+        assert [f for f, _ in shown] == list(range(max(0, t - 6 + 1)))  # frame t - delay committed
+    tracks, _ = tracker.finish()
+    shown += tracker.take_committed()
+    assert [f for f, _ in shown] == list(range(60)) and not tracker.take_committed()
+    final = per_frame(tracks, 60)
+    assert len(tracks) == 4 and [[(i, tuple(p), b) for i, p, b in rows] for _, rows in shown] == \
+        [[(i, tuple(p), b) for i, p, b in rows] for rows in final]
+    at30 = {tuple(np.round(p[:2], 1).tolist()): i for i, p, _ in final[30]}
+    assert at30[(0.5, 2.8)] < at30[(3.0, 2.2)]  # numbered by x
+
+
 @pytest.mark.parametrize("method", ["online", "ksp"])
 def test_reach_follows_the_maps_times_where_frames_were_dropped(method):
     """A live run drops frames, a recording loses or skips some: a person walking 1.25 m/s is
