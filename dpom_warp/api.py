@@ -7,6 +7,7 @@
     for d in result.detections:
         print(d.x, d.y, d.rho, d.box)
     tracks, report = det.track(det.detect_batch(frames))   # identities over a sequence
+    online = det.online_tracker()           # or as frames come (a camera): what a live run does
 
 The Detector is the CLI's engine side: the same setup (`pipeline.set_up`: pose fit, background,
 stride, sparse iterations, every default) and the same frame-to-detections step
@@ -166,6 +167,20 @@ class Detector:
         return run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, fps, cfg.detection.threshold, method,
                            None if times is None else list(times))
 
+    def online_tracker(self, fps: float | None = None) -> "OnlineTracks":
+        """Identities as frames come, as a live run gives them: `push` each frame's Result
+        (with its timestamp, where frames may be dropped between) and get back the frames the
+        tracker has committed, tracking.delay frames behind, with their final identities;
+        `finish` commits the rest. `fps`: the camera's rate (default input.fps). The tracks
+        are those of `track(results, method="online", times=...)` at that rate."""
+        from .tracking import Cells, OnlineTracker
+
+        cfg = self.config
+        rate = fps or cfg.inputs.fps
+        tracker = OnlineTracker(Cells.for_run(self.worker.geometry, cfg), cfg.grid.shape, cfg.tracking, 1.0 / rate,
+                                cfg.detection.threshold)
+        return OnlineTracks(tracker)
+
     def _metres(self, depth, index: int) -> np.ndarray:
         depth = np.asarray(depth)
         shape = (self.config.camera.height, self.config.camera.width)
@@ -182,6 +197,30 @@ class Detector:
         if metres.min(initial=0) < 0:
             raise InputError(f"depth (frame {index}): expected metres >= 0, found {metres.min():g}")
         return metres
+
+
+class OnlineTracks:
+    """Detector.online_tracker's tracker. Each committed frame comes as (index, tracks):
+    `index` counts the frames pushed from 0, `tracks` is [(id, xyz, bridged)] by id (world
+    metres; `bridged`: held without a map peak), the identities tracks.csv would hold."""
+
+    def __init__(self, tracker):
+        self._tracker = tracker
+        self.tracks: list | None = None  # after finish: every track (id, frames, xyz, rho, bridged)
+
+    def push(self, result: Result, timestamp: float | None = None) -> list[tuple[int, list]]:
+        """The next frame's result (`timestamp`: seconds, its camera's clock); returns the
+        frames committed now (none until tracking.delay frames have come, then one a frame)."""
+        if self.tracks is not None:
+            raise RuntimeError("OnlineTracks.push after finish: expected a new online_tracker()")
+        self._tracker.push(result.rho_star, timestamp)
+        return self._tracker.take_committed()
+
+    def finish(self) -> list[tuple[int, list]]:
+        """Commit the frames still waiting and return them; `tracks` then holds every track."""
+        if self.tracks is None:
+            self.tracks, self.report = self._tracker.finish()
+        return self._tracker.take_committed()
 
 
 def _yaml(value) -> str:

@@ -70,6 +70,24 @@ def test_api_gives_the_cli_detections_on_the_demo(demo_run):
     assert report["fps"] == pytest.approx(fps) and report["frames_without_map"] == 0
     with pytest.raises(ValueError, match="one timestamp per result"):
         det.track(results, times=[0.0])
+    # as frames come: each push commits the frame tracking.delay behind, with its final identity
+    from dpom_warp.tracking import per_frame
+
+    times, delay = [7.0 + k / fps for k in range(len(results))], cfg.tracking.delay
+    online, shown = det.online_tracker(fps), []
+    for k, r in enumerate(results):
+        got = online.push(r, times[k])
+        assert [f for f, _ in got] == ([k - delay] if k >= delay else [])
+        shown += got
+    shown += online.finish()
+    want, _ = det.track(results, method="online", times=times)
+    assert online.tracks and tracks_csv(online.tracks, [f.name for f in frames]) == \
+        tracks_csv(want, [f.name for f in frames])
+    assert [f for f, _ in shown] == list(range(len(results)))
+    assert [[(i, p.tolist(), b) for i, p, b in rows] for _, rows in shown] == \
+        [[(i, p.tolist(), b) for i, p, b in rows] for rows in per_frame(want, len(results))]
+    with pytest.raises(RuntimeError, match="after finish"):
+        online.push(results[0])
 
 
 def test_api_float_metres_and_batches_match_single_frames(tmp_path):
@@ -327,6 +345,7 @@ def test_readme_api_examples_run(monkeypatch, demo_run):
     first = {"depth": depths[0], "depths": depths, "print": lambda *a: None}
     exec(blocks[0], first)
     assert first["result"].detections and len(first["results"]) == 2
+    assert first["tracks"] and first["online"].tracks is not None  # the two frames tracked both ways
     second = {"depth_m": read_depth(frames[0], 0.001),
               "background_m": np.stack([read_depth(f, 0.001) for f in background])}
     exec(next(b for b in blocks if "Engine(" in b), second)
