@@ -15,7 +15,7 @@ beside the same maps tracked by KSP, and every SPARSE-th map alone (what a machi
 fifth of the frames would have) tracked online with the maps' timestamps and without them (one
 camera frame between two maps, as the live tracker did before it used them).
 
-    python -m bench.live [--fps 30] [--frames 300] [--every 30] [--repeats 3] [--workers 1 2]
+    python -m bench.live [--fps 30] [--frames 300] [--every 30] [--repeats 3] [--workers 1 2 3]
                          [--stream-frames 900] [--output runs/live]
 """
 
@@ -88,7 +88,7 @@ def main():
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--every", type=int, default=30)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2],
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2, 3],
                     help="processes of the live run, each measured (1: the main process alone)")
     ap.add_argument("--stream-frames", type=int, default=900,
                     help="frames of the rendered stream (the camera loops it; 900: 30 s at 30 fps)")
@@ -97,6 +97,7 @@ def main():
     os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
     from dpom_warp.config import load_config
     from dpom_warp.evaluate import load_ground_truth
+    from dpom_warp.live import LIVE_WORKERS
     from dpom_warp.pipeline import run
     from dpom_warp.sources.realsense import SoftwareCamera
 
@@ -132,7 +133,8 @@ def main():
 
     lines = []
     for w in a.workers:
-        who = "one process" if w == 1 else f"`--workers {w}` (the main process and {w - 1} helper{'s' * (w > 2)})"
+        who = "one process" if w == 1 else (f"`--workers {w}` (the main process and {w - 1} helper{'s' * (w > 2)}"
+                                            f"{'; the default' if w == LIVE_WORKERS else ''})")
         kept = statistics.median(r["quality"]["sparse_rate"] for r in runs[w])
         trackers = (("live", "as run (online)"), ("ksp", "its maps by KSP"),
                     ("sparse", f"every {SPARSE}th map alone ({kept:.1f} frames/s kept), online by their timestamps"),

@@ -302,8 +302,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--strict", action="store_true", help="a bad frame is fatal instead of skipped")
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="infer frames in this many processes (Warp runs CPU kernels on one thread); "
-                        "with --ray, this many actors (default: 1; a live camera on the CPU: 2 where "
-                        "there are two CPUs; with --ray one actor per CPU, or GPU, of the cluster)")
+                        "with --ray, this many actors (default: 1; a live camera on the CPU: 3 where "
+                        "there are two CPUs or more; with --ray one actor per CPU, or GPU, of the cluster)")
     p.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
                    help="infer frames on Ray actors: of the cluster at ADDRESS (or $RAY_ADDRESS; "
                         "'auto': the one `ray start` runs here), else of a new local Ray instance; "
