@@ -533,6 +533,7 @@ def track_online(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     tracker = OnlineTracker(cells, shape, opt, dt, threshold)
     for t in range(len(maps)):
         tracker.push(maps[t], None if times is None else times[t])
+        tracker.take_committed()  # (the frames as committed are the final tracks': not kept twice)
     return tracker.finish()
 
 

@@ -276,6 +276,8 @@ def test_ctrl_c_writes_and_tracks_every_frame_taken(camera_config, workers):
     assert_plain_maps_in_stream_order(out, want, frames)
     t = summary["tracking"]  # every frame pushed to the online tracker: a solve each past the delay
     assert t["method"] == "online" and t["solves"] == max(0, frames - t["delay_frames"]) + 1
+    # every 5th frame's picture, those the tracker had not committed at Ctrl-C drawn at the end
+    assert len(list((out / "images").glob("*.png"))) == (frames + 4) // 5
 
 
 def test_an_error_writing_a_frame_ends_the_live_run_with_one_line(camera_config, capsys, monkeypatch):
