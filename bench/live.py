@@ -5,9 +5,9 @@ to waypoints (--stream-frames frames, rendered once into .cache/live_stream), at
 background frames, online tracks, a picture every --every frames), and the processing rate,
 the drops and the latency (a frame's arrival to its record written) are reported, median of
 --repeats runs. The rate is the run's once running (summary.json's live.frames_per_s_steady:
-frames written from the first's record to the last's), with the rate over the whole run beside
-it (frames_per_s: from the first frame's arrival to the end of the run, the helpers' and the
-camera's shutdown included).
+frames written from the first's arrival plus the median latency to the last's record), with the
+rate over the whole run beside it (frames_per_s: from the first frame's arrival to the end of
+the run, the helpers' and the camera's shutdown included).
 
 Each run's tracks are scored against the stream's ground truth (each map's camera frame from
 its timestamp; MOTA, IDF1 and identity switches at 0.5 m, people under 10 % visible ignored),

@@ -53,6 +53,15 @@ def usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
+def steady_rate(done: int, first_arrival: list, latencies: list, finished: list) -> float | None:
+    """Frames written a second once running: done - 1 over the time from the first frame's
+    arrival plus the median latency to the last frame's record; None under two frames."""
+    if done < 2 or not first_arrival:
+        return None
+    span = finished[-1] - (first_arrival[0] + statistics.median(latencies))
+    return (done - 1) / span if span > 0 else None
+
+
 def default_workers(cfg: RunConfig, device: str) -> int:
     """A live run's processes without --workers: on the CPU LIVE_WORKERS where there are two
     CPUs or more, one where there is one; one with warm starts (each frame starts from the one
@@ -217,6 +226,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         view.camera(camera)
     slot = NewestFrame()
     records, names, latencies, infer_s, finished = {}, [], [], [], []  # finished: when each was written
+    first_arrival: list = []  # when the first frame written arrived
     # with tracks, a frame's picture and its tracks on the view wait for the online tracker to
     # commit it (tracking.delay frames later): frame index -> (name, timestamp, map as saved,
     # depth where a picture is due)
@@ -374,6 +384,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             publish(tracker.take_committed())
         finished.append(time.perf_counter())
         latencies.append(finished[-1] - fr.arrived)
+        first_arrival[:] = first_arrival or [fr.arrived]
         infer_s.append(infer)
         done += 1
 
@@ -488,10 +499,12 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     summary["live"] = {"source": info.kind, "frames": done, "received": slot.received,
                        "dropped": slot.dropped, "dropped_share": slot.dropped / max(1, slot.received),
                        "frames_per_s": done / wall if wall > 0 else None,
-                       # the output rate once running: frames written from the first's record to
-                       # the last's (the pipeline's start and the run's shutdown left out)
-                       "frames_per_s_steady": ((done - 1) / (finished[-1] - finished[0])
-                                               if done > 1 and finished[-1] > finished[0] else None),
+                       # the output rate once running: frames written from when the first's
+                       # record would be at the run's pace (its arrival plus the median latency:
+                       # its own record, late with the first solve's costs, would count the
+                       # frames queued behind it as a burst) to the last's record (the
+                       # pipeline's start and the run's shutdown left out)
+                       "frames_per_s_steady": steady_rate(done, first_arrival, latencies, finished),
                        "processes": workers,
                        "camera_fps": fps, "stopped_by": stopped_by, "stop_error": stop_error,
                        "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
