@@ -207,6 +207,7 @@ class OnlineTracks:
     def __init__(self, tracker):
         self._tracker = tracker
         self.tracks: list | None = None  # after finish: every track (id, frames, xyz, rho, bridged)
+        self.report: dict | None = None  # after finish: solves, graph sizes, delay
 
     def push(self, result: Result, timestamp: float | None = None) -> list[tuple[int, list]]:
         """The next frame's result (`timestamp`: seconds, its camera's clock); returns the

@@ -438,7 +438,7 @@ class OnlineTracker:
 
     def push(self, rho_map: np.ndarray, time_s: float | None = None) -> None:
         """The next map; `time_s`: when its frame was taken (seconds, a camera's timestamp),
-        where frames were dropped between the maps (solve_window's `times`)."""
+        where frames were dropped between the maps (frame_steps)."""
         self.t += 1
         self.window.append(np.asarray(rho_map, np.float32).ravel())
         self.times.append(time_s)
