@@ -594,6 +594,12 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
         camera = dataclasses.replace(camera, T_world_from_camera=np.array(
             summary["ground_fit"]["T_world_from_camera"], float))
     names = [p["frame"] for p in summary["per_frame"]]
+    from .sources.realsense import is_live
+
+    if is_live(cfg.inputs.frames) and (cfg.output.images or cfg.output.rerun):
+        raise InputError(f"{run_dir}: a live run keeps no frames (input.frames: {cfg.inputs.frames}), so its "
+                         f"pictures and Rerun log cannot be drawn again; expected --set output.images=false "
+                         f"--set output.rerun=null (tracks.csv, track_table.csv and the summary only)")
     if cfg.output.images:
         by_name = {f.name: f for f in expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, log)}
         missing = [n for n in names if n not in by_name]

@@ -102,6 +102,16 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
                                 trail=cfg.tracking.trail)
             drawn += png == (out / "images" / f"{n}.png").read_bytes()
     assert drawn == 3
+    # `dpom-warp track` on a live run: no frames were kept to draw pictures from (one line);
+    # without pictures it gives the live run's tracks again from its maps and timestamps
+    live_tracks = (out / "tracks.csv").read_text()
+    capsys.readouterr()
+    assert main(["track", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "a live run keeps no frames (input.frames: realsense)" in err and "\n" not in err
+    assert main(["track", str(out), "--set", "output.images=false", "--set", "output.rerun=null",
+                 "--set", "tracking.method=online"]) == 0
+    assert (out / "tracks.csv").read_text() == live_tracks
 
 
 def plain_maps(tmp):
