@@ -186,7 +186,7 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
     `sources` names each run's config and `devices` gives its device setting (for errors);
     `workers`: the number of actors (None: one per CPU, or per GPU, of the cluster).
     Nothing is written before the first actor has started."""
-    from .pipeline import abandon_if_empty, accept, finish_run, open_output, progress_bar
+    from .pipeline import abandon_if_empty, accept, finish_run, open_output, progress_bar, remove_temporaries
 
     with connect(address) as where:
         ray = import_ray()
@@ -215,6 +215,10 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
             except (InputError, ConfigError):
                 for p in plans:
                     abandon_if_empty(p)  # --strict before any frame: nothing left behind
+                raise
+            except KeyboardInterrupt:  # the frames are written here, in this thread: none in flight
+                for p in plans:
+                    remove_temporaries(p.out)
                 raise
             wall = time.perf_counter() - t0
         finally:

@@ -37,15 +37,17 @@ def atomic_path(path: str | Path, suffix: str = ""):
     """Yield a temporary path beside `path`; on success it is renamed onto `path`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}{TEMP_MARK}", suffix=suffix or path.suffix,
-                               dir=path.parent)
-    os.close(fd)
-    try:
+    tmp = None
+    try:  # (Ctrl-C inside mkstemp itself can still leave one: the runs remove those, remove_temporaries)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}{TEMP_MARK}", suffix=suffix or path.suffix,
+                                   dir=path.parent)
+        os.close(fd)
         yield Path(tmp)
         os.chmod(tmp, _FILE_MODE)  # mkstemp makes 0600 files; outputs are ordinary files
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
         raise
 
 

@@ -89,9 +89,15 @@ def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> 
             raise ConfigError(f"output.dir: {out} is not empty; expected an empty or new folder "
                               f"(use --overwrite to replace its results or --resume to continue)")
     out.mkdir(parents=True, exist_ok=True)
-    for stale in list(out.glob(f".*{TEMP_MARK}*")) + list(out.glob(f"*/.*{TEMP_MARK}*")):
-        stale.unlink()  # temporary files of a killed run
+    remove_temporaries(out)  # of a killed run
     write_json_atomic(out / RUN_STATE, state)
+
+
+def remove_temporaries(out: Path) -> None:
+    """The temporary files of atomic writes left in a run's folder: by a killed run, or by
+    Ctrl-C landing between a temporary file's creation and the write's own cleanup."""
+    for stale in list(out.glob(f".*{TEMP_MARK}*")) + list(out.glob(f"*/.*{TEMP_MARK}*")):
+        stale.unlink(missing_ok=True)
 
 
 def _first_difference(a, b, path=""):
@@ -178,6 +184,9 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         collect(plan, progress_bar(outcomes, len(plan.todo), desc, progress), strict, log)
     except (InputError, ConfigError):
         abandon_if_empty(plan)  # --strict: a bad frame before any good one leaves nothing
+        raise
+    except KeyboardInterrupt:  # every write started has ended (collect): none is in flight
+        remove_temporaries(plan.out)
         raise
     finally:
         outcomes.close()  # stops the worker pool at once on an error or Ctrl-C

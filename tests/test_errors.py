@@ -16,7 +16,7 @@ import yaml
 from PIL import Image
 
 from dpom_warp.cli import main
-from dpom_warp.io import write_depth_png
+from dpom_warp.io import TEMP_MARK, write_depth_png
 from dpom_warp.worker import CACHE_PREFIX
 
 from test_cli import small_config
@@ -246,8 +246,12 @@ def test_interrupted_run_resumes_to_the_same_files(tmp_path, scene, monkeypatch,
     real = FrameWorker.process
     calls = []
 
+    out = tmp_path / "out"
+
     def interrupted(self, items, *read):  # Ctrl-C while the fourth frame is inferred
         if len(calls) == 3:
+            # and as if it had landed inside a write's mkstemp (the write's cleanup never ran)
+            (out / "frames" / f".0002.json{TEMP_MARK}x1y2z3.json").write_text("")
             raise KeyboardInterrupt
         calls.append(1)
         return real(self, items, *read)
@@ -255,7 +259,7 @@ def test_interrupted_run_resumes_to_the_same_files(tmp_path, scene, monkeypatch,
     monkeypatch.setattr(FrameWorker, "process", interrupted)
     assert main(["run", str(path), "--no-progress"]) == 130
     assert "continue with --resume" in capsys.readouterr().err
-    out = tmp_path / "out"
+    assert not [p for p in out.rglob(".*") if p.is_file()]  # no temporary file left
     assert len(list((out / "frames").glob("*.json"))) == 3 and not (out / "detections.csv").exists()
     monkeypatch.setattr(FrameWorker, "process", real)
     assert main(["run", str(path), "--no-progress", "--resume"]) == 0
