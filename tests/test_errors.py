@@ -287,7 +287,8 @@ def test_killed_run_leaves_whole_files_and_resumes(tmp_path, scene):
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=slow_env(tmp_path, 1.0))
     deadline = time.time() + 120
-    while not list((out / "frames").glob("*.json")) and time.time() < deadline and proc.poll() is None:
+    # a finished record (glob("*.json") also matches a record being written: .NAME.json.tmp-*.json)
+    while not list((out / "frames").glob("[!.]*.json")) and time.time() < deadline and proc.poll() is None:
         time.sleep(0.01)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)

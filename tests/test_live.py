@@ -261,7 +261,7 @@ def test_ctrl_c_writes_and_tracks_every_frame_taken(camera_config, workers):
         # frames never come, the camera stops, so that the run ends and the test fails, not hangs
         deadline = time.time() + 400
         while time.time() < deadline:
-            if (out / "frames").exists() and len(list((out / "frames").glob("*.json"))) >= 5:
+            if (out / "frames").exists() and len(list((out / "frames").glob("[!.]*.json"))) >= 5:
                 os.kill(os.getpid(), signal.SIGINT)
                 sent.append(True)
                 return

@@ -206,7 +206,8 @@ def test_ctrl_c_then_resume_on_ray(tmp_path, local_ray, scene):
                              "--ray", "--output", str(out)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
     deadline = time.time() + 180
-    while not list((out / "frames").glob("*.json")) and time.time() < deadline and proc.poll() is None:
+    # a finished record (glob("*.json") also matches a record being written: .NAME.json.tmp-*.json)
+    while not list((out / "frames").glob("[!.]*.json")) and time.time() < deadline and proc.poll() is None:
         time.sleep(0.01)
     assert instance_processes(ray_tmp)  # what the check below looks for is there while it runs
     proc.send_signal(signal.SIGINT)

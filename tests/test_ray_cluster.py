@@ -185,7 +185,8 @@ def test_sigterm_on_a_ray_run_stops_it_and_its_actors(cluster, scene, tmp_path):
                              address, "--output", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=driver_env)
     deadline = time.time() + 180
-    while not list((out / "frames").glob("*.json")) and time.time() < deadline and proc.poll() is None:
+    # a finished record (glob("*.json") also matches a record being written: .NAME.json.tmp-*.json)
+    while not list((out / "frames").glob("[!.]*.json")) and time.time() < deadline and proc.poll() is None:
         time.sleep(0.01)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
