@@ -51,7 +51,7 @@ def track_quality(run_dir: Path, truth: list, fps: float, cfg) -> dict:
 
     from dpom_warp.geometry import build_geometry
     from dpom_warp.track_eval import track_scores
-    from dpom_warp.tracking import Cells, read_tracks_csv, run_tracker
+    from dpom_warp.tracking import Cells, per_frame, read_tracks_csv, run_tracker
 
     summary = json.loads((run_dir / "summary.json").read_text())
     names = [p["frame"] for p in summary["per_frame"]]
@@ -72,11 +72,8 @@ def track_quality(run_dir: Path, truth: list, fps: float, cfg) -> dict:
         frames = names[take]
         tracks, _ = run_tracker(maps[take], cells, cfg.grid.shape, cfg.tracking, fps, cfg.detection.threshold,
                                 method, stamps)
-        rows: dict = {}
-        for tr in tracks:
-            for t, p, r, b in zip(tr.frames, tr.xyz, tr.rho, tr.bridged):
-                rows.setdefault(frames[t], []).append((tr.id, *map(float, p), float(r), bool(b)))
-        out[key] = score(rows, frames)
+        at = per_frame(tracks, len(frames))  # (id, xyz, bridged) a frame, as track_scores reads them
+        out[key] = score({n: [(i, *map(float, p)) for i, p, _ in rows] for n, rows in zip(frames, at)}, frames)
     kept = times[every]
     out["sparse_rate"] = (len(kept) - 1) / (kept[-1] - kept[0]) if len(kept) > 1 else 0.0
     return out

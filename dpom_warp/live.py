@@ -53,12 +53,12 @@ def usable_cpus() -> int:
         return os.cpu_count() or 1
 
 
-def steady_rate(done: int, first_arrival: list, latencies: list, finished: list) -> float | None:
+def steady_rate(done: int, first_arrival: float | None, latencies: list, finished: list) -> float | None:
     """Frames written a second once running: done - 1 over the time from the first frame's
     arrival plus the median latency to the last frame's record; None under two frames."""
-    if done < 2 or not first_arrival:
+    if done < 2 or first_arrival is None:
         return None
-    span = finished[-1] - (first_arrival[0] + statistics.median(latencies))
+    span = finished[-1] - (first_arrival + statistics.median(latencies))
     return (done - 1) / span if span > 0 else None
 
 
@@ -180,8 +180,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     written and tracked in the order they were taken. None: default_workers."""
     from .detect import detect_map
     from .io import write_bytes_atomic
-    from .pipeline import ShownTracks, _jsonable, prepare_output, set_up, summarise, track_table_files
-    from .render import frame_picture
+    from .pipeline import (ShownTracks, _jsonable, prepare_output, set_up, summarise, track_table_files,
+                           tracked_picture)
     from .sources.realsense import RealSenseLive
     from .tracking import Cells, OnlineTracker, frames_without_map
     from .worker import FrameItem, FrameWorker, failed_future, write_output
@@ -226,7 +226,6 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         view.camera(camera)
     slot = NewestFrame()
     records, names, latencies, infer_s, finished = {}, [], [], [], []  # finished: when each was written
-    first_arrival: list = []  # when the first frame written arrived
     # with tracks, a frame's picture and its tracks on the view wait for the online tracker to
     # commit it (tracking.delay frames later): frame index -> (name, timestamp, map as saved,
     # depth where a picture is due)
@@ -384,7 +383,6 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             publish(tracker.take_committed())
         finished.append(time.perf_counter())
         latencies.append(finished[-1] - fr.arrived)
-        first_arrival[:] = first_arrival or [fr.arrived]
         infer_s.append(infer)
         done += 1
 
@@ -403,9 +401,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             if view is not None:
                 view.tracks(f, stamp, dets, shown)
             if depth is not None:
-                write_bytes_atomic(out / "images" / f"{name}.png", frame_picture(
-                    depth, rho_map, cfg.grid, dets, geometry.centre[:2], None, name,
-                    in_view=geometry.rect_area > 0, tracks=shown, trail=cfg.tracking.trail))
+                write_bytes_atomic(out / "images" / f"{name}.png",
+                                   tracked_picture(cfg, geometry, depth, rho_map, dets, name, None, shown))
 
     def mine(fr, depth, small):
         item = [fr, depth, small, None, None, None, worker.name]
@@ -504,7 +501,9 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
                        # its own record, late with the first solve's costs, would count the
                        # frames queued behind it as a burst) to the last's record (the
                        # pipeline's start and the run's shutdown left out)
-                       "frames_per_s_steady": steady_rate(done, first_arrival, latencies, finished),
+                       # (t_first: the first frame taken, so the first written: frames are
+                       # written in the order taken)
+                       "frames_per_s_steady": steady_rate(done, t_first, latencies, finished),
                        "processes": workers,
                        "camera_fps": fps, "stopped_by": stopped_by, "stop_error": stop_error,
                        "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,

@@ -485,12 +485,20 @@ class ShownTracks:
         return shown
 
 
+def tracked_picture(cfg: RunConfig, geometry, depth, rho_map, dets, name: str, truth, shown) -> bytes:
+    """A frame's picture with the tracks `shown` on it (ShownTracks; None: no tracks), as a
+    finished run and a live run draw it."""
+    from .render import frame_picture
+
+    return frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2], truth, name,
+                         in_view=geometry.rect_area > 0, tracks=shown, trail=cfg.tracking.trail)
+
+
 def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, truth, tracks,
                pictures: bool, timestamps: dict | None = None, camera=None) -> None:
     """After the frames: each frame's picture (with `tracks`, their identities and trails)
     when `pictures`, and its Rerun log with output.rerun or --view (depth, boxes, map, tracks)."""
     from .detect import detect_map
-    from .render import frame_picture
     from .tracking import per_frame
 
     log = None
@@ -500,8 +508,7 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
         log = RerunLog(cfg.output.rerun, spawn=bool(VIEW))
         log.camera(camera or cfg.camera)
     now = per_frame(tracks, len(done)) if tracks is not None else [[] for _ in done]
-    trail = cfg.tracking.trail
-    trails = ShownTracks(geometry, trail)
+    trails = ShownTracks(geometry, cfg.tracking.trail)
     shown_all = [trails.at(i, now[i]) for i in range(len(done))]
 
     def one(i):
@@ -511,9 +518,8 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
         dets = detect_map(rho_map, geometry, cfg.detection)
         depth = read_frame(cfg, f)
         if pictures:
-            png = frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2],
-                                truth.get(f.name) if truth else None, f.name, in_view=geometry.rect_area > 0,
-                                tracks=shown_all[i] if tracks is not None else None, trail=trail)
+            png = tracked_picture(cfg, geometry, depth, rho_map, dets, f.name, truth.get(f.name) if truth else None,
+                                  shown_all[i] if tracks is not None else None)
             write_bytes_atomic(out / "images" / f"{f.stem}.png", png)
         return (rho_map, dets, depth) if log is not None else None
 
