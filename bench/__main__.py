@@ -1,6 +1,6 @@
 """Kernel benchmarks: time per stage on standard scenes, Warp against the NumPy reference.
 
-    python -m bench [--device cpu] [--repeats 5] [--batch 4] [--moda-frames 8] [--reference]
+    python -m bench [--device cpu] [--repeats 5] [--batch 4] [--batch-sweep N ...] [--moda-frames 8] [--reference]
                     [--whole-run] [--sweep] [--output runs/bench]
     python -m bench --kernels [--scenes ...] [--repeats 5]
 
@@ -207,6 +207,36 @@ def ingredient_times(name, stride, device, repeats, table=True):
             for key, (_, _, rho_star, times, lists) in engines.items()}
 
 
+def batch_sweep(cfg, seq, device, repeats, sizes):
+    """({batch: median seconds a frame}, {batch: {part: median seconds a frame}}) of the config's
+    path (its graph setting: a CUDA graph on a GPU) for each batch size, the parts being the
+    reduction to the engine's resolution (on the host) and the engine's lists, iterations and
+    threshold (Engine.infer_batch's timings): `batch` frames of the sequence seq = (frames, background) in one
+    engine call, reduced inside the timed call as a run does; sizes above the sequence's length
+    take its frames again in order (the same work a frame: the figure is time, not MODA)."""
+    from dpom_warp.pipeline import make_engine
+
+    frames, bg = seq[0], seq[1]
+    out, parts = {}, {}
+    for b in sizes:
+        engine = make_engine(cfg, cfg.camera, device, b)
+        reduce = engine.resolution.frames
+        engine.set_background_frames(reduce(bg))
+        many = frames[np.arange(b) % len(frames)]
+        engine.infer_batch(reduce(many))  # compiles, sizes the lists, captures the graph
+        calls = []
+
+        def call():
+            t = time.perf_counter()
+            small = reduce(many)
+            calls.append(dict(engine.infer_batch(small)[0].timings, reduce_s=time.perf_counter() - t))
+        out[b] = median_time(call, repeats) / b
+        parts[b] = {k: statistics.median(c[k] - (c["total_s"] if k == "reduce_s" else 0) for c in calls) / b
+                    for k in ("reduce_s", "lists_s", "iterations_s", "threshold_s")}
+        del engine
+    return out, parts
+
+
 def score_scene(cfg, device, seq, n):
     """MODA, precision, recall and mean position error of the config's path over the first
     `n` frames of a rendered sequence seq = scene_frames(..., with_truth=True), and each
@@ -236,21 +266,24 @@ def score_scene(cfg, device, seq, n):
 LONG_RUN = 32  # whole_run_marginal: frames of the long run
 
 
-def kernel_times(cfg, depth, bg, device, repeats):
+def kernel_times(cfg, depth, bg, device, repeats, batch=1):
     """{kernel: (median ms a frame, launches a frame)} of `cfg`'s frame `depth` (background
     frames `bg`): every launch (wp.launch and the engine's recorded ones) timed with a device
-    sync after it, summed over the frame; the most costly first."""
+    sync after it, summed over the frame; the most costly first. With batch > 1, `depth` holds
+    that many frames (n, H, W), inferred in one engine call, and the times are per frame. The
+    row "rest of the call" is the call's median time less its launches' (host work and copies)."""
     import warp as wp
 
     from dpom_warp import engine as E
     from dpom_warp.pipeline import make_engine
 
     cfg = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, graph="off"))
-    engine = make_engine(cfg, cfg.camera, device, 1)
+    engine = make_engine(cfg, cfg.camera, device, batch)
     engine.set_background_frames(engine.resolution.frames(bg))
     frame = engine.resolution.frames(depth)
-    engine.infer(frame)
-    frames, acc = [], {}
+    infer = engine.infer_batch if batch > 1 else engine.infer
+    infer(frame)
+    frames, calls, acc = [], [], {}
 
     def timed(key, launch):
         t = time.perf_counter()
@@ -265,13 +298,18 @@ def kernel_times(cfg, depth, bg, device, repeats):
     try:
         for _ in range(repeats):
             acc = {}
-            engine.infer(frame)
+            t = time.perf_counter()
+            infer(frame)
+            calls.append(time.perf_counter() - t)
             frames.append(acc)
     finally:
         wp.launch, E.Engine._launch = launch, recorded
     keys = sorted({k for f in frames for k in f}, key=lambda k: -statistics.median(sum(f.get(k, [0])) for f in frames))
-    return {k: (1000 * statistics.median(sum(f.get(k, [0])) for f in frames),
-                statistics.median(len(f.get(k, [])) for f in frames)) for k in keys}
+    out = {k: (1000 * statistics.median(sum(f.get(k, [0])) for f in frames) / batch,
+               statistics.median(len(f.get(k, [])) for f in frames)) for k in keys}
+    rest = statistics.median(c - sum(sum(v) for v in f.values()) for c, f in zip(calls, frames))
+    out["rest of the call"] = (1000 * rest / batch, 0)
+    return out
 
 
 def whole_run_marginal(repeats, name="kinect_v2"):
@@ -353,6 +391,8 @@ def main():
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--batch", type=int, default=4, help="frames per engine call for the batched figure (1: none)")
+    ap.add_argument("--batch-sweep", type=int, nargs="+", default=[], metavar="N",
+                    help="also time the fast path with N frames per engine call for each N (graph as configured)")
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     ap.add_argument("--moda-frames", type=int, default=8,
                     help="frames of each scene's sequence scored for MODA, both paths (0: none)")
@@ -363,6 +403,8 @@ def main():
     ap.add_argument("--sweep", action="store_true", help="time against locations and resolution, with a plot")
     ap.add_argument("--kernels", action="store_true",
                     help="only: each kernel's time in the fast path's frame of each scene (a sync after each launch)")
+    ap.add_argument("--kernels-batch", type=int, default=1, metavar="N",
+                    help="with --kernels: N frames of the scene's sequence in one engine call (times per frame)")
     ap.add_argument("--output", default="runs/bench")
     a = ap.parse_args()
 
@@ -376,11 +418,17 @@ def main():
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)
     if a.kernels:
-        times = {name: kernel_times(*load_scene(name), device, a.repeats) for name in a.scenes}
+        times = {}
+        for name in a.scenes:
+            cfg, depth, bg = load_scene(name)
+            if a.kernels_batch > 1:
+                depth, bg = scene_frames(name, a.kernels_batch)
+                depth = depth[:a.kernels_batch]
+            times[name] = kernel_times(cfg, depth, bg, device, a.repeats, a.kernels_batch)
         first = times[a.scenes[0]]
         kernels = list(first) + sorted({k for t in times.values() for k in t} - set(first))
         lines = [f"Machine: {platform.machine()}, {platform.node()}; device {device} ({wp.get_device(device).name}); "
-                 f"Warp {wp.__version__}", "",
+                 f"Warp {wp.__version__}; {a.kernels_batch} frame(s) an engine call, launches counted a call", "",
                  "| kernel | " + " | ".join(f"{name}: ms a frame | launches" for name in a.scenes) + " |",
                  "|---|" + "---|---|" * len(a.scenes)]
         for k in kernels:
@@ -410,6 +458,10 @@ def main():
             if a.moda_frames:
                 r["scores"], r["maps"] = score_scene(cfg, device, seq, a.moda_frames)
             rows[path] = r
+        if a.batch_sweep:
+            sweep_s, parts = batch_sweep(load_scene(name)[0], seq, device, a.repeats, a.batch_sweep)
+            rows["fast"]["batch_sweep_per_frame_s"] = {str(b): t for b, t in sweep_s.items()}
+            rows["fast"]["batch_sweep_parts_per_frame_s"] = {str(b): p for b, p in parts.items()}
             if a.reference and name in REFERENCE_SCENES and path == "exact":
                 params = dataclasses.replace(cfg.model)
                 geom = build_geometry(cfg.camera, cfg.grid, cfg.obj)
@@ -471,6 +523,12 @@ def main():
                      + 
                      f"fast vs exact max |rho* difference| {f['fast_vs_exact_max_rho_star_difference']:.2f} "
                      "(another resolution: judged by MODA)")
+    for name, rows in result["scenes"].items():
+        if "batch_sweep_per_frame_s" in rows["fast"]:
+            notes.append(f"{name}: fast path, frames per engine call (graph as configured): " + ", ".join(
+                f"x{b} {1000 * t:.2f} ms a frame ({1 / t:.0f} frames/s: " + ", ".join(
+                    f"{k[:-2]} {1000 * v:.2f}" for k, v in rows["fast"]["batch_sweep_parts_per_frame_s"][b].items())
+                + " ms)" for b, t in rows["fast"]["batch_sweep_per_frame_s"].items()))
     for name, rows in result["scenes"].items():
         if "reference_whole_frame_s" not in rows["exact"]:
             continue
