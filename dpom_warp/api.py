@@ -133,7 +133,7 @@ class Detector:
             chunk = np.stack(frames[start:start + n])
             t0 = time.perf_counter()
             try:
-                out = engine.infer_batch(engine.resolution.frames(chunk))
+                out = engine.infer_batch(chunk)  # reduced by the engine (on a GPU there)
             except ListOverflow as e:
                 raise InputError(f"frame {start}: {e}") from None
             share = (time.perf_counter() - t0) / len(chunk)

@@ -14,7 +14,7 @@ import warp as wp
 from . import kernels as K
 from .geometry import Geometry, neighbour_lists
 from .model import BAND_ALL, MISSING_READ, TOP_MIN_RHO, AutoBackground, Background, ModelParams
-from .resolution import Resolution
+from .resolution import Resolution, min_readings
 from .warp_setup import init_warp
 
 
@@ -202,6 +202,10 @@ class Engine:
         self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
         self._graph, self._graph_lists = None, None
         self._last_rho = None  # the last frame's rho, for params.warm_start
+        # full-resolution frames are reduced on a GPU (kernels.frames), by NumPy on the CPU
+        self.reduce_on_device = wp.get_device(device).is_cuda
+        self.pinned = self.reduce_on_device
+        self._full = self._full_host = None  # their buffers, made at the first such frame
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
         self.sparse_on_lists = False  # the sparse passes walk the lists (nothing has died yet)
@@ -532,20 +536,52 @@ class Engine:
 
     # -- one frame or one batch ----------------------------------------------------------
     def _frames(self, depth_m: np.ndarray) -> np.ndarray:
-        """(batch, H, W) float32 of one (H, W) frame or of up to `batch` frames, zero-padded."""
+        """(batch, H', W') float32 of one (H', W') frame or of up to `batch` frames, zero-padded,
+        where (H', W') is the engine's (H, W) or, with a stride s > 1, a full-resolution shape
+        (H' // s, W' // s = H, W)."""
         d = np.asarray(depth_m, dtype=np.float32)
         d = d[None] if d.ndim == 2 else d
-        if d.ndim != 3 or d.shape[1:] != (self.height, self.width) or not 1 <= len(d) <= self.batch:
+        if (d.ndim != 3 or not 1 <= len(d) <= self.batch
+                or d.shape[1:] != (self.height, self.width) and not self._full_resolution(d)):
+            full = (f" (or a full-resolution frame at stride {self.resolution.stride})"
+                    if self.resolution.stride > 1 else "")
             raise ValueError(f"depth: expected (H, W) or (n <= {self.batch}, H, W) with H, W = "
-                             f"{self.height}, {self.width}, found {d.shape}")
+                             f"{self.height}, {self.width}{full}, found {d.shape}")
         if len(d) < self.batch:
             d = np.concatenate([d, np.zeros((self.batch - len(d),) + d.shape[1:], np.float32)])
         return np.ascontiguousarray(d)
 
+    def _full_resolution(self, d: np.ndarray) -> bool:
+        s = self.resolution.stride
+        return s > 1 and d.shape[1:] != (self.height, self.width) and (d.shape[1] // s, d.shape[2] // s) == (
+            self.height, self.width)
+
+    def _set_depth(self, depth_m: np.ndarray):
+        """self.depth <- the frames: at the engine's resolution as given; at the camera's full
+        resolution reduced as self.resolution says, on a GPU by kernels.frames (through a
+        pinned copy: a batched frame's host work was mostly this reduction), on the CPU by
+        NumPy (resolution.reduce_depth, vectorised, where the kernel has one thread)."""
+        d = self._frames(depth_m)
+        if not self._full_resolution(d):
+            self.depth.assign(d)
+        elif not self.reduce_on_device:
+            self.depth.assign(self.resolution.frames(d))
+        else:
+            if self._full is None or self._full.shape != d.shape:
+                self._full = wp.empty(d.shape, dtype=wp.float32, device=self.device)
+                self._full_host = wp.empty(d.shape, dtype=wp.float32, device="cpu", pinned=self.pinned)
+                self.extra_bytes += d.nbytes
+            self._full_host.numpy()[...] = d
+            wp.copy(self._full, self._full_host)
+            r = self.resolution
+            self._launch(K.reduce_frames, self.depth.shape, [self._full, r.stride, K.frames.HOW[r.reduce],
+                                                             float(r.z_max), min_readings(r.stride), self.depth])
+
     def build_lists(self, depth_m: np.ndarray) -> int:
         """Masks, Delta and depth-sorted per-pixel lists of a frame (H, W) or of up to `batch`
-        frames (n, H, W); returns the number of entries."""
-        self.depth.assign(self._frames(depth_m))
+        frames (n, H, W), at the engine's resolution or the camera's full resolution (see
+        _set_depth); returns the number of entries."""
+        self._set_depth(depth_m)
         if self.floor_mode and self.params.background_outside_grid:
             self._floor_background(1)
         self._launch(K.background_delta, self.depth.shape, [self.depth, self.pm, self.bg, int(self.bg_fresh),

@@ -272,7 +272,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             if fr is None:
                 return None
             depth = units_to_metres(fr.depth, cfg.inputs.depth_scale)
-            small = engine.resolution.frames(depth)
+            # what the engines take: on a GPU the frame itself (the engine reduces it there)
+            small = depth if engine.reduce_on_device else engine.resolution.frames(depth)
             return then(fr, depth, small)
 
     def feed():

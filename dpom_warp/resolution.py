@@ -102,6 +102,11 @@ def sort_rows(keys: np.ndarray, network_max: int = NETWORK_MAX_BLOCK) -> np.ndar
     return keys
 
 
+def min_readings(stride: int, min_share: float = 0.25) -> int:
+    """Valid readings a stride x stride block needs for a min or median (else no reading)."""
+    return max(1, int(np.ceil(min_share * stride * stride)))
+
+
 def reduce_depth(depth_m: np.ndarray, stride: int, how: str = "median", z_max: float = np.inf,
                  min_share: float = 0.25, network_max: int = NETWORK_MAX_BLOCK) -> np.ndarray:
     """(..., H, W) depth in metres (0 = no reading) -> (..., H // s, W // s) float32.
@@ -129,7 +134,7 @@ def reduce_depth(depth_m: np.ndarray, stride: int, how: str = "median", z_max: f
     else:
         pick = np.maximum(n - 1, 0) // 2
         out = np.take_along_axis(sort_rows(keys, network_max), pick[None], 0)[0]
-    enough = n >= max(1, int(np.ceil(min_share * s * s)))
+    enough = n >= min_readings(s, min_share)
     return np.where(enough, out, 0.0).astype(np.float32)
 
 

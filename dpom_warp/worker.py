@@ -86,7 +86,8 @@ def read_frame(cfg: RunConfig, path, data: bytes | None = None) -> np.ndarray:
 
 def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engine:
     """The engine of a run (engine.* options) at the run's inference resolution, for `batch`
-    frames per call; it takes frames reduced by engine.resolution.frames."""
+    frames per call; it takes frames at the camera's full resolution (reduced by the engine:
+    on a GPU by a kernel) or already reduced by engine.resolution.frames."""
     resolution = resolution_of(cfg, camera)
     geometry = build_geometry(resolution.camera(camera), cfg.grid, cfg.obj)
     # the tile index's tiles (where the pixel table is not used) keep about 8 x 8 full-resolution
@@ -139,7 +140,7 @@ class FrameWorker:
         if len(read) > 1:
             grown, t0 = len(engine.grown), time.perf_counter()
             try:
-                results = engine.infer_batch(engine.resolution.frames(np.stack([d for _, d, _ in read])))
+                results = engine.infer_batch(np.stack([d for _, d, _ in read]))  # reduced by the engine
             except ListOverflow:
                 pass  # each frame alone below
             else:
@@ -151,7 +152,7 @@ class FrameWorker:
         for item, depth, read_s in read:
             grown, t0 = len(engine.grown), time.perf_counter()
             try:
-                res = engine.infer(engine.resolution.frames(depth))
+                res = engine.infer(depth)
             except ListOverflow as e:
                 outcomes.append((Path(item.path).name, None, f"{item.path}: {e}"))
                 continue

@@ -8,12 +8,15 @@
   update, on-device convergence check (batches, graphs), soft threshold with the top-band test.
 - `sparse`: the pruning bound, and the per-pixel lists compacted to the live locations
   (sparse iterations).
+- `frames`: full-resolution frames reduced to the engine's pixels (median, min or nearest of
+  each stride x stride block), on the device.
 - `background`: background distributions from background frames, from the run's own frames
   (streamed clusters, `input.background: auto`) or from the floor plane.
 """
 
 from .background import (background_delta, background_from_frames, cluster_background, cluster_frames,
                          floor_background)
+from .frames import reduce_frames
 from .masks import (PixelTable, TablePair, TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once, table_pairs,
                     table_window)
 from .mean_field import (ONE_STACK, SIZED_STACK, behind_count, behind_points, check_converged, evidence_pass, exclusion_pass,
@@ -28,6 +31,6 @@ __all__ = [
     "background_delta", "background_from_frames", "behind_count", "behind_points", "bound_pass", "check_converged",
     "cluster_background", "cluster_frames", "compact_again", "compact_once", "count_entries", "count_iteration",
     "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background", "gather_live", "keep_better_top",
-    "mark_idle", "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "prune", "prune_lists", "soft_threshold",
-    "table_pairs", "table_window", "top_band", "transparency_pass", "update_bound", "update_rho",
+    "mark_idle", "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "prune", "prune_lists", "reduce_frames",
+    "soft_threshold", "table_pairs", "table_window", "top_band", "transparency_pass", "update_bound", "update_rho",
 ]

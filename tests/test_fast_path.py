@@ -65,6 +65,73 @@ def test_reduce_depth_matches_block_loop(how, stride, network_max, rng):
     np.testing.assert_array_equal(both[1], reduce_loop(depth[::-1], stride, how, 10.0))
 
 
+def ragged_depth(rng, shape):
+    """Depth frames with what a reduction must get right: holes (some blocks below the readings
+    a median needs, one block with none), ties, readings beyond z_max = 10 m."""
+    depth = rng.uniform(0.5, 9.0, shape).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.4] = 0
+    depth[rng.random(depth.shape) < 0.2] = 3.0
+    depth[rng.random(depth.shape) < 0.05] = 12.0
+    depth[..., :8, :8] = 0
+    return depth
+
+
+@pytest.mark.parametrize("how", REDUCERS)
+def test_reduce_frames_kernel_matches_reduce_depth(device, how, rng):
+    """kernels.frames.reduce_frames (the engine's reduction on a GPU) gives
+    resolution.reduce_depth's frames bit for bit: strides 2 to 8, a finite and an infinite
+    z_max, two frames in one launch."""
+    import warp as wp
+
+    from dpom_warp import kernels as K
+    from dpom_warp.resolution import min_readings
+
+    depth = ragged_depth(rng, (2, 37, 43))
+    full = wp.array(depth, dtype=wp.float32, device=device)
+    for stride in (2, 3, 4, 5, 6, 8):
+        for z_max in (10.0, np.inf):
+            out = wp.zeros((2, 37 // stride, 43 // stride), dtype=wp.float32, device=device)
+            wp.launch(K.reduce_frames, dim=out.shape, device=device,
+                      inputs=[full, stride, K.frames.HOW[how], z_max, min_readings(stride), out])
+            want = reduce_depth(depth, stride, how, z_max=z_max)
+            np.testing.assert_array_equal(out.numpy(), want, err_msg=f"stride {stride}, z_max {z_max}")
+            if how != "nearest":
+                assert (want == 0).any() and (want > 0).any()
+
+
+@pytest.mark.parametrize("on_device", [False, True])
+def test_engine_takes_full_resolution_frames(device, on_device, rng):
+    """An engine with a stride takes frames at the camera's full resolution (what a run and the
+    API pass) and reduces them itself: by kernels.frames where asked (a GPU's default; on the
+    CPU here by setting it), else by NumPy. Its frames, and so its rho, are those of the frames
+    reduced beforehand; a frame of neither shape is refused, naming both."""
+    from conftest import assert_same_sums
+    from dpom_warp.resolution import Resolution
+
+    geom, params, depth, _ = random_scene(4)
+    s = 3
+    full = np.repeat(np.repeat(depth, s, 0), s, 1)
+    full = np.pad(full, ((0, 2), (0, 1)))  # a full-resolution size the stride does not divide
+    jitter = rng.random(full.shape) < 0.3
+    full[jitter] += rng.normal(0.0, 0.02, jitter.sum()).astype(np.float32) * (full[jitter] > 0)
+    full[rng.random(full.shape) < 0.1] = 0  # dropouts
+    frames = np.stack([full, full[:, ::-1]])
+    resolution = Resolution(stride=s, reduce="median", z_max=8.0)
+    engine = Engine(geom, params, device, batch=2, resolution=resolution)
+    engine.reduce_on_device = on_device if device == "cpu" else engine.reduce_on_device
+    assert engine.reduce_on_device == (on_device or device != "cpu")
+    small = resolution.frames(frames)
+    assert small.shape[1:] == depth.shape and not np.array_equal(small[0], depth)
+    got = engine.infer_batch(frames)
+    np.testing.assert_array_equal(engine.depth.numpy(), small)
+    want = Engine(geom, params, device, batch=2, resolution=resolution).infer_batch(small)
+    for a, b in zip(got, want):
+        assert a.entries == b.entries > 0
+        assert_same_sums(a.rho, b.rho, device)
+    with pytest.raises(ValueError, match=r"H, W = 40, 48 \(or a full-resolution frame at stride 3\), found \(1, 40, 47\)"):
+        engine.infer(depth[:, :-1])
+
+
 def test_sorting_networks_sort(rng):
     """resolution.sorting_network(n) sorts any n keys (ties and +inf included) as np.sort does,
     for every block size a stride up to 8 gives and the sizes between."""
