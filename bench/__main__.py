@@ -107,7 +107,7 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     """Per-stage medians of one frame on `device` with the config's inference path (stride,
     sparse iterations); with batch > 1 also the frames of `sequence` = (frames (batch, H, W),
     their background frames) in one engine call. Frames are given at full resolution and
-    reduced inside the timed whole frame, as a run does."""
+    reduced by the engine inside the timed whole frame, as a run does (on a GPU by a kernel)."""
     import warp as wp
 
     from dpom_warp.pipeline import make_engine
@@ -118,7 +118,7 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     reduce = engine.resolution.frames
     engine.set_background_frames(reduce(bg))
     setup = time.perf_counter() - t
-    warm = engine.infer(reduce(depth))
+    warm = engine.infer(depth)
     lengths = engine.counts.numpy()  # after the bound: what the passes walk
     median_list = float(np.median(lengths[lengths > 0])) if (lengths > 0).any() else 0.0
     small = reduce(depth)
@@ -135,12 +135,12 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     }
     engine.done.zero_()  # after infer every frame is done and the pass would skip it
     stages["one iteration"] = median_time(one_iteration, repeats)
-    stages["whole frame"] = median_time(lambda: engine.infer(reduce(depth)), repeats)
+    stages["whole frame"] = median_time(lambda: engine.infer(depth), repeats)
     engine.graph = True
     graph_error = None
     try:
-        engine.infer(reduce(depth))  # captures the graph
-        stages["whole frame, graph"] = median_time(lambda: engine.infer(reduce(depth)), repeats)
+        engine.infer(depth)  # captures the graph
+        stages["whole frame, graph"] = median_time(lambda: engine.infer(depth), repeats)
     except Exception as e:  # reported in the table and the JSON, not hidden
         graph_error = f"{type(e).__name__}: {e}"
         stages["whole frame, graph"] = float("nan")
@@ -160,8 +160,8 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
         frames, seq_bg = sequence
         many = make_engine(cfg, cfg.camera, device, batch)
         many.set_background_frames(reduce(seq_bg))
-        got = many.infer_batch(reduce(frames))
-        stages["per frame, batched"] = median_time(lambda: many.infer_batch(reduce(frames)), repeats) / batch
+        got = many.infer_batch(frames)
+        stages["per frame, batched"] = median_time(lambda: many.infer_batch(frames), repeats) / batch
         result.update(batch=batch, batch_iterations=[r.iterations for r in got],
                       batch_memory_mb=many.memory_bytes() / 2**20,
                       frames_per_s_batched=1.0 / stages["per frame, batched"])
@@ -196,11 +196,11 @@ def ingredient_times(name, stride, device, repeats, table=True):
                 continue
             engine.local_scratch = K.ONE_STACK
         engine.set_background_frames(engine.resolution.frames(bg))
-        engines[key] = (engine, depth, engine.infer(engine.resolution.frames(depth)).rho_star, [], [])
+        engines[key] = (engine, depth, engine.infer(depth).rho_star, [], [])
     for _ in range(repeats):
         for engine, depth, _, times, lists in engines.values():
             t = time.perf_counter()
-            r = engine.infer(engine.resolution.frames(depth))
+            r = engine.infer(depth)
             times.append(time.perf_counter() - t)
             lists.append(r.timings["lists_s"])
     return {key: (statistics.median(times), rho_star, statistics.median(lists))
@@ -209,31 +209,31 @@ def ingredient_times(name, stride, device, repeats, table=True):
 
 def batch_sweep(cfg, seq, device, repeats, sizes):
     """({batch: median seconds a frame}, {batch: {part: median seconds a frame}}) of the config's
-    path (its graph setting: a CUDA graph on a GPU) for each batch size, the parts being the
-    reduction to the engine's resolution (on the host) and the engine's lists, iterations and
-    threshold (Engine.infer_batch's timings): `batch` frames of the sequence seq = (frames, background) in one
-    engine call, reduced inside the timed call as a run does; sizes above the sequence's length
-    take its frames again in order (the same work a frame: the figure is time, not MODA)."""
+    path (its graph setting: a CUDA graph on a GPU) for each batch size: `batch` frames of the
+    sequence seq = (frames, background) in one engine call at full resolution, reduced by the
+    engine as in a run; sizes above the sequence's length take its frames again in order (the
+    same work a frame: the figure is time, not MODA). The parts are Engine.infer_batch's
+    timings (the lists with the reduction, the iterations, the threshold) and the rest of the
+    call (its results' copies)."""
     from dpom_warp.pipeline import make_engine
 
     frames, bg = seq[0], seq[1]
     out, parts = {}, {}
     for b in sizes:
         engine = make_engine(cfg, cfg.camera, device, b)
-        reduce = engine.resolution.frames
-        engine.set_background_frames(reduce(bg))
+        engine.set_background_frames(engine.resolution.frames(bg))
         many = frames[np.arange(b) % len(frames)]
-        engine.infer_batch(reduce(many))  # compiles, sizes the lists, captures the graph
+        engine.infer_batch(many)  # compiles, sizes the lists, captures the graph
         calls = []
 
         def call():
             t = time.perf_counter()
-            small = reduce(many)
-            calls.append(dict(engine.infer_batch(small)[0].timings, reduce_s=time.perf_counter() - t))
+            timings = engine.infer_batch(many)[0].timings
+            calls.append(dict(timings, rest_s=time.perf_counter() - t - timings["total_s"]))
         out[b] = median_time(call, repeats) / b
-        parts[b] = {k: statistics.median(c[k] - (c["total_s"] if k == "reduce_s" else 0) for c in calls) / b
-                    for k in ("reduce_s", "lists_s", "iterations_s", "threshold_s")}
-        del engine
+        parts[b] = {k: statistics.median(c[k] for c in calls) / b
+                    for k in ("lists_s", "iterations_s", "threshold_s", "rest_s")}
+        engine = None  # its buffers go before the next batch size's
     return out, parts
 
 
@@ -254,7 +254,7 @@ def score_scene(cfg, device, seq, n):
     dims = 3 if cfg.grid.mode == "voxel" else 2
     found, maps = {}, []
     for f, depth in zip(names, frames):
-        res = engine.infer(engine.resolution.frames(depth))
+        res = engine.infer(depth)
         maps.append(res.rho_star)
         dets = detect_map(res.rho_star.reshape(cfg.grid.shape), geom, cfg.detection)
         found[f] = np.array([[d.x, d.y, d.z][:dims] for d in dets]).reshape(-1, dims)
@@ -280,7 +280,7 @@ def kernel_times(cfg, depth, bg, device, repeats, batch=1):
     cfg = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, graph="off"))
     engine = make_engine(cfg, cfg.camera, device, batch)
     engine.set_background_frames(engine.resolution.frames(bg))
-    frame = engine.resolution.frames(depth)
+    frame = depth  # reduced by the engine, as in a run
     infer = engine.infer_batch if batch > 1 else engine.infer
     infer(frame)
     frames, calls, acc = [], [], {}

@@ -52,8 +52,33 @@ def test_kernel_times_count_every_launch_of_a_frame(tmp_path):
     iterations = engine.infer(engine.resolution.frames(depth)).iterations
     assert times["evidence_pass"][1] == times["update_rho"][1] == iterations > 1
     assert times["pixel_entries_once"][1] == 1 and all(ms > 0 for ms, _ in times.values())
-    ms = [ms for ms, _ in times.values()]
+    assert list(times)[-1] == "rest of the call" and times["rest of the call"][1] == 0
+    ms = [ms for ms, _ in list(times.values())[:-1]]
     assert ms == sorted(ms, reverse=True)  # the most costly first
+    # two frames a call: the launches are a call's, the times a frame's
+    frames = np.stack([read_depth(f, cfg.inputs.depth_scale, shape) for f in expand(cfg.inputs.frames, "input.frames")])
+    two = kernel_times(cfg, frames[:2], bg, "cpu", 3, batch=2)
+    assert two["pixel_entries_once"][1] == 1 and two["evidence_pass"][1] >= iterations
+    assert all(ms > 0 for ms, _ in two.values())
+
+
+def test_batch_sweep_times_each_batch_size(tmp_path):
+    """bench --batch-sweep: a time a frame and its parts for each batch size, sizes above the
+    sequence's length taking its frames again."""
+    from bench.__main__ import batch_sweep
+
+    cfg = load_config(small_config(tmp_path), ["input.stride=2"])
+    generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
+    shape = (cfg.camera.height, cfg.camera.width)
+    frames = np.stack([read_depth(f, cfg.inputs.depth_scale, shape) for f in expand(cfg.inputs.frames, "input.frames")])
+    bg = np.stack([read_depth(f, cfg.inputs.depth_scale, shape) for f in expand(cfg.inputs.background, "input.background")])
+    n = len(frames)
+    per_frame, parts = batch_sweep(cfg, (frames, bg), "cpu", 2, [1, n + 1])
+    assert list(per_frame) == list(parts) == [1, n + 1] and all(t > 0 for t in per_frame.values())
+    for b, p in parts.items():
+        assert set(p) == {"lists_s", "iterations_s", "threshold_s", "rest_s"}
+        assert sum(p.values()) <= per_frame[b] * 1.5  # parts of the call (medians: not a sum exactly)
+        assert p["lists_s"] > 0 and p["iterations_s"] > 0
 
 
 def test_errors_sorts_each_error_by_its_kind(tmp_path):
