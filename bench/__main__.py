@@ -2,7 +2,7 @@
 
     python -m bench [--device cpu] [--repeats 5] [--batch 4] [--batch-sweep N ...] [--moda-frames 8] [--reference]
                     [--whole-run] [--sweep] [--output runs/bench]
-    python -m bench --kernels [--scenes ...] [--repeats 5]
+    python -m bench --kernels [--scenes ...] [--repeats 5] [--kernels-batch N]
 
 Scenes (rendered once into .cache/bench/, seeded):
 - kinect_v2: 512x424, people, 6 x 6.5 m ground grid at 0.1 m (the people demo);
@@ -20,13 +20,16 @@ lists); the NumPy reference, with --reference, runs once on kinect_v2 and kinect
 resolution).
 Whole frames are timed three ways: the iteration loop driven from Python (a host check every
 check_every iterations), the loop replayed as a captured graph (no host sync), and `--batch`
-different frames of the scene in one engine call (time per frame = batch time / batch).
+different frames of the scene in one engine call (time per frame = batch time / batch);
+--batch-sweep N... adds the fast path's time per frame for each batch size N (the graph as
+configured), split into the engine's lists (with the reduction), iterations, threshold and the
+rest of the call.
 --whole-run times `dpom-warp run` with pictures on kinect_v2 and kinect_v2_far (32 frames against
 2: the marginal frame; the engine's setup, ~2 s and noisy, cancels). --sweep also times whole
 frames against the number of locations (grid step) and the image resolution on kinect_v2, and
 plots both. --kernels instead times each kernel of the fast path's frame (every launch followed
 by a device sync, so the sum exceeds the whole frame a little), summed over a frame, median of
---repeats frames.
+--repeats frames; with --kernels-batch N, of N frames in one engine call, per frame.
 """
 
 from __future__ import annotations
