@@ -204,7 +204,6 @@ class Engine:
         self._last_rho = None  # the last frame's rho, for params.warm_start
         # full-resolution frames are reduced on a GPU (kernels.frames), by NumPy on the CPU
         self.reduce_on_device = wp.get_device(device).is_cuda
-        self.pinned = self.reduce_on_device
         self._full = self._full_host = None  # their buffers, made at the first such frame
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
@@ -569,7 +568,8 @@ class Engine:
         else:
             if self._full is None or self._full.shape != d.shape:
                 self._full = wp.empty(d.shape, dtype=wp.float32, device=self.device)
-                self._full_host = wp.empty(d.shape, dtype=wp.float32, device="cpu", pinned=self.pinned)
+                self._full_host = wp.empty(d.shape, dtype=wp.float32, device="cpu",
+                                           pinned=wp.get_device(self.device).is_cuda)
                 self.extra_bytes += d.nbytes
             self._full_host.numpy()[...] = d
             wp.copy(self._full, self._full_host)
