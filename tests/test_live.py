@@ -77,8 +77,7 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     from dpom_warp.detect import detect_map
     from dpom_warp.geometry import build_geometry
     from dpom_warp.io import units_to_metres
-    from dpom_warp.pipeline import ShownTracks
-    from dpom_warp.render import frame_picture
+    from dpom_warp.pipeline import ShownTracks, tracked_picture
     from dpom_warp.tracking import Cells, per_frame, run_tracker, tracks_csv
 
     cfg = parse_config(summary["config"])
@@ -97,9 +96,9 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
             rho_map = maps[i].reshape(cfg.grid.shape)
             sent = round(stamps[i] * 30)  # the camera's frame number
             depth = units_to_metres(cam.frames[sent % len(cam.frames)], 0.001)
-            png = frame_picture(depth, rho_map, cfg.grid, detect_map(rho_map, geometry, cfg.detection),
-                                geometry.centre[:2], None, n, in_view=geometry.rect_area > 0, tracks=shown,
-                                trail=cfg.tracking.trail)
+            # as a finished run draws a frame with its tracks (frames_out)
+            png = tracked_picture(cfg, geometry, depth, rho_map, detect_map(rho_map, geometry, cfg.detection), n,
+                                  None, shown)
             drawn += png == (out / "images" / f"{n}.png").read_bytes()
     assert drawn == 3
     # `dpom-warp track` on a live run: no frames were kept to draw pictures from (one line);
