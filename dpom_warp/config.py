@@ -563,7 +563,7 @@ class DetectionSection(Node):
     nms_radius: Num = Field(0.4, ge=0, description="greedy non-maximum suppression radius, metres")
     edge_radius: Num | None = Field(None, ge=0, description=(
         "a detection whose silhouette is mostly outside the image (its share in view under edge_view) is dropped "
-        f"within this distance of one in view, metres (README, How it works); default {EDGE_RADIUS:g} on ground "
+        f"within this distance of one in view, metres (README, Known behaviour); default {EDGE_RADIUS:g} on ground "
         f"grids, 0 (off) in voxel mode"))
     edge_view: Num = Field(0.5, gt=0, le=1, description=(
         "the share of a silhouette's rectangle inside the image under which edge_radius applies"))

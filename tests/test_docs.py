@@ -44,9 +44,19 @@ def test_replace_block_keeps_the_rest():
 
 
 def test_every_test_the_readme_names_exists():
-    """The Tests section maps each promise to tests (`file::test`): each must be there."""
+    """The Tests section maps each promise to tests (`file::test`): each must be there; and
+    every test file the README or docs/*.md names (`tests/....py`) exists."""
     named = set(re.findall(r"`(test_[a-z_0-9]+)::(test_[a-z_0-9]+)`", TEXT))
     assert len(named) >= 30
     for file, test in sorted(named):
         source = (ROOT / "tests" / f"{file}.py").read_text()
         assert re.search(rf"^def {test}\(", source, re.M), f"README names {file}::{test}, which does not exist"
+    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        for rel in set(re.findall(r"`(tests/[a-z_0-9]+\.py)", doc.read_text())):
+            assert (ROOT / rel).is_file(), f"{doc.name} names {rel}, which does not exist"
+
+
+def test_docs_pages_are_linked():
+    """Each page under docs/ is linked from the README, where a reader starts."""
+    for page in sorted((ROOT / "docs").glob("*.md")):
+        assert f"(docs/{page.name})" in TEXT, f"docs/{page.name} is linked from nowhere in the README"
