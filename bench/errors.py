@@ -7,7 +7,8 @@ For a missed person: their height and visibility, the nearest other person and d
 (a detection under 0.5 m was matched to someone else), and at the cell
 within 0.3 m with the largest rho: rho (mean field), e (eq. 13's share), rho* before the
 top-band test (sigmoid(alpha e + beta) rho), the top band's counts (support / against /
-hidden / missing / in view, the kept band's) and the readings behind the cell's core. For a false
+hidden / missing / in view, the kept band's) and the readings behind the cell's core; then the
+largest rho* within 0.3 m and its cell's distance to the nearest detection. For a false
 detection: its rho* and the nearest people, with the same at its cell. Before the summary, a
 count of the errors by kind (miss_kind, false_kind).
 
@@ -45,6 +46,17 @@ def cell_values(detector, result, k: int) -> dict:
     return dict(rho=rho, e=e, before=rho / (1.0 + np.exp(-(p.alpha * e + p.beta))), counts=counts,
                 out_of_view=bool(band_out_of_view(counts[4], area, p)), behind=int(engine.n_behind.numpy()[k]),
                 rho_star=float(result.rho_star.ravel()[k]))
+
+
+def strongest_near(rho_star, locations, near, found) -> tuple[float, float]:
+    """Of the cells `near` a missed person (indices into the flat map), the largest rho* and
+    that cell's distance to the nearest detection (metres; inf without detections): a person
+    found as one with a neighbour shows how close to the neighbour's detection their own peak
+    lies (the 0.4 m suppression)."""
+    flat = np.asarray(rho_star).ravel()
+    k = int(near[np.argmax(flat[near])])
+    gap = np.hypot(*(found - locations[k]).T).min() if len(found) else float("inf")
+    return float(flat[k]), float(gap)
 
 
 def cell_state(v: dict) -> str:
@@ -120,6 +132,9 @@ def main():
                 v = cell_values(detector, result, int(near[np.argmax(result.rho.ravel()[near])])) if len(
                     near) else None
                 state = cell_state(v) if v else "no cell within 0.3 m"
+                if len(near):
+                    peak, peak_gap = strongest_near(result.rho_star, locations, near, found)
+                    state += f"; largest rho* within 0.3 m {peak:.3f}, {peak_gap:.2f} m from the nearest detection"
                 kinds[miss_kind(v, cfg.detection.threshold)] += 1
                 gap = np.hypot(*(found - where[j]).T).min() if len(found) else float("inf")
                 print(f"missed  {name} {f.name}: person at ({o['x']:.2f}, {o['y']:.2f}), {o['height']:.2f} m, "

@@ -1,6 +1,7 @@
 """The benchmark's timing of one scene, on a small rendered scene (not its speed)."""
 
 import numpy as np
+import pytest
 
 from bench.__main__ import kernel_times, time_scene
 from dpom_warp.config import load_config
@@ -96,6 +97,12 @@ def test_errors_sorts_each_error_by_its_kind(tmp_path):
     assert false_kind({**cell, "out_of_view": True}, 0.2, 0.5) == "band out of view"
     assert false_kind(cell, 0.3, 0.5) == "second cell beside a person"
     assert false_kind(cell, 0.8, 0.5) == "elsewhere"
+    # the strongest cell near a missed person and how far the nearest detection lies from it
+    from bench.errors import strongest_near
+    locs = np.array([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0], [0.6, 0.0]])
+    assert strongest_near(np.array([0.2, 0.9, 0.4, 1.0]), locs, np.array([0, 1, 2]),
+                          np.array([[0.5, 0.0], [2.0, 0.0]])) == pytest.approx((0.9, 0.4))
+    assert strongest_near(np.array([0.2, 0.9, 0.4, 1.0]), locs, np.array([0, 2]), np.zeros((0, 2)))[1] == np.inf
 
     det = Detector.from_config(small_config(tmp_path), ["device=cpu"])
     cfg = det.config
