@@ -540,28 +540,23 @@ class Engine:
         (H' // s, W' // s = H, W)."""
         d = np.asarray(depth_m, dtype=np.float32)
         d = d[None] if d.ndim == 2 else d
-        if (d.ndim != 3 or not 1 <= len(d) <= self.batch
-                or d.shape[1:] != (self.height, self.width) and not self._full_resolution(d)):
-            full = (f" (or a full-resolution frame at stride {self.resolution.stride})"
-                    if self.resolution.stride > 1 else "")
+        s = self.resolution.stride
+        full = s > 1 and d.ndim == 3 and (d.shape[1] // s, d.shape[2] // s) == (self.height, self.width)
+        if d.ndim != 3 or not 1 <= len(d) <= self.batch or d.shape[1:] != (self.height, self.width) and not full:
+            hint = f" (or a full-resolution frame at stride {s})" if s > 1 else ""
             raise ValueError(f"depth: expected (H, W) or (n <= {self.batch}, H, W) with H, W = "
-                             f"{self.height}, {self.width}{full}, found {d.shape}")
+                             f"{self.height}, {self.width}{hint}, found {d.shape}")
         if len(d) < self.batch:
             d = np.concatenate([d, np.zeros((self.batch - len(d),) + d.shape[1:], np.float32)])
         return np.ascontiguousarray(d)
-
-    def _full_resolution(self, d: np.ndarray) -> bool:
-        s = self.resolution.stride
-        return s > 1 and d.shape[1:] != (self.height, self.width) and (d.shape[1] // s, d.shape[2] // s) == (
-            self.height, self.width)
 
     def _set_depth(self, depth_m: np.ndarray):
         """self.depth <- the frames: at the engine's resolution as given; at the camera's full
         resolution reduced as self.resolution says, on a GPU by kernels.frames (through a
         pinned copy: a batched frame's host work was mostly this reduction), on the CPU by
         NumPy (resolution.reduce_depth, vectorised, where the kernel has one thread)."""
-        d = self._frames(depth_m)
-        if not self._full_resolution(d):
+        d = self._frames(depth_m)  # at the engine's (H, W), or else at full resolution
+        if d.shape[1:] == (self.height, self.width):
             self.depth.assign(d)
         elif not self.reduce_on_device:
             self.depth.assign(self.resolution.frames(d))
