@@ -283,9 +283,8 @@ def kernel_times(cfg, depth, bg, device, repeats, batch=1):
     cfg = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, graph="off"))
     engine = make_engine(cfg, cfg.camera, device, batch)
     engine.set_background_frames(engine.resolution.frames(bg))
-    frame = depth  # reduced by the engine, as in a run
     infer = engine.infer_batch if batch > 1 else engine.infer
-    infer(frame)
+    infer(depth)  # at full resolution, reduced by the engine as in a run
     frames, calls, acc = [], [], {}
 
     def timed(key, launch):
@@ -302,7 +301,7 @@ def kernel_times(cfg, depth, bg, device, repeats, batch=1):
         for _ in range(repeats):
             acc = {}
             t = time.perf_counter()
-            infer(frame)
+            infer(depth)
             calls.append(time.perf_counter() - t)
             frames.append(acc)
     finally:

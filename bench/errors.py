@@ -48,6 +48,11 @@ def cell_values(detector, result, k: int) -> dict:
                 rho_star=float(result.rho_star.ravel()[k]))
 
 
+def nearest(points: np.ndarray, p) -> float:
+    """Distance from p to the nearest of `points` (n, 2), metres; inf when there are none."""
+    return float(np.hypot(*(points - p).T).min()) if len(points) else float("inf")
+
+
 def strongest_near(rho_star, locations, near, found) -> tuple[float, float]:
     """Of the cells `near` a missed person (indices into the flat map), the largest rho* and
     that cell's distance to the nearest detection (metres; inf without detections): a person
@@ -55,8 +60,7 @@ def strongest_near(rho_star, locations, near, found) -> tuple[float, float]:
     lies (the 0.4 m suppression)."""
     flat = np.asarray(rho_star).ravel()
     k = int(near[np.argmax(flat[near])])
-    gap = np.hypot(*(found - locations[k]).T).min() if len(found) else float("inf")
-    return float(flat[k]), float(gap)
+    return float(flat[k]), nearest(found, locations[k])
 
 
 def cell_state(v: dict) -> str:
@@ -126,8 +130,7 @@ def main():
                 if j in matched_people:
                     continue
                 missed_total += 1
-                others = np.delete(where, j, axis=0)
-                nearest = np.hypot(*(others - where[j]).T).min() if len(others) else float("inf")
+                person_gap = nearest(np.delete(where, j, axis=0), where[j])
                 near = np.flatnonzero(np.hypot(*(locations - where[j]).T) < 0.3)
                 v = cell_values(detector, result, int(near[np.argmax(result.rho.ravel()[near])])) if len(
                     near) else None
@@ -136,9 +139,9 @@ def main():
                     peak, peak_gap = strongest_near(result.rho_star, locations, near, found)
                     state += f"; largest rho* within 0.3 m {peak:.3f}, {peak_gap:.2f} m from the nearest detection"
                 kinds[miss_kind(v, cfg.detection.threshold)] += 1
-                gap = np.hypot(*(found - where[j]).T).min() if len(found) else float("inf")
+                gap = nearest(found, where[j])
                 print(f"missed  {name} {f.name}: person at ({o['x']:.2f}, {o['y']:.2f}), {o['height']:.2f} m, "
-                      f"{100 * o['visibility']:.0f} % visible, nearest person {nearest:.2f} m, nearest detection "
+                      f"{100 * o['visibility']:.0f} % visible, nearest person {person_gap:.2f} m, nearest detection "
                       f"{gap:.2f} m; {state}")
             for i, d in enumerate(result.detections):
                 if i in matched_found:
