@@ -244,10 +244,10 @@ def score_scene(cfg, device, seq, n):
     """MODA, precision, recall and mean position error of the config's path over the first
     `n` frames of a rendered sequence seq = scene_frames(..., with_truth=True), and each
     frame's rho*."""
-    from dpom_warp.detect import detect_map
     from dpom_warp.evaluate import score_frames
     from dpom_warp.geometry import build_geometry
     from dpom_warp.pipeline import make_engine
+    from dpom_warp.worker import detections_of
 
     frames, bg, names, truth = seq
     frames, names = frames[:n], names[:n]
@@ -258,8 +258,8 @@ def score_scene(cfg, device, seq, n):
     found, maps = {}, []
     for f, depth in zip(names, frames):
         res = engine.infer(depth)
-        maps.append(res.rho_star)
-        dets = detect_map(res.rho_star.reshape(cfg.grid.shape), geom, cfg.detection)
+        maps.append(res.rho_star)  # (the engine's, before the joint test)
+        _, dets = detections_of(res, engine, geom, cfg)  # as a run detects them
         found[f] = np.array([[d.x, d.y, d.z][:dims] for d in dets]).reshape(-1, dims)
     s = score_frames(found, {f: truth[f] for f in names}, cfg.evaluation.match_distance,
                      cfg.evaluation.hidden_visibility, geom.centre[:2])

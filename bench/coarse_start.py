@@ -28,12 +28,13 @@ import numpy as np
 from bench.robustness import VARIANTS, scene_sets
 
 
-def score(rho_star, cfg, geometry, truth) -> tuple[int, int]:
-    """(false detections, misses) of one frame's rho* at 0.5 m."""
-    from dpom_warp.detect import detect_map
+def score(res, engine, cfg, geometry, truth) -> tuple[int, int]:
+    """(false detections, misses) at 0.5 m of one frame's result from `engine`, detected as a
+    run detects it (worker.detections_of: the joint test on the engine's frame)."""
     from dpom_warp.evaluate import match
+    from dpom_warp.worker import detections_of
 
-    dets = detect_map(rho_star.reshape(cfg.grid.shape), geometry, cfg.detection)
+    _, dets = detections_of(res, engine, geometry, cfg)
     found = np.array([(d.x, d.y) for d in dets]).reshape(-1, 2)
     people = np.array([(o["x"], o["y"]) for o in truth]).reshape(-1, 2)
     matched = len(match(found, people, 0.5))
@@ -84,7 +85,7 @@ def main():
                     res = warm.infer(warm.resolution.frames(depth), start=first.rho)
                     iterations = share * first.iterations + res.iterations
                 total[3].append(time.perf_counter() - t)
-                false, missed = score(res.rho_star, cfg, geometry, truth[f.name])
+                false, missed = score(res, fine if key == "plain" else warm, cfg, geometry, truth[f.name])
                 total[0] += false
                 total[1] += missed
                 total[2] += iterations

@@ -9,8 +9,9 @@ within 0.3 m with the largest rho: rho (mean field), e (eq. 13's share), rho* be
 top-band test (sigmoid(alpha e + beta) rho), the top band's counts (support / against /
 hidden / missing / in view, the kept band's) and the readings behind the cell's core; then the
 largest rho* within 0.3 m and its cell's distance to the nearest detection. For a false
-detection: its rho* and the nearest people, with the same at its cell. Before the summary, a
-count of the errors by kind (miss_kind, false_kind).
+detection: its rho* and the nearest people, with the same at its cell, and its log odds in the
+joint test (detection.min_log_odds). Before the summary, a count of the errors by kind
+(miss_kind, false_kind) and the lowest log odds of the true and of the false detections.
 
     python -m bench.errors [--tuning] [--background frames|auto|floor] [--set key=value ...]
                            [--scenes NAME ...] [--frames 10] [--tracking]
@@ -105,6 +106,7 @@ def main():
     scenes = a.scenes or list(tracking.SCENES if a.tracking else VARIANTS)
     false_total = missed_total = 0
     kinds = collections.Counter()
+    odds = {"true": [], "false": []}  # the detections' log odds in the joint test
     counts = {name: a.frames or (tracking.FRAMES if name in tracking.SCENES else 10) for name in scenes}
     for name in scenes:
         frames = counts[name]
@@ -144,6 +146,8 @@ def main():
                       f"{100 * o['visibility']:.0f} % visible, nearest person {person_gap:.2f} m, nearest detection "
                       f"{gap:.2f} m; {state}")
             for i, d in enumerate(result.detections):
+                if d.log_odds is not None:
+                    odds["true" if i in matched_found else "false"].append(d.log_odds)
                 if i in matched_found:
                     continue
                 false_total += 1
@@ -152,11 +156,16 @@ def main():
                 k = int(np.argmin(np.hypot(*(locations - found[i]).T)))
                 v = cell_values(detector, result, k)
                 kinds[false_kind(v, dist.min() if len(dist) else np.inf, GATE)] += 1
+                joint = "" if d.log_odds is None else f", log odds {d.log_odds:.1f}"
                 print(f"false   {name} {f.name}: at ({d.x:.2f}, {d.y:.2f}), nearest people {close or 'none'}; "
-                      f"{cell_state(v)}")
+                      f"{cell_state(v)}{joint}")
     draw = "tuning draw" if a.tuning else "held-out draw"
     per_scene = " / ".join(str(n) for n in sorted(set(counts.values())))
     print("kinds: " + "; ".join(f"{kind} {n}" for kind, n in kinds.most_common()))
+    if odds["true"] or odds["false"]:
+        print("joint test, log odds of the detections kept: " + "; ".join(
+            f"{n} {which}, lowest {', '.join(f'{x:.1f}' for x in sorted(v)[:5]) or '-'}"
+            for which, v in odds.items() for n in [len(v)]))
     print(f"{draw}, {len(scenes)} scenes x {per_scene} frames, background {a.background}"
           f"{'; ' + ', '.join(a.set) if a.set else ''}: {false_total} false detections, {missed_total} missed")
 

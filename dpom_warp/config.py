@@ -24,7 +24,7 @@ from pydantic import (BaseModel, BeforeValidator, ConfigDict, Discriminator, Fie
                       ValidationError, model_validator)
 from pydantic_core import PydanticCustomError
 
-from .detect import EDGE_RADIUS
+from .detect import EDGE_RADIUS, MIN_LOG_ODDS
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
 from .ground import GroundOptions
 from .model import BEHIND_COST, TOP_SHORTER, AutoBackground, ModelParams
@@ -567,6 +567,9 @@ class DetectionSection(Node):
         f"grids, 0 (off) in voxel mode"))
     edge_view: Num = Field(0.5, gt=0, le=1, description=(
         "the share of a silhouette's rectangle inside the image under which edge_radius applies"))
+    min_log_odds: Num = Field(MIN_LOG_ODDS, ge=0, description=(
+        "the joint test: a detection whose log posterior odds, with the other detections present and nothing "
+        "else, is under this (nats) leaves the map (README, How it works); 0: off"))
 
 
 class EvaluationSection(Node):
@@ -803,6 +806,7 @@ class Detection:
     nms_radius: float = 0.4
     edge_radius: float = 0.0
     edge_view: float = 0.5
+    min_log_odds: float = MIN_LOG_ODDS
 
 
 @dataclass(frozen=True)

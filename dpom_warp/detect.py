@@ -1,20 +1,25 @@
 """Detections from an occupancy map: local maxima above a threshold, then greedy
 non-maximum suppression within a radius (MODEL.md, Detections and scores); a cell mostly
-outside the image beside a detection in view is that person's edge (detection.edge_radius)."""
+outside the image beside a detection in view is that person's edge (detection.edge_radius);
+a detection the model gives too little log posterior odds with the others present leaves the
+map (the joint test, detection.min_log_odds)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 
 EDGE_RADIUS = 0.45  # detection.edge_radius's default on ground grids (config; README, How it works)
+MIN_LOG_ODDS = 10.0  # detection.min_log_odds's default on ground grids (README, How it works)
 
 
 @dataclass(frozen=True)
 class Detected:
-    """One detection: location index k, world position (metres), rho* and image box."""
+    """One detection: location index k, world position (metres), rho* and image box; with
+    the joint test, its log posterior odds with the other detections present (nats; None
+    where not computed: the test off, or detections re-detected from a map)."""
 
     k: int
     x: float
@@ -22,6 +27,7 @@ class Detected:
     z: float
     rho: float
     box: tuple[int, int, int, int]
+    log_odds: float | None = None
 
 
 def local_maxima(rho_map: np.ndarray) -> np.ndarray:
@@ -92,3 +98,26 @@ def detect_map(rho_star: np.ndarray, geometry, detection, threshold: float | Non
     return detect(rho_star, geometry.locations, geometry.rect,
                   detection.threshold if threshold is None else threshold, detection.nms_radius,
                   geometry.view_part, detection.edge_radius, detection.edge_view)
+
+
+def joint_detections(rho_map: np.ndarray, geometry, detection, log_odds=None) -> tuple[np.ndarray, list[Detected]]:
+    """detect_map, then the joint test: while the weakest detection's log posterior odds with
+    the other detections present and every other location empty (`log_odds(cells)` -> (n,),
+    reference.joint_log_odds on the frame) is under detection.min_log_odds, its cell leaves
+    the map (rho* 0) and the map is detected again. Returns the map (a copy where a cell left
+    it) and its detections, which detect_map finds again in that map, each with its log odds;
+    `log_odds` None or min_log_odds 0: the map and detect_map's."""
+    dets = detect_map(rho_map, geometry, detection)
+    if log_odds is None or detection.min_log_odds <= 0:
+        return rho_map, dets
+    out = rho_map
+    while dets:
+        odds = log_odds([d.k for d in dets])
+        weakest = int(np.argmin(odds))
+        if odds[weakest] >= detection.min_log_odds:
+            return out, [replace(d, log_odds=float(o)) for d, o in zip(dets, odds)]
+        if out is rho_map:
+            out = np.array(rho_map)
+        out.flat[dets[weakest].k] = 0.0
+        dets = detect_map(out, geometry, detection)
+    return out, dets

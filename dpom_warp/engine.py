@@ -142,6 +142,10 @@ class FrameResult:
     kept_entries: int | None = None  # mask entries left after the pruning bound (None: not run)
     pruned: int = 0  # locations the pruning bound removed
     converged: bool = True  # False: stopped at max_iterations above the tolerance
+    # with Engine.keep_frames: the frame at the engine's resolution (metres) and the background
+    # it was inferred against, what the detections' joint test needs (detect.joint_detections)
+    frame: np.ndarray | None = None
+    background: Background | None = None
 
 
 class Engine:
@@ -191,6 +195,7 @@ class Engine:
         if batch < 1 or tile < 1:
             raise ValueError(f"batch and tile: expected integers >= 1, found {batch} and {tile}")
         self.geometry, self.params, self.device = geometry, params, device
+        self.keep_frames = False  # results carry their frame and background (FrameResult)
         self.resolution = resolution or Resolution()
         self.height, self.width = geometry.rays.shape[:2]
         self.n_pixels = self.height * self.width
@@ -529,9 +534,12 @@ class Engine:
 
     def background(self, frame: int = 0) -> Background:
         """The background distribution of frame `frame` of the last batch (arrays (H, W))."""
-        b = self.bg.numpy()[frame * self.n_pixels:(frame + 1) * self.n_pixels]
-        b = b.reshape(self.height, self.width, 4)
-        return Background(mu=b[..., 0], sigma=b[..., 1], missing=b[..., 2], outlier=b[..., 3])
+        return self._backgrounds(self.bg.numpy())[frame]
+
+    def _backgrounds(self, bg: np.ndarray) -> list[Background]:
+        """Each frame's Background (copies) from the bg buffer as a host array."""
+        b = bg.reshape(self.batch, self.height, self.width, 4)
+        return [Background(*(np.ascontiguousarray(b[f, ..., i]) for i in range(4))) for f in range(self.batch)]
 
     # -- one frame or one batch ----------------------------------------------------------
     def _frames(self, depth_m: np.ndarray) -> np.ndarray:
@@ -907,6 +915,10 @@ class Engine:
         pruned, live = (live == K.PRUNED).sum(1), (live == 1).sum(1)
         kept = self.counts.numpy().reshape(self.batch, self.n_pixels).sum(1) if bound else [None] * self.batch
         self._last_rho = rho[n - 1].copy()
+        frames = backgrounds = [None] * n
+        if self.keep_frames:
+            frames = self.depth.numpy().reshape(self.batch, self.height, self.width)[:n].copy()
+            backgrounds = self._backgrounds(self.bg.numpy())
         t3 = time.perf_counter()
         timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2, "total_s": t3 - t0}
         if self.batch > 1:
@@ -915,5 +927,6 @@ class Engine:
                             iterations=int(iterations[f]), entries=int(entries[f]),
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
                             live=int(live[f]), converged=bool(done[f]),
-                            kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]))
+                            kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]),
+                            frame=frames[f], background=backgrounds[f])
                 for f in range(n)]

@@ -379,7 +379,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
             awaiting[done] = (name, fr.timestamp, output.map, depth if due else None)
         if tracking_on:
             t1 = time.perf_counter()
-            tracker.push(res.rho_star, fr.timestamp)  # frames dropped between: reach by the time apart
+            tracker.push(output.map, fr.timestamp)  # frames dropped between: reach by the time apart
             track_s += time.perf_counter() - t1
             publish(tracker.take_committed())
         finished.append(time.perf_counter())

@@ -191,9 +191,22 @@ def silhouette(z_img, geom: Geometry, k: int, params: ModelParams):
     return (v0, u0), rays, z, mu, inlier
 
 
-def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | None = None):
+def silhouettes(z_img, geom: Geometry, which, params: ModelParams, sils: dict | None = None) -> dict:
+    """{k: silhouette(z_img, geom, k, params)} for the locations `which` (indices), those in
+    `sils` (the same frame's, computed before) taken from it; `sils` receives the others."""
+    sils = {} if sils is None else sils
+    for k in which:
+        if int(k) not in sils:
+            sils[int(k)] = silhouette(z_img, geom, int(k), params)
+    return sils
+
+
+def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | None = None, which=None,
+                 sils: dict | None = None):
     """All (pixel, location) pairs with i in M_k (eq. 12, corrected sign); with
     params.background_occludes, not where the known background is clearly in front of k.
+    `which`: the locations to list (indices), with `sils` their silhouettes (silhouettes());
+    None: all.
 
     Returns:
         pixel (int64 flat index), loc (int64), mu (float32 object depth), delta (float32 Delta_ki),
@@ -203,8 +216,8 @@ def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | 
     w = z_img.shape[1]
     outlier = log_outlier(params)
     out = []
-    for k in range(len(geom.rect)):
-        sil = silhouette(z_img, geom, k, params)
+    for k in (range(len(geom.rect)) if which is None else (int(j) for j in which)):
+        sil = sils[k] if sils is not None and k in sils else silhouette(z_img, geom, k, params)
         if sil is None:
             continue
         (v0, u0), _, z, mu, inlier = sil
@@ -268,6 +281,51 @@ def front_transparency(r):
     t = np.ones_like(r)
     t[:, 1:] = np.cumprod(1.0 - r[:, :-1], axis=1)
     return t
+
+
+def evidence_sums(valid, L, D, dbg, r, n_locations: int):
+    """Each location's evidence, the sum over its entries of T_j (D_j - B_j) (MODEL.md,
+    exclusive form), with r the entries' rho (0 where not `valid`: transparent)."""
+    T = front_transparency(r)
+    B = np.empty_like(D)
+    b = dbg.copy()
+    for j in range(D.shape[1] - 1, -1, -1):
+        B[:, j] = b
+        b = r[:, j] * D[:, j] + (1.0 - r[:, j]) * b
+    contrib = np.where(valid, T * (D - B), 0.0)
+    return np.bincount(L[valid], weights=contrib[valid], minlength=n_locations)
+
+
+def joint_log_odds(depth_m, geom: Geometry, bg: Background, params: ModelParams, cells, sils: dict | None = None):
+    """For each of `cells` (location indices), the log posterior odds of its object given the
+    other cells' objects present and every other location empty: the logit of the mean-field
+    update at that binary state, logit(prior) + evidence - behind_cost x readings behind -
+    exclusion x the other cells closer than exclusion_radius (each neighbour's rho is 1), which
+    is log P(Z, X) - log P(Z, X without it) for the binary configuration X of `cells` (the
+    pixels of its masks where it is the nearest object present against what lies behind it
+    then: the next cell's object or the background). `sils`: a dict that keeps the frame's
+    silhouettes between calls (silhouettes()). Returns (len(cells),) float64."""
+    cells = np.asarray(cells, np.int64)
+    K = len(geom.rect)
+    if not len(cells):
+        return np.zeros(0)
+    z = np.asarray(depth_m, dtype=np.float64)
+    sils = silhouettes(z, geom, cells, params, sils)
+    pixel, loc, _, delta = mask_entries(z, geom, params, bg, cells, sils)
+    pix, valid, L, D = _padded_lists(pixel, loc, delta.astype(np.float64))
+    at = np.unravel_index(pix, z.shape)  # Delta_bg (background_delta) where the lists are
+    dbg = log_theta(z[at], bg.mu[at], bg.sigma[at], bg.missing[at], bg.outlier[at], params.z_max)
+    evidence = evidence_sums(valid, L, D, dbg, valid.astype(np.float64), K)[cells]
+    which = np.zeros(K, bool)
+    which[cells] = True
+    if params.behind_cost > 0:
+        evidence -= params.behind_cost * behind_count(z, geom, params, which, sils)[cells]
+    if params.exclusion > 0:  # neighbours as neighbour_lists finds them
+        where = geom.locations[cells]
+        gap = np.linalg.norm(where[:, None] - where[None], axis=-1)
+        close = (gap < params.exclusion_radius * (1 - 1e-9)) & ~np.eye(len(cells), dtype=bool)
+        evidence -= params.exclusion * close.sum(1)
+    return np.log(params.prior) - np.log1p(-params.prior) + evidence
 
 
 def pixel_lists(depth_m, geom: Geometry, bg: Background, params: ModelParams):
@@ -355,16 +413,8 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
     streak = np.zeros(K, np.int64)  # signed run of same-side targets (damping_streak)
     for it in range(params.max_iterations):
         full = params.full_pass(it)
-        r = np.where(valid & (full | live[L]), rho[L], 0.0)
-        T = front_transparency(r)
-        B = np.empty_like(D)
-        b = dbg.copy()
-        for j in range(D.shape[1] - 1, -1, -1):
-            B[:, j] = b
-            b = r[:, j] * D[:, j] + (1.0 - r[:, j]) * b
         use = valid & (full | live[L])
-        contrib = np.where(use, T * (D - B), 0.0)
-        evidence = np.bincount(L[use], weights=contrib[use], minlength=K)
+        evidence = evidence_sums(use, L, D, dbg, np.where(use, rho[L], 0.0), K)
         if params.exclusion > 0:  # neighbours above the gate push a location down
             over = np.maximum(rho - params.exclusion_gate, 0.0) / (1.0 - params.exclusion_gate)
             # (not in place: bincount of an empty selection is an integer array)
@@ -504,20 +554,21 @@ def behind_evidence(depth_m, geom: Geometry, params: ModelParams, valid, L):
     return params.behind_cost * behind_count(depth_m, geom, params, listed)
 
 
-def behind_count(depth_m, geom: Geometry, params: ModelParams, which):
+def behind_count(depth_m, geom: Geometry, params: ModelParams, which, sils: dict | None = None):
     """For each location in `which` (bool (K,)), its silhouette pixels whose reading lies
     behind its object beyond the mask test (z > mu_ki and not in M_k: the object would hide
     them), counted in its core on the pixels whose row and column are multiples of
     behind_step (each standing for behind_step^2): in each such row the lattice pixels whose
     rays hit the solid run from column a to b, and those before a + behind_side (b - a) or
     after b - behind_side (b - a) are left out, as are object points below behind_low or above
-    behind_high x the height (ground grids; kernels.mean_field.behind_count). Returns (K,) int64."""
+    behind_high x the height (ground grids; kernels.mean_field.behind_count). `sils`: some of
+    their silhouettes (silhouettes()). Returns (K,) int64."""
     n = np.zeros(len(geom.rect), np.int64)
     z_img = np.asarray(depth_m, dtype=np.float64)
     low, high = ((params.behind_low * geom.height, params.behind_high * geom.height) if geom.height > 0
                  else (-BAND_ALL, BAND_ALL))
     for k in np.flatnonzero(which):
-        sil = silhouette(z_img, geom, k, params)
+        sil = sils[k] if sils is not None and k in sils else silhouette(z_img, geom, k, params)
         if sil is None:
             continue
         (v0, u0), rays, z, mu, inlier = sil

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import ConfigError, RunConfig
-from .detect import detect_map
+from .detect import joint_detections
 from .engine import Engine, ListOverflow
 from .geometry import Camera, build_geometry
 from .io import InputError, read_depth, write_bytes_atomic, write_json_atomic, write_npy_atomic
@@ -93,12 +93,27 @@ def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engi
     # the tile index's tiles (where the pixel table is not used) keep about 8 x 8 full-resolution
     # pixels' worth of the scene (2 x 2 at stride 4: list building ~20 % faster than 8 x 8 there)
     tile = max(2, round(8 / resolution.stride))
-    return Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel, cfg.engine.max_entries,
-                  cfg.engine.memory_gb, tile=tile, batch=batch,
-                  graph={"auto": None, "on": True, "off": False}[cfg.engine.graph],
-                  table={"auto": None, "table": True, "tiles": False}[cfg.engine.mask_index],
-                  resolution=resolution,
-                  background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
+    engine = Engine(geometry, cfg.model, device, cfg.engine.entries_per_pixel, cfg.engine.max_entries,
+                    cfg.engine.memory_gb, tile=tile, batch=batch,
+                    graph={"auto": None, "on": True, "off": False}[cfg.engine.graph],
+                    table={"auto": None, "table": True, "tiles": False}[cfg.engine.mask_index],
+                    resolution=resolution,
+                    background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
+    engine.keep_frames = cfg.detection.min_log_odds > 0  # the joint test reads them
+    return engine
+
+
+def detections_of(res, engine: Engine, geometry, cfg: RunConfig) -> tuple[np.ndarray, list]:
+    """FrameWorker.detections for an engine result of `engine` (made by make_engine: its
+    results carry their frame where the joint test is on), `geometry` at full resolution."""
+    rho_map = res.rho_star.reshape(cfg.grid.shape)
+    if res.frame is None:
+        return joint_detections(rho_map, geometry, cfg.detection)
+    from .reference import joint_log_odds
+
+    sils = {}  # the cells' silhouettes, kept between the test's rounds
+    return joint_detections(rho_map, geometry, cfg.detection, lambda cells: joint_log_odds(
+        res.frame, engine.geometry, res.background, engine.params, cells, sils))
 
 
 class FrameWorker:
@@ -162,10 +177,9 @@ class FrameWorker:
 
     def detections(self, res) -> tuple[np.ndarray, list]:
         """The rho* map (grid-shaped) of an engine result and its detections, located and
-        boxed on the full-resolution geometry."""
-        cfg, geometry = self.cfg, self.geometry
-        rho_map = res.rho_star.reshape(cfg.grid.shape)
-        return rho_map, detect_map(rho_map, geometry, cfg.detection)
+        boxed on the full-resolution geometry, after the joint test (detect.joint_detections:
+        a cell it rejects is 0 in the map returned, which is the run's map)."""
+        return detections_of(res, self.engine, self.geometry, self.cfg)
 
     def _finish(self, item: FrameItem, depth, res, read_s: float, infer_s: float, grown: list):
         """Detections, map, picture and record of an inferred frame; `infer_s` is the
