@@ -12,7 +12,7 @@ import numpy as np
 
 
 EDGE_RADIUS = 0.45  # detection.edge_radius's default on ground grids (config; README, How it works)
-MIN_LOG_ODDS = 10.0  # detection.min_log_odds's default on ground grids (README, How it works)
+MIN_LOG_ODDS = 10.0  # detection.min_log_odds's default, nats (README, How it works)
 
 
 @dataclass(frozen=True)
