@@ -534,12 +534,12 @@ class Engine:
 
     def background(self, frame: int = 0) -> Background:
         """The background distribution of frame `frame` of the last batch (arrays (H, W))."""
-        return self._backgrounds(self.bg.numpy())[frame]
+        return self._background_of(self.bg.numpy(), frame)
 
-    def _backgrounds(self, bg: np.ndarray) -> list[Background]:
-        """Each frame's Background (copies) from the bg buffer as a host array."""
-        b = bg.reshape(self.batch, self.height, self.width, 4)
-        return [Background(*(np.ascontiguousarray(b[f, ..., i]) for i in range(4))) for f in range(self.batch)]
+    def _background_of(self, bg: np.ndarray, frame: int) -> Background:
+        """Frame `frame`'s Background (copies) from the bg buffer as a host array."""
+        b = bg.reshape(self.batch, self.height, self.width, 4)[frame]
+        return Background(*(np.ascontiguousarray(b[..., i]) for i in range(4)))
 
     # -- one frame or one batch ----------------------------------------------------------
     def _frames(self, depth_m: np.ndarray) -> np.ndarray:
@@ -918,7 +918,8 @@ class Engine:
         frames = backgrounds = [None] * n
         if self.keep_frames:
             frames = self.depth.numpy().reshape(self.batch, self.height, self.width)[:n].copy()
-            backgrounds = self._backgrounds(self.bg.numpy())
+            bg = self.bg.numpy()
+            backgrounds = [self._background_of(bg, f) for f in range(n)]
         t3 = time.perf_counter()
         timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2, "total_s": t3 - t0}
         if self.batch > 1:
