@@ -13,6 +13,14 @@ import numpy as np
 
 EDGE_RADIUS = 0.45  # detection.edge_radius's default on ground grids (config; README, How it works)
 MIN_LOG_ODDS = 10.0  # detection.min_log_odds's default, nats (README, How it works)
+ROUNDING = 1e-9  # metres: two cells whose distance equals a radius up to rounding are not closer
+
+
+def closer(distance, radius: float):
+    """Whether `distance` (metres) is closer than `radius`: less by more than rounding (cells
+    4 steps of 0.1 m apart are 0.39999999999999997 or 0.4000000000000001 m apart, by where the
+    grid starts; both are 0.4, not closer than 0.4)."""
+    return distance < radius - ROUNDING
 
 
 @dataclass(frozen=True)
@@ -71,7 +79,7 @@ def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, thresh
     cand = cand[np.lexsort((cand, -mass[cand], -flat[cand]))]
     kept: list[int] = []
     for k in cand:
-        if all(np.linalg.norm(locations[k] - locations[j]) >= nms_radius for j in kept):
+        if not any(closer(np.linalg.norm(locations[k] - locations[j]), nms_radius) for j in kept):
             kept.append(int(k))
     kept = edge_drop(kept, flat, locations, view_part, edge_radius, edge_view)
     return [Detected(k, *(float(c) for c in locations[k]), float(flat[k]),
@@ -89,7 +97,7 @@ def edge_drop(kept: list[int], flat: np.ndarray, locations: np.ndarray, view_par
         return kept
     seen = [j for j in kept if view_part[j] >= edge_view]
     return [k for k in kept if view_part[k] >= edge_view or all(
-        flat[j] < flat[k] or np.linalg.norm(locations[k] - locations[j]) >= edge_radius for j in seen)]
+        flat[j] < flat[k] or not closer(np.linalg.norm(locations[k] - locations[j]), edge_radius) for j in seen)]
 
 
 def detect_map(rho_star: np.ndarray, geometry, detection, threshold: float | None = None) -> list[Detected]:

@@ -172,15 +172,15 @@ def peaks(rho_map: np.ndarray, cells: Cells, threshold: float) -> np.ndarray:
     cells.nms_radius as the detections (the solid model often explains one person by two
     neighbouring cells; each would carry a track of its own), less a person's edge beside
     them (detect.edge_drop). Sorted cell indices."""
-    from .detect import edge_drop, local_maxima
+    from .detect import closer, edge_drop, local_maxima
 
     flat = rho_map.ravel()
     cand = np.flatnonzero(local_maxima(rho_map).ravel() & (flat >= threshold))
     cand = cand[np.lexsort((cand, -flat[cand]))]
     kept: list[int] = []
-    r2 = cells.nms_radius ** 2
     for k in cand:
-        if not kept or (((cells.positions[kept] - cells.positions[k]) ** 2).sum(axis=1) >= r2).all():
+        if not kept or not closer(np.linalg.norm(cells.positions[kept] - cells.positions[k], axis=1),
+                                  cells.nms_radius).any():
             kept.append(int(k))
     kept = edge_drop(kept, flat, cells.positions, cells.view_part, cells.edge_radius, cells.edge_view)
     return np.array(sorted(kept), dtype=np.int64)

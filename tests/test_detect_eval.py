@@ -31,6 +31,26 @@ def test_local_maxima_and_nms():
     assert len(detect(m, locs, rect, threshold=0.5, nms_radius=0.2)) == 3
 
 
+def test_cells_a_radius_apart_are_not_closer_than_it_whatever_the_rounding():
+    """Two maxima 4 cells of 0.1 m apart are 0.4 m apart: not closer than a 0.4 m suppression
+    radius, both kept, wherever the grid starts (at x = 0.3 and 0.7 they are 0.39999999999999997
+    m apart in floating point, at 0.1 and 0.5 0.4 exactly; the suppression went by those
+    digits); 3 cells apart, the weaker goes. The tracker's peaks do the same."""
+    from dpom_warp.tracking import Cells, peaks
+
+    rect = np.tile([0, 0, 1, 1], (8, 1))
+    for x0 in (0.0, 0.2, 0.3, 0.6):
+        locs = np.stack([x0 + 0.1 * np.arange(8), np.zeros(8), np.zeros(8)], 1)
+        for gap, both in ((4, True), (3, False)):
+            m = np.zeros((1, 8))
+            m[0, 1], m[0, 1 + gap] = 0.9, 0.8
+            got = [d.k for d in detect(m, locs, rect, threshold=0.5, nms_radius=0.4)]
+            assert got == ([1, 1 + gap] if both else [1]), (x0, gap, got)
+            cells = Cells(locs, 0.1, np.zeros(8, bool), 0.4)
+            assert list(peaks(m, cells, 0.5)) == ([1, 1 + gap] if both else [1]), (x0, gap)
+    assert 0.7 - 0.3 < 0.4  # (the digits this test is about)
+
+
 def test_match_prefers_global_assignment():
     # greedy nearest would pair det 0 with gt 0 (0.1 m) and leave gt 1 unmatched at 0.5 gate
     det = np.array([[0.0, 0.0], [0.45, 0.0]])
