@@ -27,7 +27,7 @@ from pydantic_core import PydanticCustomError
 from .detect import EDGE_RADIUS, MIN_LOG_ODDS
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
 from .ground import GroundOptions
-from .model import BEHIND_COST, TOP_SHORTER, AutoBackground, ModelParams
+from .model import BEHIND_COST, EXACT_BETA, TOP_SHORTER, AutoBackground, ModelParams
 from .resolution import REDUCERS
 from .synthetic import SceneSpec
 from .tracking import TrackingOptions
@@ -443,7 +443,8 @@ class ModelSection(Node):
                               description="pi_inf of objects and of the floor-only background")
     z_max: Num = Field(_d(ModelParams, "z_max"), gt=0, description="sensor range, metres")
     alpha: Num = Field(_d(ModelParams, "alpha"), description="soft threshold rho* = sigmoid(alpha e + beta) rho")
-    beta: Num = Field(_d(ModelParams, "beta"), description="see alpha")
+    beta: Num | None = Field(None, description=f"see alpha; null: {_d(ModelParams, 'beta'):g}, on the exact path "
+                                               f"(engine.exact) {EXACT_BETA:g}")
     share_of: Literal["silhouette", "unhidden"] = Field(
         _d(ModelParams, "share_of"), description="eq. 13's e: share of the silhouette, or of its "
         "pixels not hidden by something nearer (README, How it works)")
@@ -560,7 +561,8 @@ class DetectionSection(Node):
     """Detections from the rho* map."""
 
     threshold: Num = Field(0.5, gt=0, lt=1, description="minimum rho* of a detection (a local maximum)")
-    nms_radius: Num = Field(0.4, ge=0, description="greedy non-maximum suppression radius, metres")
+    nms_radius: Num = Field(0.4, ge=0, description="greedy non-maximum suppression: a weaker maximum closer than "
+                                                   "this (by more than rounding) goes, metres")
     edge_radius: Num | None = Field(None, ge=0, description=(
         "a detection whose silhouette is mostly outside the image (its share in view under edge_view) is dropped "
         f"within this distance of one in view, metres (README, Known behaviour); default {EDGE_RADIUS:g} on ground "
@@ -971,8 +973,10 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     # ceiling camera's edges); floor-only it is rejected: a table at the image's edge supports
     # the lower part of such a solid, and without a background nothing tells it from a person
     top_unseen = m.top_unseen if m.top_unseen is not None else (1.0 if c.input.background is not None else 0.0)
+    # eq. 13's cut-off, chosen for each path on the tuning draw (README, Defaults and why)
+    beta = m.beta if m.beta is not None else (EXACT_BETA if c.engine.exact else _d(ModelParams, "beta"))
     model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost,
-                  top_heights=top_heights, top_unseen=top_unseen)
+                  top_heights=top_heights, top_unseen=top_unseen, beta=beta)
     edge_radius = (c.detection.edge_radius if c.detection.edge_radius is not None else
                    EDGE_RADIUS if c.grid.mode == "ground" else 0.0)
     detection = _fill(Detection, c.detection, edge_radius=edge_radius)

@@ -9,6 +9,7 @@ import numpy as np
 
 TOP_MIN_RHO = 1e-3  # locations whose rho* is below it before the top-band test skip it (a factor <= 1)
 BEHIND_COST = 2.0  # model.behind_cost's default with the solid on ground grids (config)
+EXACT_BETA = -2.5  # model.beta's default on the exact path (engine.exact; config; README, Defaults and why)
 TOP_SHORTER = 0.15  # model.top_heights' default: [object.height - TOP_SHORTER] with the solid on ground grids
 BAND_ALL = 1e30  # a height band that holds every pixel (the unhidden share of eq. 13)
 # a band pixel without a reading counts as missing (ModelParams.top_missing) only where the
@@ -31,7 +32,8 @@ class ModelParams:
         alpha, beta: soft threshold rho* = sigmoid(alpha e + beta) rho (eq. 13, corrected sign;
             beta = -3.5 cuts at e = 0.035: MODEL.md's -8, at 0.08, -6.5 and -4.5 cut more
             hidden people in the crowds of the tuning draw, for fewer false detections than
-            they save, once the top-band test judged the head, README).
+            they save, once the top-band test judged the head, README; the exact path's
+            default is EXACT_BETA, config).
         share_of: what e of eq. 13 is a share of: 'silhouette' (MODEL.md: sum of T over the
             mask / |S_k|) or 'unhidden' (/ the silhouette's pixels that read at or behind the
             object: those whose reading is nearer, hidden by something in front, and those

@@ -411,3 +411,16 @@ def test_exclusion_defaults_to_on_for_ground_grids_and_off_in_voxel_mode():
     assert drones.model.exclusion == 0.0 and drones.resolved["model"]["exclusion"] == 0.0
     assert load_config(str(ROOT / "configs" / "demo_drones.yaml"), ["model.exclusion=3"]).model.exclusion == 3.0
     assert load_config(str(ROOT / "configs" / "demo_people.yaml"), ["model.exclusion=0"]).model.exclusion == 0.0
+
+
+def test_eq13_cut_off_defaults_to_each_paths_own():
+    """model.beta unset: -3.5 on the fast path, -2.5 on the exact path (engine.exact), which
+    the tuning draw chose for each (README, Defaults and why); given, it is what was given
+    on either path, and the resolved config records it."""
+    people = str(ROOT / "configs" / "demo_people.yaml")
+    fast, exact = load_config(people), load_config(people, ["engine.exact=true"])
+    assert fast.model.beta == -3.5 and fast.resolved["model"]["beta"] == -3.5
+    assert exact.model.beta == -2.5 and exact.resolved["model"]["beta"] == -2.5
+    for path in ("false", "true"):
+        given = load_config(people, [f"engine.exact={path}", "model.beta=-4"])
+        assert given.model.beta == -4.0 and given.resolved["model"]["beta"] == -4.0
