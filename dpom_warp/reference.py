@@ -201,6 +201,11 @@ def silhouettes(z_img, geom: Geometry, which, params: ModelParams, sils: dict | 
     return sils
 
 
+def kept_silhouette(z_img, geom: Geometry, k: int, params: ModelParams, sils: dict | None):
+    """silhouette(z_img, geom, k, params), taken from `sils` (silhouettes()) where it holds k."""
+    return sils[k] if sils is not None and k in sils else silhouette(z_img, geom, k, params)
+
+
 def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | None = None, which=None,
                  sils: dict | None = None):
     """All (pixel, location) pairs with i in M_k (eq. 12, corrected sign); with
@@ -217,7 +222,7 @@ def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | 
     outlier = log_outlier(params)
     out = []
     for k in (range(len(geom.rect)) if which is None else (int(j) for j in which)):
-        sil = sils[k] if sils is not None and k in sils else silhouette(z_img, geom, k, params)
+        sil = kept_silhouette(z_img, geom, k, params, sils)
         if sil is None:
             continue
         (v0, u0), _, z, mu, inlier = sil
@@ -320,11 +325,9 @@ def joint_log_odds(depth_m, geom: Geometry, bg: Background, params: ModelParams,
     which[cells] = True
     if params.behind_cost > 0:
         evidence -= params.behind_cost * behind_count(z, geom, params, which, sils)[cells]
-    if params.exclusion > 0:  # neighbours as neighbour_lists finds them
-        where = geom.locations[cells]
-        gap = np.linalg.norm(where[:, None] - where[None], axis=-1)
-        close = (gap < params.exclusion_radius * (1 - 1e-9)) & ~np.eye(len(cells), dtype=bool)
-        evidence -= params.exclusion * close.sum(1)
+    if params.exclusion > 0:  # each cell's neighbours among the cells, as mean_field finds them
+        start, _ = neighbour_lists(geom.locations[cells], params.exclusion_radius)
+        evidence -= params.exclusion * np.diff(start)
     return np.log(params.prior) - np.log1p(-params.prior) + evidence
 
 
@@ -568,7 +571,7 @@ def behind_count(depth_m, geom: Geometry, params: ModelParams, which, sils: dict
     low, high = ((params.behind_low * geom.height, params.behind_high * geom.height) if geom.height > 0
                  else (-BAND_ALL, BAND_ALL))
     for k in np.flatnonzero(which):
-        sil = sils[k] if sils is not None and k in sils else silhouette(z_img, geom, k, params)
+        sil = kept_silhouette(z_img, geom, k, params, sils)
         if sil is None:
             continue
         (v0, u0), rays, z, mu, inlier = sil
