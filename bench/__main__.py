@@ -259,7 +259,7 @@ def score_scene(cfg, device, seq, n):
     for f, depth in zip(names, frames):
         res = engine.infer(depth)
         maps.append(res.rho_star)  # (the engine's, before the joint test)
-        _, dets = detections_of(res, engine, geom, cfg)  # as a run detects them
+        _, dets = detections_of(res, geom, cfg)  # as a run detects them
         found[f] = np.array([[d.x, d.y, d.z][:dims] for d in dets]).reshape(-1, dims)
     s = score_frames(found, {f: truth[f] for f in names}, cfg.evaluation.match_distance,
                      cfg.evaluation.hidden_visibility, geom.centre[:2])

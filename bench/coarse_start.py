@@ -30,11 +30,11 @@ from bench.robustness import VARIANTS, scene_sets
 
 def score(res, engine, cfg, geometry, truth) -> tuple[int, int]:
     """(false detections, misses) at 0.5 m of one frame's result from `engine`, detected as a
-    run detects it (worker.detections_of: the joint test on the engine's frame)."""
+    run detects it (worker.detections_of: the joint test on the lists the engine hands over)."""
     from dpom_warp.evaluate import match
     from dpom_warp.worker import detections_of
 
-    _, dets = detections_of(res, engine, geometry, cfg)
+    _, dets = detections_of(res, geometry, cfg)
     found = np.array([(d.x, d.y) for d in dets]).reshape(-1, 2)
     people = np.array([(o["x"], o["y"]) for o in truth]).reshape(-1, 2)
     matched = len(match(found, people, 0.5))

@@ -14,6 +14,7 @@ import warp as wp
 from . import kernels as K
 from .geometry import Geometry, neighbour_lists
 from .model import BAND_ALL, MISSING_READ, TOP_MIN_RHO, AutoBackground, Background, ModelParams
+from .reference import JointLists
 from .resolution import Resolution, min_readings
 from .warp_setup import init_warp
 
@@ -142,10 +143,9 @@ class FrameResult:
     kept_entries: int | None = None  # mask entries left after the pruning bound (None: not run)
     pruned: int = 0  # locations the pruning bound removed
     converged: bool = True  # False: stopped at max_iterations above the tolerance
-    # with Engine.keep_frames: the frame at the engine's resolution (metres) and the background
-    # it was inferred against, what the detections' joint test needs (detect.joint_detections)
-    frame: np.ndarray | None = None
-    background: Background | None = None
+    # with Engine.joint_threshold: what the detections' joint test needs of the frame, for the
+    # locations whose rho* reaches that threshold (reference.JointLists; detect.joint_detections)
+    joint: JointLists | None = None
 
 
 class Engine:
@@ -195,7 +195,8 @@ class Engine:
         if batch < 1 or tile < 1:
             raise ValueError(f"batch and tile: expected integers >= 1, found {batch} and {tile}")
         self.geometry, self.params, self.device = geometry, params, device
-        self.keep_frames = False  # results carry their frame and background (FrameResult)
+        # results carry the joint test's lists of the locations whose rho* reaches this (None: none)
+        self.joint_threshold: float | None = None
         self.resolution = resolution or Resolution()
         self.height, self.width = geometry.rays.shape[:2]
         self.n_pixels = self.height * self.width
@@ -305,6 +306,9 @@ class Engine:
             self.no_index = wp.zeros(0, dtype=wp.int32)
             self.reserved = wp.zeros(2, dtype=wp.int32)  # kernels.masks.pixel_entries_once
             self.no_reserved = wp.zeros(0, dtype=wp.int32)
+            self.candidate = wp.zeros(L, dtype=wp.int32)  # the joint test's locations (joint_lists)
+            self.candidate_behind = wp.zeros(L, dtype=wp.int32)  # and their readings behind
+            self.not_done = wp.zeros(batch, dtype=wp.int32)
             self.neighbour_start = wp.array(start, dtype=wp.int32)
             self.neighbours = wp.array(nbrs, dtype=wp.int32)
         self._fill_behind_table(behind_points)
@@ -915,11 +919,7 @@ class Engine:
         pruned, live = (live == K.PRUNED).sum(1), (live == 1).sum(1)
         kept = self.counts.numpy().reshape(self.batch, self.n_pixels).sum(1) if bound else [None] * self.batch
         self._last_rho = rho[n - 1].copy()
-        frames = backgrounds = [None] * n
-        if self.keep_frames:
-            frames = self.depth.numpy().reshape(self.batch, self.height, self.width)[:n].copy()
-            bg = self.bg.numpy()
-            backgrounds = [self._background_of(bg, f) for f in range(n)]
+        joint = [None] * n if self.joint_threshold is None else self.joint_lists(rho_star[:n])
         t3 = time.perf_counter()
         timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2, "total_s": t3 - t0}
         if self.batch > 1:
@@ -929,5 +929,43 @@ class Engine:
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
                             live=int(live[f]), converged=bool(done[f]),
                             kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]),
-                            frame=frames[f], background=backgrounds[f])
+                            joint=joint[f])
                 for f in range(n)]
+
+    def joint_lists(self, rho_star: np.ndarray) -> list[JointLists]:
+        """After a batch's inference, each frame's JointLists for the locations whose rho*
+        (float32, as detect reads the maps) reaches joint_threshold: their entries copied out of
+        the lists in order (kernels.sparse.compact_once, every frame taken) with each pixel's
+        Delta_bg, and their readings behind (kernels.behind_count). Two launches and a few
+        reads for the batch; what the host then does with them is small."""
+        n, locations = len(rho_star), self.n_locations
+        marked = np.zeros((self.batch, locations), np.int32)
+        marked[:n] = np.asarray(rho_star, np.float32) >= self.joint_threshold
+        self.candidate.assign(marked.ravel())
+        self.live_count.zero_()
+        self._launch(K.compact_once, self.batch * self.n_pixels,
+                     [self.offsets, self.counts, self.entry_loc, self.entry_delta, self.candidate, self.n_pixels,
+                      self.not_done, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
+                      self.active, self.live_count])
+        _, entries, pixels = (int(x) for x in self.live_count.numpy())
+        active = np.sort(self.active.numpy()[:pixels])  # pixel order (on a GPU they come in any)
+        first, count = self.live_offsets.numpy()[active], self.live_counts.numpy()[active]
+        loc, delta = self.live_loc.numpy()[:entries], self.live_delta.numpy()[:entries]
+        dbg = self.delta_bg.numpy()[active]
+        p = self.params
+        if p.behind_cost > 0:  # counted for every candidate (n_behind leaves out locations in no list)
+            self._launch(K.behind_count, len(self.candidate),
+                         [self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu, self.behind_var,
+                          self.behind_half, p.behind_step, self.candidate, self.candidate_behind])
+            behind = p.behind_cost * self.candidate_behind.numpy().reshape(self.batch, locations).astype(np.float64)
+        at = np.repeat(first, count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
+        pixel, loc, delta = np.repeat(active, count), loc[at], delta[at]
+        out = []
+        for f in range(n):
+            cells = np.flatnonzero(marked[f])
+            mine = (pixel >= f * self.n_pixels) & (pixel < (f + 1) * self.n_pixels)
+            out.append(JointLists.of_entries(cells, pixel[mine], loc[mine] - f * locations, delta[mine],
+                                             dbg[(active >= f * self.n_pixels) & (active < (f + 1) * self.n_pixels)],
+                                             behind[f, cells] if p.behind_cost > 0 else np.zeros(len(cells)),
+                                             self.geometry.locations[cells], p))
+        return out

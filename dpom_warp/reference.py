@@ -8,6 +8,7 @@ rounds them the same way; everything else is float64.
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -301,34 +302,88 @@ def evidence_sums(valid, L, D, dbg, r, n_locations: int):
     return np.bincount(L[valid], weights=contrib[valid], minlength=n_locations)
 
 
-def joint_log_odds(depth_m, geom: Geometry, bg: Background, params: ModelParams, cells, sils: dict | None = None):
+def joint_log_odds(depth_m, geom: Geometry, bg: Background, params: ModelParams, cells):
     """For each of `cells` (location indices), the log posterior odds of its object given the
     other cells' objects present and every other location empty: the logit of the mean-field
     update at that binary state, logit(prior) + evidence - behind_cost x readings behind -
     exclusion x the other cells closer than exclusion_radius (each neighbour's rho is 1), which
     is log P(Z, X) - log P(Z, X without it) for the binary configuration X of `cells` (the
     pixels of its masks where it is the nearest object present against what lies behind it
-    then: the next cell's object or the background). `sils`: a dict that keeps the frame's
-    silhouettes between calls (silhouettes()). Returns (len(cells),) float64."""
+    then: the next cell's object or the background). Returns (len(cells),) float64."""
     cells = np.asarray(cells, np.int64)
-    K = len(geom.rect)
     if not len(cells):
         return np.zeros(0)
+    return joint_lists(depth_m, geom, bg, params, cells).log_odds(cells)
+
+
+@dataclass
+class JointLists:
+    """What the joint test needs of one frame, for its candidate locations (those that can be
+    detections: rho* at or above the detection threshold), as the engine hands it over with
+    the frame's result (Engine.joint_threshold): the per-pixel lists of the pixels whose masks
+    hold a candidate, kept to the candidates' entries in the lists' order (near to far), with
+    each pixel's Delta_bg; each candidate's behind_cost x readings behind its object
+    (behind_count) and its position. `log_odds(cells)` is joint_log_odds(frame, geom, bg,
+    params, cells) for cells among the candidates, without the frame: other locations' entries
+    are transparent at that binary state (rho 0), so leaving them out changes no sum."""
+
+    cells: np.ndarray  # (n,) int64, the candidates' location indices, ascending
+    valid: np.ndarray  # (P, W) bool: padded lists of the P pixels (as _padded_lists)
+    L: np.ndarray  # (P, W) int64: positions in `cells`
+    D: np.ndarray  # (P, W) float64: Delta of each entry
+    dbg: np.ndarray  # (P,) float64: Delta_bg of each pixel
+    behind: np.ndarray  # (n,) float64: behind_cost x readings behind each candidate's object
+    locations: np.ndarray  # (n, 3) the candidates' centres (the exclusion prior)
+    logit_prior: float
+    exclusion: float
+    exclusion_radius: float
+
+    @classmethod
+    def of_entries(cls, cells, pixel, loc, delta, dbg_of_pixel, behind, locations, params: ModelParams):
+        """From the candidates' entries (`pixel`, `loc` (location indices), `delta`) in list
+        order within each pixel, `dbg_of_pixel`: the pixels' Delta_bg, by position in
+        np.unique(pixel)."""
+        cells = np.asarray(cells, np.int64)
+        pix, valid, L, D = _padded_lists(np.asarray(pixel), np.searchsorted(cells, loc),
+                                         np.asarray(delta, np.float64))
+        return cls(cells, valid, L, D, np.asarray(dbg_of_pixel, np.float64), np.asarray(behind, np.float64),
+                   np.asarray(locations, np.float64), float(np.log(params.prior) - np.log1p(-params.prior)),
+                   float(params.exclusion), float(params.exclusion_radius))
+
+    def log_odds(self, cells) -> np.ndarray:
+        """(len(cells),) float64: each cell's log posterior odds with the other `cells` present
+        and every other location empty (joint_log_odds); every cell must be a candidate."""
+        cells = np.asarray(cells, np.int64)
+        at = np.searchsorted(self.cells, cells)
+        if len(cells) and (np.any(at >= len(self.cells)) or np.any(self.cells[np.minimum(at, len(self.cells) - 1)]
+                                                                    != cells)):
+            raise ValueError(f"joint test: cells {sorted(set(cells.tolist()) - set(self.cells.tolist()))} "
+                             f"are not among the frame's candidates (rho* at or above the detection threshold)")
+        present = np.zeros(len(self.cells), bool)
+        present[at] = True
+        r = np.where(self.valid, present[self.L], False).astype(np.float64)
+        evidence = evidence_sums(self.valid, self.L, self.D, self.dbg, r, len(self.cells))[at] - self.behind[at]
+        if self.exclusion > 0:  # each cell's neighbours among the cells, as mean_field finds them
+            start, _ = neighbour_lists(self.locations[at], self.exclusion_radius)
+            evidence -= self.exclusion * np.diff(start)
+        return self.logit_prior + evidence
+
+
+def joint_lists(depth_m, geom: Geometry, bg: Background, params: ModelParams, candidates) -> JointLists:
+    """The JointLists of a frame for the locations `candidates`, from scratch (what the
+    engine's copy is tested against)."""
+    cells = np.unique(np.asarray(candidates, np.int64))
     z = np.asarray(depth_m, dtype=np.float64)
-    sils = silhouettes(z, geom, cells, params, sils)
+    sils = silhouettes(z, geom, cells, params)
     pixel, loc, _, delta = mask_entries(z, geom, params, bg, cells, sils)
-    pix, valid, L, D = _padded_lists(pixel, loc, delta.astype(np.float64))
-    at = np.unravel_index(pix, z.shape)  # Delta_bg (background_delta) where the lists are
+    pix = np.unique(pixel)
+    at = np.unravel_index(pix, z.shape)
     dbg = log_theta(z[at], bg.mu[at], bg.sigma[at], bg.missing[at], bg.outlier[at], params.z_max)
-    evidence = evidence_sums(valid, L, D, dbg, valid.astype(np.float64), K)[cells]
-    which = np.zeros(K, bool)
+    which = np.zeros(len(geom.rect), bool)
     which[cells] = True
-    if params.behind_cost > 0:
-        evidence -= params.behind_cost * behind_count(z, geom, params, which, sils)[cells]
-    if params.exclusion > 0:  # each cell's neighbours among the cells, as mean_field finds them
-        start, _ = neighbour_lists(geom.locations[cells], params.exclusion_radius)
-        evidence -= params.exclusion * np.diff(start)
-    return np.log(params.prior) - np.log1p(-params.prior) + evidence
+    behind = (params.behind_cost * behind_count(z, geom, params, which, sils)[cells] if params.behind_cost > 0
+              else np.zeros(len(cells)))
+    return JointLists.of_entries(cells, pixel, loc, delta, dbg, behind, geom.locations[cells], params)
 
 
 def pixel_lists(depth_m, geom: Geometry, bg: Background, params: ModelParams):

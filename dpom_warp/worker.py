@@ -99,21 +99,16 @@ def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engi
                     table={"auto": None, "table": True, "tiles": False}[cfg.engine.mask_index],
                     resolution=resolution,
                     background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
-    engine.keep_frames = cfg.detection.min_log_odds > 0  # the joint test reads them
+    if cfg.detection.min_log_odds > 0:  # results carry the joint test's lists (reference.JointLists)
+        engine.joint_threshold = cfg.detection.threshold
     return engine
 
 
-def detections_of(res, engine: Engine, geometry, cfg: RunConfig) -> tuple[np.ndarray, list]:
-    """FrameWorker.detections for an engine result of `engine` (made by make_engine: its
-    results carry their frame where the joint test is on), `geometry` at full resolution."""
+def detections_of(res, geometry, cfg: RunConfig) -> tuple[np.ndarray, list]:
+    """FrameWorker.detections for a result of an engine made by make_engine (its results carry
+    the joint test's lists where the test is on), `geometry` at full resolution."""
     rho_map = res.rho_star.reshape(cfg.grid.shape)
-    if res.frame is None:
-        return joint_detections(rho_map, geometry, cfg.detection)
-    from .reference import joint_log_odds
-
-    sils = {}  # the cells' silhouettes, kept between the test's rounds
-    return joint_detections(rho_map, geometry, cfg.detection, lambda cells: joint_log_odds(
-        res.frame, engine.geometry, res.background, engine.params, cells, sils))
+    return joint_detections(rho_map, geometry, cfg.detection, None if res.joint is None else res.joint.log_odds)
 
 
 class FrameWorker:
@@ -179,7 +174,7 @@ class FrameWorker:
         """The rho* map (grid-shaped) of an engine result and its detections, located and
         boxed on the full-resolution geometry, after the joint test (detect.joint_detections:
         a cell it rejects is 0 in the map returned, which is the run's map)."""
-        return detections_of(res, self.engine, self.geometry, self.cfg)
+        return detections_of(res, self.geometry, self.cfg)
 
     def _finish(self, item: FrameItem, depth, res, read_s: float, infer_s: float, grown: list):
         """Detections, map, picture and record of an inferred frame; `infer_s` is the

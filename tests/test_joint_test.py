@@ -1,6 +1,6 @@
 """The joint test (detection.min_log_odds): each detection's log posterior odds with the other
 detections present, against the model's joint probability evaluated by brute force, from the
-engine's copies of the frame and background on every device, and on rendered people."""
+lists the engine hands over on every device, and on rendered people."""
 
 import dataclasses
 
@@ -69,28 +69,43 @@ def test_log_odds_are_the_joint_probability_with_and_without_each_cell(seed, sha
 
 
 @pytest.mark.parametrize("frames", [True, False])
-def test_engine_results_carry_what_the_reference_needs(device, frames):
-    """With keep_frames, each result holds the frame at the engine's resolution and the
-    background it was inferred against (background frames, or the floor-only model completed
-    from the frame), and the joint test computed from them is the reference's to 1e-6."""
+def test_engine_hands_over_the_joint_tests_lists(device, frames):
+    """With joint_threshold, each result carries the JointLists of the locations whose rho*
+    (float32) reaches it, copied out of the engine's lists: their log odds are the
+    reference's, computed from the frame and background from scratch, to 1e-6 (background
+    frames, or the floor-only model completed from the frame), alone and in a batch; a cell
+    that is not a candidate is refused."""
     geom, params, depth, bg_frames = random_scene(5, shape="solid")
     params = dataclasses.replace(params, behind_cost=2.0, exclusion=10.0, exclusion_radius=0.45,
                                  background_outside_grid=True)
-    engine = Engine(geom, params, device)
-    assert engine.infer(depth).frame is None  # off unless asked (make_engine: min_log_odds > 0)
-    engine.keep_frames = True
+    engines = [Engine(geom, params, device), Engine(geom, params, device, batch=3)]
+    assert engines[0].infer(depth).joint is None  # off unless asked (make_engine: min_log_odds > 0)
     if frames:
-        engine.set_background_frames(bg_frames)
         bg = ref.background_from_frames(bg_frames, params)
+        for e in engines:
+            e.set_background_frames(bg_frames)
     else:
         bg = ref.floor_background(geom, params, depth)
-    res = engine.infer(depth)
-    np.testing.assert_array_equal(res.frame, depth.astype(np.float32))
-    for got, want in zip(dataclasses.astuple(res.background), dataclasses.astuple(bg)):
-        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-9)
-    cells = np.argsort(-res.rho)[:5]
-    np.testing.assert_allclose(ref.joint_log_odds(res.frame, geom, res.background, params, cells),
-                               ref.joint_log_odds(depth, geom, bg, params, cells), rtol=0, atol=1e-6)
+    res = engines[0].infer(depth)
+    star = np.asarray(res.rho_star, np.float32)
+    threshold = float(np.sort(star)[-8])  # eight candidates at least, ties included
+    for e in engines:
+        e.joint_threshold = threshold
+    res = engines[0].infer(depth)
+    batch = engines[1].infer_batch(np.stack([bg_frames[0], depth]))  # the frame second, after another
+    candidates = np.flatnonzero(star >= threshold)
+    np.testing.assert_array_equal(res.joint.cells, candidates)
+    np.testing.assert_array_equal(batch[1].joint.cells, candidates)
+    rng = np.random.default_rng(0)
+    for size in (1, 3, len(candidates)):
+        cells = rng.choice(candidates, size=size, replace=False)
+        want = ref.joint_log_odds(depth, geom, bg, params, cells)
+        np.testing.assert_allclose(res.joint.log_odds(cells), want, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(batch[1].joint.log_odds(cells), want, rtol=1e-6, atol=1e-6)
+    assert np.ptp(res.joint.log_odds(candidates)) > 1.0
+    outside = int(np.flatnonzero(star < threshold)[0])
+    with pytest.raises(ValueError, match="not among the frame's candidates"):
+        res.joint.log_odds([candidates[0], outside])
 
 
 def test_defaults_and_bad_values():
@@ -115,7 +130,7 @@ def test_cells_the_test_rejects_leave_the_map_until_every_detection_passes():
     _, grid, geom, empty, depth = rendered_people(people)
     params = ModelParams(behind_cost=BEHIND_COST, exclusion=10.0)
     engine = Engine(geom, params, "cpu")
-    engine.keep_frames = True
+    engine.joint_threshold = Detection().threshold
     engine.set_background_frames(empty)
     res = engine.infer(depth)
     rho_map = res.rho_star.reshape(grid.shape)
@@ -123,7 +138,7 @@ def test_cells_the_test_rejects_leave_the_map_until_every_detection_passes():
 
     def log_odds(cells):
         calls.append(list(cells))
-        return ref.joint_log_odds(res.frame, geom, res.background, params, cells)
+        return res.joint.log_odds(cells)
 
     default = Detection(edge_radius=0.45, min_log_odds=MIN_LOG_ODDS)
     kept_map, dets = joint_detections(rho_map, geom, default, log_odds)
