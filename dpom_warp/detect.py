@@ -10,17 +10,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .geometry import closer
+
 
 EDGE_RADIUS = 0.45  # detection.edge_radius's default on ground grids (config; README, How it works)
 MIN_LOG_ODDS = 10.0  # detection.min_log_odds's default, nats (README, How it works)
-ROUNDING = 1e-9  # metres: two cells whose distance equals a radius up to rounding are not closer
-
-
-def closer(distance, radius: float):
-    """Whether `distance` (metres) is closer than `radius`: less by more than rounding (cells
-    4 steps of 0.1 m apart are 0.39999999999999997 or 0.4000000000000001 m apart, by where the
-    grid starts; both are 0.4, not closer than 0.4)."""
-    return distance < radius - ROUNDING
 
 
 @dataclass(frozen=True)

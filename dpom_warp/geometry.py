@@ -440,16 +440,29 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
     )
 
 
+ROUNDING = 1e-9  # metres: two cells whose distance equals a radius up to rounding are not closer
+
+
+def closer(distance, radius: float):
+    """Whether `distance` (metres) is closer than `radius`: less by more than rounding (cells
+    4 steps of 0.1 m apart are 0.39999999999999997 or 0.4000000000000001 m apart, by where the
+    grid starts; both are 0.4, not closer than 0.4). The detections' suppression, the edge rule,
+    the tracker's peaks and the exclusion prior's neighbours (neighbour_lists) all go by it."""
+    return distance < radius - ROUNDING
+
+
 def neighbour_lists(locations: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """(start (K + 1,), neighbours): location k's neighbours, the other locations closer than
-    `radius` (metres, 3D), are neighbours[start[k]:start[k + 1]], in index order; radius 0:
-    none."""
+    `radius` (metres, 3D; closer()), are neighbours[start[k]:start[k + 1]], in index order;
+    radius 0: none."""
     from scipy.spatial import cKDTree
 
     n = len(locations)
     if radius <= 0 or n == 0:
         return np.zeros(n + 1, np.int32), np.zeros(1, np.int32)
-    pairs = cKDTree(locations).query_pairs(radius * (1 - 1e-9), output_type="ndarray")
+    pairs = cKDTree(locations).query_pairs(radius - ROUNDING, output_type="ndarray")  # (at most it)
+    if len(pairs):  # query_pairs keeps distances equal to its radius: closer() does not
+        pairs = pairs[closer(np.linalg.norm(locations[pairs[:, 0]] - locations[pairs[:, 1]], axis=1), radius)]
     both = np.concatenate([pairs, pairs[:, ::-1]]) if len(pairs) else np.zeros((0, 2), np.int64)
     both = both[np.lexsort((both[:, 1], both[:, 0]))]
     start = np.zeros(n + 1, np.int64)

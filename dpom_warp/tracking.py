@@ -172,7 +172,8 @@ def peaks(rho_map: np.ndarray, cells: Cells, threshold: float) -> np.ndarray:
     cells.nms_radius as the detections (the solid model often explains one person by two
     neighbouring cells; each would carry a track of its own), less a person's edge beside
     them (detect.edge_drop). Sorted cell indices."""
-    from .detect import closer, edge_drop, local_maxima
+    from .detect import edge_drop, local_maxima
+    from .geometry import closer
 
     flat = rho_map.ravel()
     cand = np.flatnonzero(local_maxima(rho_map).ravel() & (flat >= threshold))

@@ -35,7 +35,9 @@ def test_cells_a_radius_apart_are_not_closer_than_it_whatever_the_rounding():
     """Two maxima 4 cells of 0.1 m apart are 0.4 m apart: not closer than a 0.4 m suppression
     radius, both kept, wherever the grid starts (at x = 0.3 and 0.7 they are 0.39999999999999997
     m apart in floating point, at 0.1 and 0.5 0.4 exactly; the suppression went by those
-    digits); 3 cells apart, the weaker goes. The tracker's peaks do the same."""
+    digits); 3 cells apart, the weaker goes. The tracker's peaks and the exclusion prior's
+    neighbour lists do the same."""
+    from dpom_warp.geometry import neighbour_lists
     from dpom_warp.tracking import Cells, peaks
 
     rect = np.tile([0, 0, 1, 1], (8, 1))
@@ -48,6 +50,8 @@ def test_cells_a_radius_apart_are_not_closer_than_it_whatever_the_rounding():
             assert got == ([1, 1 + gap] if both else [1]), (x0, gap, got)
             cells = Cells(locs, 0.1, np.zeros(8, bool), 0.4)
             assert list(peaks(m, cells, 0.5)) == ([1, 1 + gap] if both else [1]), (x0, gap)
+        start, nbrs = neighbour_lists(locs, 0.4)  # 1, 2 and 3 cells away; 4 is not closer
+        assert [list(nbrs[start[k]:start[k + 1]]) for k in (0, 4)] == [[1, 2, 3], [1, 2, 3, 5, 6, 7]], x0
     assert 0.7 - 0.3 < 0.4  # (the digits this test is about)
 
 
