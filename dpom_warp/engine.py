@@ -948,9 +948,10 @@ class Engine:
                       self.not_done, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
                       self.active, self.live_count])
         _, entries, pixels = (int(x) for x in self.live_count.numpy())
-        active = np.sort(self.active.numpy()[:pixels])  # pixel order (on a GPU they come in any)
+        # (slices: a GPU copies back what they hold, not the arrays' capacity)
+        active = np.sort(self.active[:pixels].numpy())  # pixel order (on a GPU they come in any)
         first, count = self.live_offsets.numpy()[active], self.live_counts.numpy()[active]
-        loc, delta = self.live_loc.numpy()[:entries], self.live_delta.numpy()[:entries]
+        loc, delta = self.live_loc[:entries].numpy(), self.live_delta[:entries].numpy()
         dbg = self.delta_bg.numpy()[active]
         p = self.params
         if p.behind_cost > 0:  # counted for every candidate (n_behind leaves out locations in no list)
