@@ -222,13 +222,13 @@ def _info(args) -> int:
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
-    i = info["intrinsics"]
+    i, d = info["intrinsics"], info["distortion"]
     lines = [f"{info['path']}: {info['kind']}",
-             f"  depth stream: {info['topic'] or '-'} ({info['encoding'] or '-'}), {info['frames']} frames "
-             f"of {info['width']}x{info['height']}",
+             f"  depth stream: {info['topic'] or '-'} ({info['encoding'] or '-'}), {info['frames']} "
+             f"frame{'' if info['frames'] == 1 else 's'} of {info['width']}x{info['height']}",
              "  intrinsics: " + (f"fx {i['fx']:.3f}, fy {i['fy']:.3f}, cx {i['cx']:.3f}, cy {i['cy']:.3f}"
                                   if i else "none (give camera.intrinsics in the config)"),
-             f"  distortion: {info['distortion'] or 'none'}",
+             "  distortion: " + (f"[{', '.join(f'{x:.6g}' for x in d)}]" if d else "none"),
              "  depth scale: " + (f"{info['depth_scale']:.7g} m per unit" if info["depth_scale"]
                                    else "float metres" if info["encoding"] == "32FC1" else "-"),
              "  duration: " + (f"{info['duration_s']:.3f} s, {info['rate_hz']:.2f} frames/s"
@@ -237,11 +237,32 @@ def _info(args) -> int:
                  f" (up in the depth camera's frame: [{', '.join(f'{x:.4f}' for x in info['gravity_up'])}])"
                  if info.get("gravity_up") else "")]
     if len(info["streams"]) > 1:
-        lines.append("  streams: " + "; ".join(f"{s['topic']} ({s['type']}"
-                                               + (f", {s['messages']}" if s.get("messages") else "") + ")"
-                                               for s in info["streams"][:40]))
+        lines.append(stream_lines(info["streams"]))
     print("\n".join(lines))
     return 0
+
+
+SENSOR_TYPES = ("Image", "CameraInfo", "Imu", "PointCloud", "video", "subtitle")  # what `info` lists by name
+
+
+def stream_lines(streams: list[dict]) -> str:
+    """`info`'s streams line: those carrying sensor data (images, camera models, IMU, point
+    clouds; a Matroska file's tracks) by name with their type and messages, the others (a
+    RealSense recording's option values and device records: dozens) counted by type."""
+    def one(s):
+        return f"{s['topic']} ({s['type']}" + (f", {s['messages']}" if s.get("messages") else "") + ")"
+
+    shown = [s for s in streams if any(t in s["type"] for t in SENSOR_TYPES)]
+    rest = [s for s in streams if s not in shown]
+    line = "  streams: " + "; ".join(one(s) for s in shown or streams[:8])
+    rest = rest if shown else streams[8:]
+    if rest:
+        kinds = {}
+        for s in rest:
+            kinds[s["type"]] = kinds.get(s["type"], 0) + 1
+        line += (f"; and {len(rest)} more (" + ", ".join(f"{k} {n}" for k, n in sorted(kinds.items(), key=lambda kv: -kv[1]))
+                 + "; --json lists them)")
+    return line
 
 
 def _schema(args) -> int:

@@ -346,6 +346,23 @@ def test_realsense_recording_reads_right_and_runs(tmp_path, capsys):
     assert set(js["intrinsics"]) == {"fx", "fy", "cx", "cy"} and js["depth_scale"] == pytest.approx(0.001)
 
 
+def test_info_names_the_sensor_streams_and_counts_the_rest(capsys):
+    """`dpom-warp info` in words: the RealSense recording's 70 streams are its two image
+    streams and two camera models by name, then the option values and device records counted
+    by type (all of them in --json); the Azure Kinect file's one frame is one frame."""
+    assert main(["info", str(RS_BAG)]) == 0
+    out = capsys.readouterr().out
+    (streams,) = [line for line in out.splitlines() if line.startswith("  streams: ")]
+    named = streams.split("; and ")[0]
+    assert named.count("sensor_msgs/msg/Image") == 2 and named.count("sensor_msgs/msg/CameraInfo") == 2
+    assert "std_msgs" not in named and "and 66 more (std_msgs/msg/Float32 28, std_msgs/msg/String 28" in streams
+    assert main(["info", str(RS_BAG), "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["streams"]) == 70
+    assert main(["info", str(AZURE)]) == 0
+    out = capsys.readouterr().out
+    assert "1 frame of 640x576" in out and "IMU (subtitle)" in out and "distortion: [0.54794, " in out
+
+
 def test_azure_kinect_recording_reads_right_and_runs(tmp_path):
     import av
 
