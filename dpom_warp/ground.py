@@ -318,7 +318,8 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
     if not candidates:
         which = (f"is the floor of a camera pitched {-AUTO_MARGIN_DEG:g} to {90 + AUTO_MARGIN_DEG:g} deg "
                  f"(roll up to {options.max_angle_deg:g} deg)" if auto else
-                 f"lies within {options.max_angle_deg:g} deg of up")
+                 f"lies within {options.max_angle_deg:g} deg of up [{', '.join(f'{x:.3f}' for x in up)}] "
+                 f"(camera coordinates: x right, y down, z forward)")
         raise GroundFitError(
             f"no floor plane found: no plane of at least {options.min_inliers} points below the "
             f"camera {which} (largest other plane: {best_other} points); is enough floor in view?")
@@ -353,8 +354,9 @@ def fit_ground_frames(frames_m, camera: Camera, options: GroundOptions = GroundO
 
 
 def fit_ground_files(files, camera: Camera, depth_scale: float,
-                     options: GroundOptions = GroundOptions()) -> GroundFit:
-    """`fit_ground_frames` on depth files.
+                     options: GroundOptions = GroundOptions(), names: list[str] | None = None) -> GroundFit:
+    """`fit_ground_frames` on depth files; `names`: what to call them in messages (a
+    recording's frames: the recording and the frame, not the cache's files).
 
     Raises:
         InputError: a bad file, or no floor in the files (the message names them).
@@ -365,5 +367,6 @@ def fit_ground_files(files, camera: Camera, depth_scale: float,
     try:
         return fit_ground_frames(depths, camera, options)
     except GroundFitError as e:
-        which = str(files[0]) if len(files) == 1 else f"{files[0]} and {len(files) - 1} more frames"
+        first = names[0] if names else str(files[0])
+        which = first if len(files) == 1 else f"{first} and {len(files) - 1} more frames"
         raise InputError(f"{which}: {e}") from None

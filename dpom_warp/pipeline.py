@@ -38,16 +38,21 @@ def _ambiguity(fit, log) -> dict:
 
 
 def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
-    """camera.extrinsics: auto. Fit the floor on `files` and return the posed camera and a
-    report for summary.json.
+    """camera.extrinsics: auto. Fit the floor on `files` (input.background's, else
+    input.frames') and return the posed camera and a report for summary.json.
 
     Raises:
-        InputError: naming the frames, when no floor plane is found in them.
+        InputError: naming the frames (a recording's by the recording and frame), when no
+            floor plane is found in them.
     """
+    from .sources import is_recording
+
     t = time.perf_counter()
     kind = "background frame" if cfg.inputs.background else "frame"
     log(f"fitting the floor on {len(files)} {kind}{'s' if len(files) > 1 else ''} ...")
-    fit = fit_ground_files(files, cfg.camera, cfg.inputs.depth_scale, cfg.ground)
+    source = cfg.inputs.background or cfg.inputs.frames
+    names = [f"{source} (frame {f.name})" for f in files] if source and is_recording(source) else None
+    fit = fit_ground_files(files, cfg.camera, cfg.inputs.depth_scale, cfg.ground, names)
     log(f"ground plane from {len(files)} {kind}{'s' if len(files) > 1 else ''}: camera "
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
         f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")

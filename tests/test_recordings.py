@@ -429,6 +429,21 @@ def test_azure_kinect_accelerometer_gives_up(tmp_path):
     assert tuple(load_config(path).ground.up) == (0, -1, 0)
 
 
+def test_a_recording_with_no_floor_in_view_is_named_in_the_error(tmp_path, capsys):
+    """The Azure Kinect recording looks at a desk: extrinsics auto finds no floor near its
+    IMU's up, and the one-line error names the recording and its frame (not the cache's file)
+    and the up it looked along; nothing is written."""
+    cfg = {"device": "cpu", "input": {"frames": str(AZURE)}, "camera": {"extrinsics": "auto"},
+           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]}, "output": {"dir": str(tmp_path / "out")}}
+    path = tmp_path / "az.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress"]) == 2
+    (line,) = [x for x in capsys.readouterr().err.splitlines() if x.startswith("dpom-warp: error:")]
+    assert line.startswith(f"dpom-warp: error: {AZURE} (frame 000000): no floor plane found")
+    assert "of up [0.022, -0.982, 0.187]" in line and ".cache" not in line
+    assert not (tmp_path / "out").exists()
+
+
 def test_realsense_sdk_db3_gives_the_png_run(tmp_path, scene):
     """A RealSense SDK recording (.db3, compressedDepth) made by the SDK's own recorder from a
     SoftwareCamera playing the rendered frames: the PNG run's detections."""
