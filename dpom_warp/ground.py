@@ -367,6 +367,11 @@ def fit_ground_files(files, camera: Camera, depth_scale: float,
     try:
         return fit_ground_frames(depths, camera, options)
     except GroundFitError as e:
-        first = names[0] if names else str(files[0])
-        which = first if len(files) == 1 else f"{first} and {len(files) - 1} more frames"
-        raise InputError(f"{which}: {e}") from None
+        raise InputError(f"{frames_named(files, names)}: {e}") from None
+
+
+def frames_named(files, names: list[str] | None = None) -> str:
+    """How messages name the frames a floor is fitted on: the first (by `names`, else its
+    path) and how many more."""
+    first = names[0] if names else str(files[0])
+    return first if len(files) == 1 else f"{first} and {len(files) - 1} more frames"

@@ -18,7 +18,7 @@ from .config import ConfigError, RunConfig
 from .engine import Engine, MemoryBudgetError, resolve_device
 from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
-from .ground import fit_ground_files
+from .ground import fit_ground_files, frames_named
 from .io import TEMP_MARK, InputError, write_bytes_atomic, write_json_atomic, write_text_atomic
 from .resolution import Resolution
 from .sources.run import expand, render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
@@ -53,6 +53,7 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
     source = cfg.inputs.background or cfg.inputs.frames
     names = [f"{source} (frame {f.name})" for f in files] if source and is_recording(source) else None
     fit = fit_ground_files(files, cfg.camera, cfg.inputs.depth_scale, cfg.ground, names)
+    refuse_low_view_from_above(cfg, fit, frames_named(files, names))
     log(f"ground plane from {len(files)} {kind}{'s' if len(files) > 1 else ''}: camera "
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
         f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")
@@ -663,6 +664,24 @@ def estimate_background(cfg: RunConfig, files: list[Path], height: int, width: i
                        "estimate_s": time.perf_counter() - t}
 
 
+def refuse_low_view_from_above(cfg: RunConfig, fit, where: str) -> None:
+    """camera.ground.up: auto (no IMU in the recording, none in the config): a plane facing the
+    camera reads the same as a floor seen from straight down and as a wall faced level, and
+    auto takes the floor. On a ground grid, a camera looking down (within 10 degrees of
+    straight down) from lower than its objects' height sees none of them whole: the plane is
+    taken for a wall, and the run stops with an InputError saying how to give the pose."""
+    from .ground import AUTO_MARGIN_DEG, HINT
+
+    if not isinstance(cfg.ground.up, str) or cfg.grid.mode != "ground":
+        return
+    if abs(fit.pitch_deg - 90.0) <= AUTO_MARGIN_DEG and fit.camera_height < cfg.obj.height:
+        raise InputError(
+            f"{where}: camera.extrinsics: auto: the floor found is a plane {fit.camera_height:.2f} m away facing "
+            f"the camera; as a floor the camera would look down on it (pitch {fit.pitch_deg:.1f} deg) from lower "
+            f"than the {cfg.obj.height:g} m objects it is to find, so it is more likely a wall the camera faces; "
+            f"{HINT}, or give camera.extrinsics")
+
+
 def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=print):
     """camera.extrinsics: auto with background: auto: the floor is fitted on the estimated
     background at full resolution (the floor people hide in a frame shows in the estimate)."""
@@ -678,6 +697,7 @@ def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=pri
     except GroundFitError as e:
         raise InputError(f"{files[0]} and {len(files) - 1} more frames: in their estimated "
                          f"background: {e}") from None
+    refuse_low_view_from_above(cfg, fit, f"{files[0]} and {len(files) - 1} more frames (their estimated background)")
     log(f"ground plane from the background estimated on {len(files)} frames: camera "
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
         f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")

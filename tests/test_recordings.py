@@ -429,6 +429,43 @@ def test_azure_kinect_accelerometer_gives_up(tmp_path):
     assert tuple(load_config(path).ground.up) == (0, -1, 0)
 
 
+def test_a_wall_faced_is_not_taken_for_a_floor_seen_from_above(tmp_path, capsys):
+    """The RealSense recording faces an office wall 1.83 m away (no IMU): as a floor it would
+    put the camera looking straight down from below the people it is to find, so extrinsics
+    auto refuses it with a one-line error naming the recording and saying how to give the
+    pose (it used to run, with the wall for a floor and a 'person' on the desk); nothing is
+    written. The same plane as the floor of a camera 2.6 m up, and the same low plane with an
+    up given or on a voxel grid, are left alone."""
+    import dataclasses
+
+    from dpom_warp.config import load_config
+    from dpom_warp.io import InputError
+    from dpom_warp.pipeline import refuse_low_view_from_above
+
+    cfg = {"device": "cpu", "input": {"frames": str(RS_BAG)}, "camera": {"extrinsics": "auto"},
+           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]}, "output": {"dir": str(tmp_path / "out")}}
+    path = tmp_path / "rs.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress"]) == 2
+    (line,) = [x for x in capsys.readouterr().err.splitlines() if x.startswith("dpom-warp: error:")]
+    assert line.startswith(f"dpom-warp: error: {RS_BAG} (frame 000000) and 1 more frames: ")
+    assert "a plane 1.83 m away facing the camera" in line and "more likely a wall" in line
+    assert "camera.ground.up" in line and not (tmp_path / "out").exists()
+    run = load_config(path)
+
+    @dataclasses.dataclass
+    class Fit:
+        pitch_deg: float
+        camera_height: float
+
+    with pytest.raises(InputError, match="wall"):
+        refuse_low_view_from_above(run, Fit(95.0, 1.5), "f")
+    refuse_low_view_from_above(run, Fit(90.0, 2.6), "f")  # a ceiling camera
+    refuse_low_view_from_above(run, Fit(75.0, 1.5), "f")  # a camera tilted down, not from above
+    refuse_low_view_from_above(dataclasses.replace(run, ground=dataclasses.replace(run.ground, up=(0.0, 0.0, -1.0))),
+                               Fit(90.0, 1.5), "f")  # up given: the user says it is a floor
+
+
 def test_a_recording_with_no_floor_in_view_is_named_in_the_error(tmp_path, capsys):
     """The Azure Kinect recording looks at a desk: extrinsics auto finds no floor near its
     IMU's up, and the one-line error names the recording and its frame (not the cache's file)
