@@ -114,7 +114,8 @@ def _report(summary: dict, out: str) -> None:
               f"({live['frames_per_s'] or 0:.1f} over the whole run), latency median "
               f"{live['latency_ms_median'] or 0:.0f} ms (stopped by {live['stopped_by']})")
     t = summary["timings"]
-    print(f"{summary['frames']} frames, {summary['detections']} detections; median "
+    n, found = summary["frames"], summary["detections"]
+    print(f"{n} frame{'' if n == 1 else 's'}, {found} detection{'' if found == 1 else 's'}; median "
           f"{1000 * t['median_infer_s']:.0f} ms per frame ({t['median_iterations']:.0f} iterations) "
           f"on {summary['device']}; outputs in {out}")
     tr = summary.get("tracking") or {}

@@ -297,7 +297,8 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
     cfg, out, i = plan.cfg, plan.out, plan.inference
     prepare_output(out, cfg.resolved, overwrite, resume)
     log(f"device {plan.device}; {plan.geometry.locations.shape[0]} locations {cfg.grid.shape}; "
-        f"{len(plan.frames)} frames; background: {plan.background}; inference at {i['image'][0]}x"
+        f"{len(plan.frames)} frame{'' if len(plan.frames) == 1 else 's'}; background: {plan.background}; "
+        f"inference at {i['image'][0]}x"
         f"{i['image'][1]} pixels (stride {i['stride']}{', ' + i['reduce'] if i['stride'] > 1 else ''}"
         f"{', exact path' if cfg.engine.exact else ''})")
     for f in plan.frames:
