@@ -3,7 +3,7 @@
 commands:
   dpom-warp run CONFIG... [--output DIR] [--device D] [--set KEY.PATH=VALUE ...]
                 [--workers N] [--ray [ADDRESS]] [--resume | --overwrite] [--max-frames N]
-  dpom-warp fit-ground DEPTH... --camera CAMERA.yaml [--output POSE.yaml]
+  dpom-warp fit-ground DEPTH... --camera CAMERA.yaml | RECORDING [--output POSE.yaml]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
   dpom-warp track RUN_DIR [--set tracking.KEY=VALUE ...]
   dpom-warp info SOURCE [--topic TOPIC] [--json]
@@ -129,6 +129,17 @@ def _report(summary: dict, out: str) -> None:
               f"{s['moda_visible']:.3f} not penalising those less than {s['hidden_visibility']:.0%} visible)")
 
 
+def _positive(text: str) -> int:
+    """An integer >= 1."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, found {text!r}")
+    return n
+
+
 def _up_arg(text: str):
     """--up: "auto" or three numbers, not all zero."""
     if text == "auto":
@@ -146,16 +157,31 @@ def _fit_ground(args) -> int:
     import yaml
 
     from .config import load_camera_file
-    from .ground import GroundOptions, fit_ground_files
-    from .io import write_text_atomic
+    from .ground import GroundOptions, fit_ground_files, fit_ground_named, frames_named, recording_frames
+    from .io import InputError, write_text_atomic
+    from .sources import is_recording
 
-    camera, scale = load_camera_file(args.camera)
-    options = GroundOptions(up=args.up, max_angle_deg=args.max_angle, depth_max=args.depth_max)
-    fit = fit_ground_files(args.depth, camera, scale, options)
+    camera, scale = load_camera_file(args.camera) if args.camera else (None, None)
+    up = args.up
+    if len(args.depth) == 1 and is_recording(args.depth[0]):
+        camera, frames, names, gravity = recording_frames(args.depth[0], args.topic, args.frames, camera)
+        if up == "auto" and gravity:  # the accelerometer says where up is, as in a run
+            up = tuple(float(x) for x in gravity)
+            print(f"up from the recording's accelerometer: [{', '.join(f'{x:.4f}' for x in up)}]", file=sys.stderr)
+        options = GroundOptions(up=up, max_angle_deg=args.max_angle, depth_max=args.depth_max)
+        fit = fit_ground_named(frames, camera, options, frames_named(frames, names))
+        count = len(frames)
+    else:
+        if camera is None:
+            raise InputError("--camera: expected a camera YAML (width, height, intrinsics, depth_scale) for "
+                             "depth image files; found none (a recording, given alone, carries its own)")
+        options = GroundOptions(up=up, max_angle_deg=args.max_angle, depth_max=args.depth_max)
+        fit = fit_ground_files(args.depth, camera, scale, options)
+        count = len(args.depth)
     if fit.ambiguity:
         print(f"dpom-warp: warning: {fit.ambiguity}", file=sys.stderr)
     report = fit.report()
-    text = (f"# dpom-warp fit-ground on {len(args.depth)} frame(s); paste under camera.extrinsics\n"
+    text = (f"# dpom-warp fit-ground on {count} frame(s); paste under camera.extrinsics\n"
             + yaml.safe_dump(report, default_flow_style=None, sort_keys=False))
     if args.output:
         write_text_atomic(args.output, text)
@@ -340,8 +366,13 @@ def main(argv: list[str] | None = None) -> int:
     g = command("fit-ground", "find the floor and the camera pose from depth frames",
                 "Fit the floor plane in depth frames of one camera and print (or write) the pose to\n"
                 "paste under a config's camera.extrinsics.")
-    g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy) of the same camera")
-    g.add_argument("--camera", required=True, help="camera YAML: width, height, intrinsics, depth_scale")
+    g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy) of the same camera, or one "
+                                            "recording (ROS bag, Azure Kinect .mkv): its first --frames frames")
+    g.add_argument("--camera", help="camera YAML: width, height, intrinsics, depth_scale (required for frame "
+                                    "files; a recording's own camera otherwise)")
+    g.add_argument("--topic", help="a recording's depth topic, where it has several (as input.topic)")
+    g.add_argument("--frames", type=_positive, default=5, metavar="N",
+                   help="a recording: fit on its first N readable depth frames (as camera.ground.frames)")
     g.add_argument("--output", help="write the pose YAML here (default: print it)")
     g.add_argument("--up", default="auto", type=_up_arg, metavar="auto|X,Y,Z",
                    help="the up direction in the camera frame (camera.ground.up): auto (default) takes "

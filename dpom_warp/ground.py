@@ -361,13 +361,56 @@ def fit_ground_files(files, camera: Camera, depth_scale: float,
     Raises:
         InputError: a bad file, or no floor in the files (the message names them).
     """
-    from .io import InputError, read_depth
+    from .io import read_depth
 
     depths = [read_depth(f, depth_scale, (camera.height, camera.width)) for f in files]
+    return fit_ground_named(depths, camera, options, frames_named(files, names))
+
+
+def fit_ground_named(frames_m, camera: Camera, options: GroundOptions, named: str) -> GroundFit:
+    """fit_ground_frames, its GroundFitError an InputError that starts with `named` (the
+    frames, as frames_named says them)."""
+    from .io import InputError
+
     try:
-        return fit_ground_frames(depths, camera, options)
+        return fit_ground_frames(frames_m, camera, options)
     except GroundFitError as e:
-        raise InputError(f"{frames_named(files, names)}: {e}") from None
+        raise InputError(f"{named}: {e}") from None
+
+
+def recording_frames(path: str, topic: str | None, count: int, camera: Camera | None = None):
+    """The first `count` readable depth frames of a recording, for a floor fit: (camera,
+    frames in metres, their names for messages, the accelerometer's up or None). The camera
+    is the recording's (size, intrinsics, distortion) unless `camera` is given.
+
+    Raises:
+        InputError: no camera information and none given, or no readable depth frame.
+    """
+    from .io import InputError, units_to_metres
+    from .sources import open_source
+
+    source = open_source(path, topic, "DEPTH")
+    info = source.info()
+    if camera is None:
+        i = info.intrinsics
+        if i is None:
+            raise InputError(f"{path}: no camera information for {info.topic} (no sensor_msgs/CameraInfo); "
+                             f"expected --camera CAMERA.yaml")
+        camera = Camera(info.width, info.height, i["fx"], i["fy"], i["cx"], i["cy"],
+                        distortion=tuple(info.distortion) if info.distortion else None)
+    frames, names = [], []
+    for frame in source.frames():
+        if frame.depth is None:  # a damaged message: the next one
+            continue
+        d = frame.depth
+        frames.append(units_to_metres(d, info.depth_scale or 0.001) if np.issubdtype(d.dtype, np.integer)
+                      else np.where(np.isfinite(d), d, 0.0).astype(np.float32))
+        names.append(f"{path} (frame {frame.index:06d})")
+        if len(frames) == count:
+            break
+    if not frames:
+        raise InputError(f"{path}: no readable depth frame")
+    return camera, frames, names, info.gravity_up
 
 
 def frames_named(files, names: list[str] | None = None) -> str:

@@ -466,6 +466,36 @@ def test_a_wall_faced_is_not_taken_for_a_floor_seen_from_above(tmp_path, capsys)
                                Fit(90.0, 1.5), "f")  # up given: the user says it is a floor
 
 
+def test_fit_ground_on_a_recording_takes_its_camera_frames_and_up(tmp_path, capsys):
+    """`dpom-warp fit-ground RECORDING`: the recording's camera and first --frames readable
+    frames (the pose is fit_ground_frames' on them, in metres), its accelerometer's up where
+    it has one (the Azure Kinect desk: no floor near it, a one-line error naming the frame);
+    frame files still need --camera."""
+    from dpom_warp.geometry import Camera
+    from dpom_warp.ground import fit_ground_frames
+    from dpom_warp.io import units_to_metres
+    from dpom_warp.sources import open_source
+
+    out = tmp_path / "pose.yaml"
+    assert main(["fit-ground", str(RS_BAG), "--output", str(out)]) == 0
+    assert "fit-ground on 2 frame(s)" in out.read_text()
+    pose = yaml.safe_load(out.read_text())
+    src = open_source(RS_BAG)
+    info, i = src.info(), src.info().intrinsics
+    cam = Camera(info.width, info.height, i["fx"], i["fy"], i["cx"], i["cy"])
+    want = fit_ground_frames([units_to_metres(fr.depth, info.depth_scale) for fr in src.frames()], cam)
+    assert pose == want.report()
+    assert main(["fit-ground", str(RS_BAG), "--frames", "1", "--output", str(out)]) == 0
+    assert "fit-ground on 1 frame(s)" in out.read_text()
+    capsys.readouterr()
+    assert main(["fit-ground", str(AZURE)]) == 2
+    err = capsys.readouterr().err
+    assert "up from the recording's accelerometer: [0.0218, -0.9821, 0.1872]" in err
+    assert f"dpom-warp: error: {AZURE} (frame 000000): no floor plane found" in err
+    assert main(["fit-ground", str(REAL / "five_people" / "depth_mm.png")]) == 2
+    assert "--camera: expected a camera YAML" in capsys.readouterr().err
+
+
 def test_a_recording_with_no_floor_in_view_is_named_in_the_error(tmp_path, capsys):
     """The Azure Kinect recording looks at a desk: extrinsics auto finds no floor near its
     IMU's up, and the one-line error names the recording and its frame (not the cache's file)
