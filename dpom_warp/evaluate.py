@@ -410,6 +410,8 @@ def evaluate_runs(sources: list[str | Path], ground_truth: str | Path | None = N
                                      f"expected --ground-truth GT.json")
             frames = list(dets.frames)
         else:
+            if not src.exists():
+                raise InputError(f"{src}: no such run folder or detections CSV")
             dets, frames = read_detections_csv(src), None
             if ground_truth is None:
                 raise InputError(f"{src}: expected --ground-truth GT.json for a CSV")

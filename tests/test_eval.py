@@ -137,6 +137,8 @@ def test_eval_errors(tmp_path, capsys):
     p.write_text("frame,x,y,rho\n")
     assert main(["eval", str(p)]) == 2
     assert "expected --ground-truth GT.json for a CSV" in capsys.readouterr().err
+    assert main(["eval", str(tmp_path / "gone")]) == 2
+    assert f"{tmp_path / 'gone'}: no such run folder or detections CSV" in capsys.readouterr().err
 
 
 def test_cube_overlap_and_3d_distance_hand_computed():
