@@ -429,6 +429,18 @@ def test_azure_kinect_accelerometer_gives_up(tmp_path):
     assert tuple(load_config(path).ground.up) == (0, -1, 0)
 
 
+def run_auto_pose_fails(tmp_path, capsys, recording) -> tuple:
+    """`dpom-warp run` on `recording` with extrinsics auto, which must exit 2: (the config's
+    path, the one error line)."""
+    cfg = {"device": "cpu", "input": {"frames": str(recording)}, "camera": {"extrinsics": "auto"},
+           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]}, "output": {"dir": str(tmp_path / "out")}}
+    path = tmp_path / "auto.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress"]) == 2
+    (line,) = [x for x in capsys.readouterr().err.splitlines() if x.startswith("dpom-warp: error:")]
+    return path, line
+
+
 def test_a_wall_faced_is_not_taken_for_a_floor_seen_from_above(tmp_path, capsys):
     """The RealSense recording faces an office wall 1.83 m away (no IMU): as a floor it would
     put the camera looking straight down from below the people it is to find, so extrinsics
@@ -442,12 +454,7 @@ def test_a_wall_faced_is_not_taken_for_a_floor_seen_from_above(tmp_path, capsys)
     from dpom_warp.io import InputError
     from dpom_warp.pipeline import refuse_low_view_from_above
 
-    cfg = {"device": "cpu", "input": {"frames": str(RS_BAG)}, "camera": {"extrinsics": "auto"},
-           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]}, "output": {"dir": str(tmp_path / "out")}}
-    path = tmp_path / "rs.yaml"
-    path.write_text(yaml.safe_dump(cfg))
-    assert main(["run", str(path), "--no-progress"]) == 2
-    (line,) = [x for x in capsys.readouterr().err.splitlines() if x.startswith("dpom-warp: error:")]
+    path, line = run_auto_pose_fails(tmp_path, capsys, RS_BAG)
     assert line.startswith(f"dpom-warp: error: {RS_BAG} (frame 000000) and 1 more frames: ")
     assert "a plane 1.83 m away facing the camera" in line and "more likely a wall" in line
     assert "camera.ground.up" in line and not (tmp_path / "out").exists()
@@ -500,12 +507,7 @@ def test_a_recording_with_no_floor_in_view_is_named_in_the_error(tmp_path, capsy
     """The Azure Kinect recording looks at a desk: extrinsics auto finds no floor near its
     IMU's up, and the one-line error names the recording and its frame (not the cache's file)
     and the up it looked along; nothing is written."""
-    cfg = {"device": "cpu", "input": {"frames": str(AZURE)}, "camera": {"extrinsics": "auto"},
-           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]}, "output": {"dir": str(tmp_path / "out")}}
-    path = tmp_path / "az.yaml"
-    path.write_text(yaml.safe_dump(cfg))
-    assert main(["run", str(path), "--no-progress"]) == 2
-    (line,) = [x for x in capsys.readouterr().err.splitlines() if x.startswith("dpom-warp: error:")]
+    _, line = run_auto_pose_fails(tmp_path, capsys, AZURE)
     assert line.startswith(f"dpom-warp: error: {AZURE} (frame 000000): no floor plane found")
     assert "of up [0.022, -0.982, 0.187]" in line and ".cache" not in line
     assert not (tmp_path / "out").exists()
