@@ -253,6 +253,12 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
 
     t = time.perf_counter()
     geometry = build_geometry(camera, cfg.grid, cfg.obj)  # full resolution: boxes, pictures
+    if not np.any(geometry.rect_area > 0):  # a grid beside the view: every map would be empty
+        c = camera.centre
+        raise ConfigError(
+            f"grid: none of its {len(geometry.rect)} locations is in the camera's view (the camera "
+            f"{'fitted ' if ground else ''}at x {c[0]:.2f} m, y {c[1]:.2f} m, {c[2]:.2f} m up); expected "
+            f"grid.x and grid.y{' and grid.z' if cfg.grid.mode == 'voxel' else ''} over what the camera sees")
     if parallel and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers or --ray with it")

@@ -114,6 +114,8 @@ CONFIG_CASES = [
     ({"engine__memory_gb": 0.001}, "engine.memory_gb: the engine needs at least"),
     ({"input__frames": "/nonexistent/*.png"}, "input.frames: no files match '/nonexistent/*.png'"),
     ({"evaluation__ground_truth": "/nonexistent/gt.json"}, "/nonexistent/gt.json: no such ground-truth file"),
+    ({"grid__x": [40.0, 42.0, 0.1]}, "grid: none of its 560 locations is in the camera's view (the camera at "
+                                     "x 0.00 m, y 0.00 m, 2.20 m up); expected grid.x"),
 ]
 
 
