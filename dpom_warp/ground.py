@@ -364,18 +364,21 @@ def fit_ground_files(files, camera: Camera, depth_scale: float,
     from .io import read_depth
 
     depths = [read_depth(f, depth_scale, (camera.height, camera.width)) for f in files]
-    return fit_ground_named(depths, camera, options, frames_named(files, names))
+    return fit_ground_named(depths, camera, options, frames_named(files, names), depth_scale)
 
 
-def fit_ground_named(frames_m, camera: Camera, options: GroundOptions, named: str) -> GroundFit:
+def fit_ground_named(frames_m, camera: Camera, options: GroundOptions, named: str,
+                     depth_scale: float | None = None) -> GroundFit:
     """fit_ground_frames, its GroundFitError an InputError that starts with `named` (the
-    frames, as frames_named says them)."""
-    from .io import InputError
+    frames, as frames_named says them) and, where the first frame's readings are no depth
+    camera's, ends with io.depth_scale_hint."""
+    from .io import InputError, depth_scale_hint
 
     try:
         return fit_ground_frames(frames_m, camera, options)
     except GroundFitError as e:
-        raise InputError(f"{named}: {e}") from None
+        hint = depth_scale_hint(frames_m[0], depth_scale) if depth_scale and len(frames_m) else None
+        raise InputError(f"{named}: {e}" + (f" ({hint})" if hint else "")) from None
 
 
 def recording_frames(path: str, topic: str | None, count: int, camera: Camera | None = None):

@@ -96,6 +96,24 @@ def units_to_metres(raw: np.ndarray, depth_scale: float) -> np.ndarray:
     return (np.asarray(raw).astype(np.float64) * depth_scale).astype(np.float32)
 
 
+PLAUSIBLE_MEDIAN_M = (0.15, 30.0)  # a depth camera's readings' median lies in here, metres
+
+
+def depth_scale_hint(depth_m: np.ndarray, depth_scale: float) -> str | None:
+    """A word about input.depth_scale when a frame's readings (metres; 0, NaN: none) have a
+    median no depth camera gives (PLAUSIBLE_MEDIAN_M), else None: a scale off by 1000 leaves
+    every reading beyond the grid, or in front of the camera's lens, and nothing is found."""
+    d = np.asarray(depth_m)
+    valid = d[np.isfinite(d) & (d > 0)]
+    if not valid.size:
+        return None
+    median = float(np.median(valid))
+    if PLAUSIBLE_MEDIAN_M[0] <= median <= PLAUSIBLE_MEDIAN_M[1]:
+        return None
+    return (f"its readings' median is {median:.4g} m, at input.depth_scale {depth_scale:g} m per unit: "
+            f"expected {PLAUSIBLE_MEDIAN_M[0]:g} to {PLAUSIBLE_MEDIAN_M[1]:g} m; is the scale right?")
+
+
 def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | None = None,
                data: bytes | None = None) -> np.ndarray:
     """Read a depth frame (16-bit PNG in depth units, or .npy; a file named without a suffix is

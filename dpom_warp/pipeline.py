@@ -19,7 +19,7 @@ from .engine import Engine, MemoryBudgetError, resolve_device
 from .evaluate import load_ground_truth, score_frames
 from .geometry import build_geometry
 from .ground import fit_ground_files, frames_named
-from .io import TEMP_MARK, InputError, write_bytes_atomic, write_json_atomic, write_text_atomic
+from .io import TEMP_MARK, InputError, depth_scale_hint, write_bytes_atomic, write_json_atomic, write_text_atomic
 from .resolution import Resolution
 from .sources.run import expand, render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
 from .worker import (FrameItem, FrameOutput, FrameWorker, WorkerSpec, make_engine,
@@ -224,6 +224,20 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
                    timestamps=timestamps)
 
 
+def warn_depth_scale(cfg: RunConfig, path, depth: np.ndarray | None, log=print) -> None:
+    """A warning (`log`) when the first frame's readings are no depth camera's at the config's
+    input.depth_scale (io.depth_scale_hint); `depth`: the frame at `path`, read if None."""
+    if path is None:
+        return
+    try:
+        depth = read_frame(cfg, path) if depth is None else depth
+    except InputError:  # a bad frame is reported where frames are read
+        return
+    hint = depth_scale_hint(depth, cfg.inputs.depth_scale)
+    if hint:
+        log(f"warning: {path}: {hint}")
+
+
 def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=print,
            parallel: bool = False, keep_engine: bool = False) -> Setup:
     """The pose (fitted with extrinsics: auto), the background (frames, auto from `frames`,
@@ -234,6 +248,8 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
     bg_files = (expand(cfg.inputs.background, "input.background", cfg.inputs.topic, log)
                 if cfg.inputs.background and not auto_bg else [])
     bg_frames = [read_frame(cfg, f) for f in bg_files]  # a bad one is fatal
+    warn_depth_scale(cfg, bg_files[0] if bg_files else frames[0] if frames else None,
+                     bg_frames[0] if bg_frames else None, log)
     try:
         dev = resolve_device(device or cfg.device)
     except ValueError as e:

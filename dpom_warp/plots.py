@@ -55,7 +55,10 @@ def pr_figure(results: list[dict], path, key: str, title: str):
         ax.set_xlim(0, 1.02)
         ax.set_ylim(0, 1.02)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="lower left")
+        if ax.get_lines():  # (a run with no detection has no curve to name)
+            ax.legend(fontsize=8, loc="lower left")
+        else:
+            ax.text(0.5, 0.5, "no detections", ha="center", va="center", transform=ax.transAxes)
     axes[0].set_ylabel("precision")
     _save(fig, path)
 

@@ -70,3 +70,35 @@ def test_outputs_are_ordinary_readable_files(tmp_path):
     write_json_atomic(tmp_path / "s.json", {"a": 1})
     assert (tmp_path / "s.json").stat().st_mode & 0o044 == 0o044  # group and others can read
     assert [p.name for p in tmp_path.iterdir()] == ["s.json"]
+
+
+def test_a_depth_scale_off_by_a_thousand_is_named(tmp_path, capsys):
+    """The real frame at 1 m per unit (its readings are millimetres): the median reading is no
+    depth camera's, so the floor fit's error says so, and a run with its pose given warns at
+    once (it would find nothing: every reading kilometres away); at 0.001 nothing is said."""
+    import yaml
+
+    from dpom_warp.cli import main
+    from dpom_warp.io import depth_scale_hint
+
+    raw = np.asarray(Image.open(paths.REAL / "five_people" / "depth_mm.png"))
+    assert depth_scale_hint(raw * 0.001, 0.001) is None
+    hint = depth_scale_hint(raw * 1.0, 1.0)
+    assert hint.startswith("its readings' median is 2570 m, at input.depth_scale 1 m per unit")
+    assert depth_scale_hint(np.zeros((4, 4)), 1.0) is None  # no reading: nothing to judge
+    config = paths.CONFIGS / "real_five_people.yaml"
+    assert main(["run", str(config), "--set", "input.depth_scale=1.0", "--output", str(tmp_path / "a"),
+                 "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "too few depth readings for a floor" in err and "is the scale right?" in err
+    cfg = yaml.safe_load(config.read_text())
+    cfg["input"]["frames"] = str(paths.REAL / "five_people" / "depth_mm.png")
+    cfg["camera"]["extrinsics"] = {"height": 1.3, "pitch_deg": 5.0}
+    cfg["output"] = {"dir": str(tmp_path / "b"), "images": False}
+    cfg["device"] = "cpu"
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--set", "input.depth_scale=1.0", "--no-progress"]) == 0
+    assert f"warning: {cfg['input']['frames']}: its readings' median is 2570 m" in capsys.readouterr().out
+    assert main(["run", str(path), "--no-progress", "--overwrite"]) == 0
+    assert "is the scale right" not in capsys.readouterr().out
