@@ -68,7 +68,7 @@ def _run(args) -> int:
     for source, cfg, out in zip(args.config, cfgs, outputs):
         if many:
             print(f"== {source}")
-        plans.append(plan_run(cfg, out, "cpu", strict=args.strict, parallel=True))
+        plans.append(plan_run(cfg, out, "cpu", strict=args.strict, parallel=True, max_frames=args.max_frames))
     devices = [args.device or cfg.device for cfg in cfgs]
     summaries = run_on_ray(plans, [str(Path(c)) for c in args.config], devices, args.ray or None,
                            args.workers, args.strict, args.overwrite, args.resume,
@@ -362,7 +362,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--view", action="store_true",
                    help="show the run in a Rerun viewer, spawned (the [view] extra; output.rerun writes a .rrd)")
     p.add_argument("--max-frames", type=int, metavar="N",
-                   help="a live camera (input.frames: realsense): stop after N frames (default: at Ctrl-C)")
+                   help="the first N frames of input.frames (a recording's by its stream; default: all); a "
+                        "live camera (input.frames: realsense): stop after N frames (default: at Ctrl-C)")
     g = command("fit-ground", "find the floor and the camera pose from depth frames",
                 "Fit the floor plane in depth frames of one camera and print (or write) the pose to\n"
                 "paste under a config's camera.extrinsics.")

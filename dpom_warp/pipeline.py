@@ -161,7 +161,8 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         resume: bool = False, workers: int | None = None, max_frames: int | None = None) -> dict:
     """Run DPOM over the configured frames; returns the summary also written to summary.json.
     A live camera (`input.frames: realsense[:SERIAL]`) runs until Ctrl-C or `max_frames`
-    (live.run_live; `workers` None: live.default_workers).
+    (live.run_live; `workers` None: live.default_workers); other frames are the first
+    `max_frames` of input.frames (all by default).
 
     A frame whose file is bad, or whose lists would exceed the memory budget, is reported
     and skipped (listed in summary.json), unless `strict`. Each frame's outputs (map,
@@ -177,7 +178,8 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
 
         return run_live(cfg, output_dir, device, log, max_frames, overwrite, workers=workers)
     workers = workers or 1
-    plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1, keep_engine=workers > 1)
+    plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1, keep_engine=workers > 1,
+                    max_frames=max_frames)
     open_output(plan, overwrite, resume, log)
     if workers > 1 and len(plan.todo) > 1:
         outcomes = pool_outcomes(plan.spec, plan.chunks(), workers, plan.engine)
@@ -203,14 +205,16 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
 
 
 def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None,
-             log=print, strict: bool = False, parallel: bool = False, keep_engine: bool = False) -> RunPlan:
+             log=print, strict: bool = False, parallel: bool = False, keep_engine: bool = False,
+             max_frames: int | None = None) -> RunPlan:
     """Check the frames, fit the pose, set up the background and the engine; nothing is
     written to the output yet. `parallel`: other processes will infer the frames, so the
     engine here compiles the kernels (into the cache they are given) and is dropped unless
-    `keep_engine` (this process infers frames beside them)."""
+    `keep_engine` (this process infers frames beside them); `max_frames`: the first that many
+    frames of input.frames."""
     t_start = time.perf_counter()
     out = Path(output_dir or cfg.output.dir)
-    source = run_frames(cfg, strict, log)  # every frame read and checked once
+    source = run_frames(cfg, strict, log, max_frames)  # every frame read and checked once
     frames, skipped, timestamps = source.frames, source.skipped, source.timestamps
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
     if truth is not None:

@@ -71,6 +71,19 @@ def test_floor_only_background_and_set_override(tmp_path):
     assert summary["scores"]["tp"] > 0
 
 
+def test_max_frames_takes_the_first_frames_of_any_source(tmp_path, capsys):
+    """--max-frames N runs the first N frames of a glob (a quick look at a long recording),
+    said on the console; the outputs hold those frames alone."""
+    path = small_config(tmp_path, frames=4)
+    assert main(["run", str(path), "--no-progress", "--max-frames", "2"]) == 0
+    assert "--max-frames: the first 2 of 4 frames" in capsys.readouterr().out
+    summary = json.load(open(tmp_path / "out" / "summary.json"))
+    assert summary["frames"] == 2 and summary["scores"]["n_gt"] == 6  # 3 people in each of 2 frames
+    with open(tmp_path / "out" / "detections.csv") as f:
+        assert {r["frame"] for r in csv.DictReader(f)} == {"0000.png", "0001.png"}
+    assert sorted(p.name for p in (tmp_path / "out" / "maps").iterdir()) == ["0000.npy", "0001.npy"]
+
+
 @pytest.mark.parametrize("override, message", [
     ("grid.x=[1, 0, 0.1]", "grid.x: expected min < max"),
     ("grid.y=[0, 5, 0]", "grid.y: expected a step > 0"),

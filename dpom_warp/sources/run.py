@@ -29,13 +29,17 @@ class RunFrames:
     meta: dict | None = None
 
 
-def run_frames(cfg: RunConfig, strict: bool = False, log=print) -> RunFrames:
+def run_frames(cfg: RunConfig, strict: bool = False, log=print, max_frames: int | None = None) -> RunFrames:
     """Render a synthetic scene if the config has one, then find, read and check input.frames
-    (with `strict`, the first bad frame is fatal)."""
+    (with `strict`, the first bad frame is fatal; `max_frames`: the first that many of them, in
+    order, a recording's by its stream)."""
     render_synthetic(cfg, log)
     if cfg.inputs.frames is None:
         raise ConfigError("input.frames: required key is missing (the frames to run on)")
     files, meta = source_frames(cfg.inputs.frames, "input.frames", cfg.inputs.topic, log)
+    if max_frames is not None and len(files) > max_frames:
+        log(f"--max-frames: the first {max_frames} of {len(files)} frames")
+        files = files[:max_frames]
     unread, timestamps = [], {}
     if meta is not None:
         for note in recording_notes(cfg, meta):
