@@ -231,13 +231,13 @@ class BackgroundAutoSection(Node):
 class InputSection(Node):
     """The depth frames and the background."""
 
-    frames: FilePath | None = Field(None, description="glob of depth frames (16-bit PNG or .npy, in depth "
-                                                      "units), processed in sorted order, or a recording "
-                                                      "(.bag, .db3, .mcap, a ROS 2 bag folder, .mkv); "
-                                                      "required by dpom-warp run")
+    frames: FilePath | None = Field(None, description="glob (or folder) of depth frames (16-bit PNG or .npy, "
+                                                      "in depth units), processed in sorted order, or a "
+                                                      "recording (.bag, .db3, .mcap, a ROS 2 bag folder, "
+                                                      ".mkv); required by dpom-warp run")
     background: Union[Literal["auto"], FilePath, None] = Field(
-        None, description="glob of background frames (no people); auto: estimated from the run's own "
-                          "frames; null: the floor-only background")
+        None, description="glob (or folder) of background frames (no people); auto: estimated from the "
+                          "run's own frames; null: the floor-only background")
     depth_scale: Num = Field(0.001, gt=0, description="metres per unit of the files' values; 0 = no "
                                                       "reading (default: the recording's, else 0.001)")
     topic: Str | None = Field(None, description="a recording's depth stream (default: its only one)")

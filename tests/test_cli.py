@@ -84,6 +84,26 @@ def test_max_frames_takes_the_first_frames_of_any_source(tmp_path, capsys):
     assert sorted(p.name for p in (tmp_path / "out" / "maps").iterdir()) == ["0000.npy", "0001.npy"]
 
 
+def test_a_folder_of_frames_is_its_png_and_npy_files(tmp_path, capsys):
+    """input.frames may name a folder (a user points at where the frames are): its .png and
+    .npy files in sorted order, the glob's run; a folder with none is a one-line error."""
+    from dpom_warp.sources.files import FileFrames
+
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    (tmp_path / "scene" / "frames" / "notes.txt").write_text("not a frame")
+    assert main(["run", str(path), "--no-progress", "--set", f"input.frames={tmp_path / 'scene' / 'frames'}",
+                 "--output", str(tmp_path / "folder")]) == 0
+    assert (tmp_path / "folder" / "detections.csv").read_text() == (tmp_path / "out" / "detections.csv").read_text()
+    assert [f.name for f in FileFrames(str(tmp_path / "scene" / "frames")).files] == ["0000.png", "0001.png", "0002.png"]
+    (tmp_path / "empty").mkdir()
+    capsys.readouterr()
+    assert main(["run", str(path), "--no-progress", "--set", f"input.frames={tmp_path / 'empty'}",
+                 "--output", str(tmp_path / "none")]) == 2
+    assert "a folder with no frames in it (expected 16-bit PNG or .npy" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()
+
+
 @pytest.mark.parametrize("override, message", [
     ("grid.x=[1, 0, 0.1]", "grid.x: expected min < max"),
     ("grid.y=[0, 5, 0]", "grid.y: expected a step > 0"),

@@ -1,4 +1,4 @@
-"""A glob of depth frame files (16-bit PNG or .npy, in depth units), in sorted order."""
+"""A glob (or a folder) of depth frame files (16-bit PNG or .npy, in depth units), in sorted order."""
 
 from __future__ import annotations
 
@@ -17,8 +17,17 @@ FRAME_SUFFIXES = (".png", ".npy")
 
 
 class FileFrames(Source):
+    """The files a glob matches, or a folder's .png and .npy files, in sorted order."""
+
     def __init__(self, pattern: str, key: str = "input.frames"):
         self.pattern, self.key = pattern, key
+        folder = Path(os.path.expanduser(pattern))
+        if folder.is_dir():  # a folder of frames: its frame files
+            self.files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in FRAME_SUFFIXES)
+            if not self.files:
+                raise InputError(f"{key}: {pattern}: a folder with no frames in it (expected 16-bit PNG or .npy "
+                                 f"files; looked in {folder.resolve()})")
+            return
         self.files = sorted(Path(p) for p in glob.glob(os.path.expanduser(pattern)) if Path(p).is_file())
         if not self.files:
             where = os.path.abspath(os.path.expanduser(pattern))
