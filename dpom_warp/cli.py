@@ -154,6 +154,8 @@ def _up_arg(text: str):
 
 
 def _fit_ground(args) -> int:
+    import os
+
     import yaml
 
     from .config import load_camera_file
@@ -172,12 +174,16 @@ def _fit_ground(args) -> int:
         fit = fit_ground_named(frames, camera, options, frames_named(frames, names))
         count = len(frames)
     else:
+        from .sources.files import FileFrames
+
         if camera is None:
             raise InputError("--camera: expected a camera YAML (width, height, intrinsics, depth_scale) for "
                              "depth image files; found none (a recording, given alone, carries its own)")
+        files = [f for d in args.depth  # a folder or a quoted glob: its frame files, as input.frames takes them
+                 for f in (FileFrames(d, "DEPTH").files if os.path.isdir(d) or any(c in d for c in "*?[") else [d])]
         options = GroundOptions(up=up, max_angle_deg=args.max_angle, depth_max=args.depth_max)
-        fit = fit_ground_files(args.depth, camera, scale, options)
-        count = len(args.depth)
+        fit = fit_ground_files(files, camera, scale, options)
+        count = len(files)
     if fit.ambiguity:
         print(f"dpom-warp: warning: {fit.ambiguity}", file=sys.stderr)
     report = fit.report()
@@ -367,8 +373,9 @@ def main(argv: list[str] | None = None) -> int:
     g = command("fit-ground", "find the floor and the camera pose from depth frames",
                 "Fit the floor plane in depth frames of one camera and print (or write) the pose to\n"
                 "paste under a config's camera.extrinsics.")
-    g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy) of the same camera, or one "
-                                            "recording (ROS bag, Azure Kinect .mkv): its first --frames frames")
+    g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy; folders and globs of them) of the "
+                                            "same camera, or one recording (ROS bag, Azure Kinect .mkv): its "
+                                            "first --frames frames")
     g.add_argument("--camera", help="camera YAML: width, height, intrinsics, depth_scale (required for frame "
                                     "files; a recording's own camera otherwise)")
     g.add_argument("--topic", help="a recording's depth topic, where it has several (as input.topic)")

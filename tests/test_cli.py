@@ -104,6 +104,24 @@ def test_a_folder_of_frames_is_its_png_and_npy_files(tmp_path, capsys):
     assert not (tmp_path / "none").exists()
 
 
+def test_fit_ground_takes_a_folder_or_a_quoted_glob(tmp_path, capsys):
+    """`dpom-warp fit-ground FOLDER` (and a glob the shell did not expand) fits on the frame
+    files in it, as input.frames takes them: the rendered scene's pose (2.2 m, pitch 20)."""
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress", "--max-frames", "1"]) == 0  # renders the scene
+    camera = tmp_path / "camera.yaml"
+    camera.write_text(yaml.safe_dump({"width": 128, "height": 106, "depth_scale": 0.001,
+                                      "intrinsics": {"fx": 91.25, "fy": 91.25, "cx": 63.5, "cy": 52.5}}))
+    background = tmp_path / "scene" / "background"
+    for source, count in ((str(background), 4), (f"{background}/000[01].png", 2)):
+        out = tmp_path / "pose.yaml"
+        assert main(["fit-ground", source, "--camera", str(camera), "--output", str(out)]) == 0
+        text = out.read_text()
+        pose = yaml.safe_load(text)
+        assert f"fit-ground on {count} frame(s)" in text
+        assert pose["camera_height"] == pytest.approx(2.2, abs=0.02) and pose["pitch_deg"] == pytest.approx(20, abs=0.5)
+
+
 @pytest.mark.parametrize("override, message", [
     ("grid.x=[1, 0, 0.1]", "grid.x: expected min < max"),
     ("grid.y=[0, 5, 0]", "grid.y: expected a step > 0"),
