@@ -72,6 +72,8 @@ def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> 
     """Make `out` ready: refuse a non-empty folder unless overwriting or resuming a run of
     the same config; remove what an interrupted write left behind."""
     state = {"config": _jsonable(resolved)}
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"output.dir: {out} is a file; expected an empty or new folder")
     if out.exists() and any(out.iterdir()):
         if resume:
             path = out / RUN_STATE
@@ -94,7 +96,11 @@ def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> 
         else:
             raise ConfigError(f"output.dir: {out} is not empty; expected an empty or new folder "
                               f"(use --overwrite to replace its results or --resume to continue)")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:  # a file where a folder above it should be, no permission
+        raise ConfigError(f"output.dir: {out}: cannot make the folder ({e.strerror or e}); expected a "
+                          f"path where a new folder can be made") from None
     remove_temporaries(out)  # of a killed run
     write_json_atomic(out / RUN_STATE, state)
 

@@ -129,6 +129,21 @@ def test_bad_config(tmp_path, capsys, scene, sets, message):
     assert not (tmp_path / "out").exists()
 
 
+def test_an_output_folder_that_cannot_be_one(tmp_path, capsys, scene):
+    """--output naming a file, or a path under one: one line, exit 2, the file untouched (it
+    said 'Not a directory; finished frames are kept, continue with --resume' of a run that
+    had not started)."""
+    path = write_config(tmp_path, scene[1])
+    taken = tmp_path / "taken"
+    taken.write_text("mine")
+    for out, message in ((taken, f"output.dir: {taken} is a file; expected an empty or new folder"),
+                         (taken / "sub", f"output.dir: {taken / 'sub'}: cannot make the folder (Not a directory)")):
+        assert main(["run", str(path), "--no-progress", "--output", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"dpom-warp: error: {message}") and len(err.splitlines()) == 1, err
+    assert taken.read_text() == "mine"
+
+
 def test_yaml_syntax_and_top_level(tmp_path, capsys):
     bad = tmp_path / "bad.yaml"
     bad.write_text("device: cpu\ngrid: [unclosed\n")
