@@ -28,8 +28,8 @@ import numpy as np
 from bench.robustness import VARIANTS, scene_sets
 
 
-def score(res, engine, cfg, geometry, truth) -> tuple[int, int]:
-    """(false detections, misses) at 0.5 m of one frame's result from `engine`, detected as a
+def score(res, cfg, geometry, truth) -> tuple[int, int]:
+    """(false detections, misses) at 0.5 m of one frame's engine result, detected as a
     run detects it (worker.detections_of: the joint test on the lists the engine hands over)."""
     from dpom_warp.evaluate import match
     from dpom_warp.worker import detections_of
@@ -85,7 +85,7 @@ def main():
                     res = warm.infer(warm.resolution.frames(depth), start=first.rho)
                     iterations = share * first.iterations + res.iterations
                 total[3].append(time.perf_counter() - t)
-                false, missed = score(res, fine if key == "plain" else warm, cfg, geometry, truth[f.name])
+                false, missed = score(res, cfg, geometry, truth[f.name])
                 total[0] += false
                 total[1] += missed
                 total[2] += iterations

@@ -954,6 +954,7 @@ class Engine:
         loc, delta = self.live_loc[:entries].numpy(), self.live_delta[:entries].numpy()
         dbg = self.delta_bg.numpy()[active]
         p = self.params
+        behind = np.zeros((self.batch, locations))
         if p.behind_cost > 0:  # counted for every candidate (n_behind leaves out locations in no list)
             self._launch(K.behind_count, len(self.candidate),
                          [self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu, self.behind_var,
@@ -961,12 +962,11 @@ class Engine:
             behind = p.behind_cost * self.candidate_behind.numpy().reshape(self.batch, locations).astype(np.float64)
         at = np.repeat(first, count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
         pixel, loc, delta = np.repeat(active, count), loc[at], delta[at]
+        frame_of_entry, frame_of_pixel = pixel // self.n_pixels, active // self.n_pixels
         out = []
         for f in range(n):
-            cells = np.flatnonzero(marked[f])
-            mine = (pixel >= f * self.n_pixels) & (pixel < (f + 1) * self.n_pixels)
+            cells, mine = np.flatnonzero(marked[f]), frame_of_entry == f
             out.append(JointLists.of_entries(cells, pixel[mine], loc[mine] - f * locations, delta[mine],
-                                             dbg[(active >= f * self.n_pixels) & (active < (f + 1) * self.n_pixels)],
-                                             behind[f, cells] if p.behind_cost > 0 else np.zeros(len(cells)),
+                                             dbg[frame_of_pixel == f], behind[f, cells],
                                              self.geometry.locations[cells], p))
         return out

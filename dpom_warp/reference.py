@@ -354,11 +354,11 @@ class JointLists:
         """(len(cells),) float64: each cell's log posterior odds with the other `cells` present
         and every other location empty (joint_log_odds); every cell must be a candidate."""
         cells = np.asarray(cells, np.int64)
+        outside = cells[~np.isin(cells, self.cells)]
+        if len(outside):
+            raise ValueError(f"joint test: cells {sorted(set(outside.tolist()))} are not among the frame's "
+                             f"candidates (rho* at or above the detection threshold)")
         at = np.searchsorted(self.cells, cells)
-        if len(cells) and (np.any(at >= len(self.cells)) or np.any(self.cells[np.minimum(at, len(self.cells) - 1)]
-                                                                    != cells)):
-            raise ValueError(f"joint test: cells {sorted(set(cells.tolist()) - set(self.cells.tolist()))} "
-                             f"are not among the frame's candidates (rho* at or above the detection threshold)")
         present = np.zeros(len(self.cells), bool)
         present[at] = True
         r = np.where(self.valid, present[self.L], False).astype(np.float64)
