@@ -18,6 +18,7 @@ Engine (`dpom_warp.engine`) stays the low-level layer.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
@@ -26,7 +27,7 @@ import numpy as np
 
 from .config import ConfigError, RunConfig, apply_overrides, parse_config, read_config
 from .detect import Detected
-from .io import InputError, units_to_metres
+from .io import PLAUSIBLE_MEDIAN_M, InputError, depth_scale_hint, units_to_metres
 
 
 @dataclass
@@ -69,6 +70,7 @@ class Detector:
         self.setup = setup
         self.worker = FrameWorker(setup.spec, engine=setup.engine)
         self.engine = self.worker.engine
+        self._units_checked = False  # the first frame with readings is checked for its units
 
     @classmethod
     def from_config(cls, config: str | Path | Mapping, overrides: list[str] | Mapping | None = None,
@@ -190,13 +192,35 @@ class Detector:
         if np.issubdtype(depth.dtype, np.integer):
             if depth.min(initial=0) < 0:
                 raise InputError(f"depth (frame {index}): expected depth units >= 0, found {depth.min()}")
-            return units_to_metres(depth, self.config.inputs.depth_scale)  # as read_depth
-        if not np.issubdtype(depth.dtype, np.floating):
+            metres = units_to_metres(depth, self.config.inputs.depth_scale)  # as read_depth
+        elif not np.issubdtype(depth.dtype, np.floating):
             raise InputError(f"depth (frame {index}): expected an integer or float array, found {depth.dtype}")
-        metres = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
-        if metres.min(initial=0) < 0:
-            raise InputError(f"depth (frame {index}): expected metres >= 0, found {metres.min():g}")
+        else:
+            metres = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
+            if metres.min(initial=0) < 0:
+                raise InputError(f"depth (frame {index}): expected metres >= 0, found {metres.min():g}")
+        if not self._units_checked:
+            self._warn_units(metres, depth.dtype, index)
         return metres
+
+    def _warn_units(self, metres: np.ndarray, dtype, index: int) -> None:
+        """A warning, once, when the first frame with readings has a median no depth camera
+        gives (as `dpom-warp run` warns): a frame in millimetres passed as floats, or integer
+        units at the wrong input.depth_scale, leaves every reading out of the grid's reach and
+        nothing is found, without a word of why."""
+        if not np.any(metres > 0):
+            return
+        self._units_checked = True
+        if np.issubdtype(dtype, np.integer):
+            hint = depth_scale_hint(metres, self.config.inputs.depth_scale)
+        else:
+            median = float(np.median(metres[metres > 0]))
+            low, high = PLAUSIBLE_MEDIAN_M
+            hint = None if low <= median <= high else (
+                f"a float array is read as metres, and its readings' median is {median:.4g} m: expected "
+                f"{low:g} to {high:g} m; pass metres, or the sensor's integer units (input.depth_scale)")
+        if hint:
+            warnings.warn(f"depth (frame {index}): {hint}", UserWarning, stacklevel=2)
 
 
 class OnlineTracks:

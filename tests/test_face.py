@@ -106,6 +106,31 @@ def test_api_float_metres_and_batches_match_single_frames(tmp_path):
     np.testing.assert_array_equal(many[1].rho_star, one[1].rho_star)
 
 
+def test_api_warns_once_of_frames_in_the_wrong_units(tmp_path):
+    """A frame in millimetres passed as floats (or integers at a wrong input.depth_scale) puts
+    every reading out of reach: the Detector says so once, as a run does, and not otherwise."""
+    import warnings
+
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    raw = np.asarray(Image.open(sorted((tmp_path / "scene" / "frames").glob("*.png"))[0]))
+    det = Detector.from_config(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the right units: no word
+        det.detect(raw)
+        det.detect(raw * np.float32(0.001))
+    det = Detector.from_config(path)
+    with pytest.warns(UserWarning, match=r"^depth \(frame 0\): a float array is read as metres, and its "
+                      r"readings' median is \d+(\.\d+)? m: expected 0.15 to 30 m"):
+        assert det.detect(raw.astype(np.float32)).detections == []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once
+        det.detect(raw.astype(np.float32))
+    det = Detector.from_config(path, overrides={"input.depth_scale": 1.0})
+    with pytest.warns(UserWarning, match=r"median is \d+(\.\d+)? m, at input.depth_scale 1 m per unit"):
+        det.detect(raw)
+
+
 def test_api_errors(tmp_path):
     path = small_config(tmp_path)
     det = Detector.from_config(path)
