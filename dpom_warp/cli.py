@@ -242,7 +242,8 @@ def _track(args) -> int:
 
     report = retrack(args.run, args.set)
     print(f"{report.get('tracks', 0)} tracks ({report['method']}); tracks.csv and track_table.csv in "
-          f"{args.run}" if report["method"] != "off" else f"tracking off: no tracks in {args.run}")
+          f"{args.run}" if report["method"] != "off" else
+          f"no tracks in {args.run}: {report['why']} (--set tracking.method=ksp|online tracks any run)")
     return 0
 
 

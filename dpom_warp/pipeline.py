@@ -603,7 +603,9 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
             (out / name).unlink(missing_ok=True)
         if cfg.output.rerun or VIEW:  # the pictures are the workers'; the Rerun log is drawn here
             frames_out(cfg, out, done, geometry, maps, truth, None, False, timestamps, camera)
-        return {"method": "off"}
+        why = ("tracking.method: off" if cfg.tracking.method == "off" else
+               f"tracking.method {cfg.tracking.method} tracks 2 frames or more, found {len(done)}")
+        return {"method": "off", "why": why}
     cells = Cells.for_run(geometry, cfg)
     rate = fps or cfg.inputs.fps
     names = [f.name for f in done]

@@ -414,9 +414,13 @@ def test_track_command_retracks_without_inferring(tracked_run, tmp_path, capsys)
     assert (run / "tracks.csv").read_bytes() == (tracked_run[0] / "tracks.csv").read_bytes()
     for p in (tracked_run[0] / "images").iterdir():  # the pictures are drawn again, the same
         assert (run / "images" / p.name).read_bytes() == p.read_bytes()
+    capsys.readouterr()
     assert main(["track", str(run), "--set", "tracking.method=off"]) == 0
     assert not (run / "tracks.csv").exists() and not (run / "track_table.csv").exists()
-    capsys.readouterr()
+    assert capsys.readouterr().out.strip().endswith(  # says why, and how to track anyway
+        "no tracks in " + str(run) + ": tracking.method: off (--set tracking.method=ksp|online tracks any run)")
+    assert json.loads((run / "summary.json").read_text())["tracking"] == {"method": "off",
+                                                                           "why": "tracking.method: off"}
     assert main(["track", str(run), "--set", "model.alpha=1"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("dpom-warp: error: --set model.alpha: expected a tracking.* key") and "\n" not in err
