@@ -490,7 +490,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
                   "frames_without_map": frames_without_map(times, 1.0 / fps)}
         track_table_files(out, tracks, names, fps, times)
     else:
-        report = {"method": "off"}
+        report = {"method": "off", "why": "tracking.method: off"}
     if view is not None:
         view.close()
     summary["tracking"] = report
