@@ -365,15 +365,21 @@ def _inside_image(camera):
 class CameraSection(Node):
     """The depth camera: image size, intrinsics, pose, lens."""
 
-    width: Int = Field(ge=1, description="image width in pixels; frames must match (default: the "
-                                         "recording's)")
-    height: Int = Field(ge=1, description="image height in pixels (default: the recording's)")
-    intrinsics: Intrinsics = Field(description="fx, fy, cx, cy (default: the recording's camera information)")
-    extrinsics: Extrinsics = Field(description="auto (fit the floor), {T_world_from_camera: 4x4} or "
-                                               "{height, pitch_deg, roll_deg, yaw_deg, x, y}")
+    file: FilePath | None = Field(None, description="a camera file (width, height, intrinsics, depth_scale, "
+                                                    "distortion; as fit-ground --camera takes) for the "
+                                                    "keys this section and input.depth_scale leave out; "
+                                                    "`camera: FILE` is short for it")
+    width: Int = Field(ge=1, description="image width in pixels; frames must match (default: "
+                                         "camera.file's, else the recording's)")
+    height: Int = Field(ge=1, description="image height in pixels (default: camera.file's, else the "
+                                          "recording's)")
+    intrinsics: Intrinsics = Field(description="fx, fy, cx, cy (default: camera.file's, else the recording's "
+                                                    "camera information)")
+    extrinsics: Extrinsics = Field("auto", description="auto (fit the floor), {T_world_from_camera: 4x4} "
+                                                       "or {height, pitch_deg, roll_deg, yaw_deg, x, y}")
     distortion: Lens | None = Field(
         None, description="[k1, k2, p1, p2, k3] or [k1, k2, p1, p2, k3, k4, k5, k6] (OpenCV's models); "
-                          "default: the recording's")
+                          "default: camera.file's, else the recording's")
     ground: GroundSection = GroundSection()
 
     @model_validator(mode="after")
@@ -737,6 +743,14 @@ class ConfigFile(Node):
 def json_schema() -> dict:
     """The JSON Schema of a run config (what `dpom-warp schema` writes)."""
     schema = ConfigFile.model_json_schema()
+    # width, height and intrinsics may come from camera.file or a recording, the whole section
+    # from a recording (parse_config says when they come from neither), and `camera: FILE` is
+    # short for {file: FILE}
+    schema["$defs"]["CameraSection"].pop("required", None)
+    schema["required"] = [k for k in schema["required"] if k != "camera"]
+    schema["properties"]["camera"] = {"anyOf": [
+        {"$ref": "#/$defs/CameraSection"},
+        {"type": "string", "description": "a camera file: short for {file: FILE}"}]}
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", **schema}
 
 
@@ -932,10 +946,43 @@ def camera_from_recording(raw: dict) -> dict:
     return out
 
 
+def _camera_shorthand(raw: dict) -> dict:
+    """`camera: FILE` is `camera: {file: FILE}`."""
+    if isinstance(raw, dict) and isinstance(raw.get("camera"), str):
+        return {**raw, "camera": {"file": raw["camera"]}}
+    return raw
+
+
+def camera_from_file(raw: dict) -> dict:
+    """A config with camera.file, with the keys it leaves out (camera.width, height,
+    intrinsics or some of fx, fy, cx, cy, distortion, input.depth_scale) taken from that camera
+    file (the config's own keys win)."""
+    cam = raw.get("camera")
+    if not isinstance(cam, dict) or not isinstance(cam.get("file"), str):
+        return raw
+    path = Path(cam["file"])
+    try:
+        c = CameraFile.model_validate(_read_yaml(path, "camera file (camera.file)"))
+    except ValidationError as e:
+        raise ConfigError(f"camera.file: {path}: {_first_error(e)}") from None
+    out = copy.deepcopy(raw)
+    cam, given = out["camera"], c.model_dump(exclude_none=True)
+    for key in ("width", "height", "intrinsics", "distortion"):
+        if key not in cam and key in given:
+            cam[key] = given[key]
+    if isinstance(cam["intrinsics"], dict):  # camera.intrinsics.fx alone changes fx alone
+        cam["intrinsics"] = {**given["intrinsics"], **cam["intrinsics"]}
+    inp = out.get("input")
+    if isinstance(inp, dict) and "depth_scale" not in inp:
+        inp["depth_scale"] = c.depth_scale
+    return out
+
+
 def parse_config(raw: dict[str, Any]) -> RunConfig:
-    """Validate a config mapping (as loaded from YAML) into a RunConfig (a recording's camera
-    fills in the camera keys the config leaves out)."""
-    raw = camera_from_recording(raw) if isinstance(raw, dict) else raw
+    """Validate a config mapping (as loaded from YAML) into a RunConfig (camera.file, then a
+    recording's camera, fill in the camera keys the config leaves out)."""
+    if isinstance(raw, dict):
+        raw = camera_from_recording(camera_from_file(_camera_shorthand(raw)))
     try:
         c = ConfigFile.model_validate(raw)
     except ValidationError as e:
@@ -1046,7 +1093,7 @@ def resolve_paths(raw: dict, base: str | Path) -> dict:
     camera (`realsense[:SERIAL]`) are not paths."""
     from .sources.realsense import is_live
 
-    out = copy.deepcopy(raw)
+    out = copy.deepcopy(_camera_shorthand(raw))
     for key in path_keys():
         *parents, last = key.split(".")
         node = out

@@ -3,6 +3,7 @@ errors users hit first, --version, help, unconverged frames, pictures and eval -
 
 import csv
 import json
+import re
 
 import jsonschema
 import numpy as np
@@ -449,3 +450,43 @@ def test_eq13_cut_off_defaults_to_each_paths_own():
     for path in ("false", "true"):
         given = load_config(people, [f"engine.exact={path}", "model.beta=-4"])
         assert given.model.beta == -4.0 and given.resolved["model"]["beta"] == -4.0
+
+
+def test_camera_file_and_auto_pose_make_a_four_line_config(tmp_path, capsys):
+    """The README's "your own camera" config on the real Kinect frame: `camera: FILE` fills
+    the camera and input.depth_scale from a camera file (as fit-ground --camera takes), the
+    pose defaults to auto, and the run gives the detections of the same config written out."""
+    import shutil
+
+    from paths import REAL
+
+    shutil.copytree(REAL / "five_people", tmp_path / "five")
+    short = {"input": {"frames": "five/depth_mm.png"}, "camera": "five/camera.yaml",
+             "grid": {"x": [-1.5, 1.5, 0.1], "y": [1.0, 5.5, 0.1]}, "output": {"dir": "short"}}
+    (tmp_path / "short.yaml").write_text(yaml.safe_dump(short))
+    jsonschema.validate(short, json.loads(SCHEMA.read_text()))  # editors take the short form too
+    camera = yaml.safe_load((REAL / "five_people" / "camera.yaml").read_text())
+    full = {**short, "input": {**short["input"], "depth_scale": camera.pop("depth_scale")},
+            "camera": {**camera, "extrinsics": "auto"}, "output": {"dir": "full"}}
+    (tmp_path / "full.yaml").write_text(yaml.safe_dump(full))
+    assert load_config(tmp_path / "short.yaml").resolved == {**load_config(tmp_path / "full.yaml").resolved,
+                                                            "output": load_config(tmp_path / "short.yaml").resolved["output"]}
+    for name in ("short", "full"):
+        assert main(["run", str(tmp_path / f"{name}.yaml"), "--no-progress", "--set", "output.images=false"]) == 0
+    rows = csv_rows(tmp_path / "short" / "detections.csv")
+    assert rows == csv_rows(tmp_path / "full" / "detections.csv")
+    assert sum(0.8 <= float(r[2]) <= 4.5 for r in rows) == 5  # the five people of the corridor
+
+    # the section's own keys and input.depth_scale win over the file's
+    cfg = load_config(tmp_path / "short.yaml", ["camera.intrinsics.fx=500", "input.depth_scale=0.002"])
+    assert cfg.camera.fx == 500 and cfg.camera.fy == 525 and cfg.inputs.depth_scale == 0.002
+    # a camera file that is not there, or not a camera file: one line naming it
+    capsys.readouterr()
+    for value, message in (("five/none.yaml", r"five/none.yaml: no such camera file \(camera.file\)$"),
+                           ("short.yaml", r"camera.file: .*short.yaml: \w+: unknown key \(expected one of width,")):
+        short.update(camera={"file": value}, output={"dir": "bad_out"})
+        (tmp_path / "bad.yaml").write_text(yaml.safe_dump(short))
+        assert main(["run", str(tmp_path / "bad.yaml")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and re.search(message, err), err
+        assert not (tmp_path / "bad_out").exists()
