@@ -142,10 +142,13 @@ def read_depth(path: str | Path, depth_scale: float, shape: tuple[int, int] | No
         if raw.ndim != 2 or not np.issubdtype(raw.dtype, np.number):
             raise InputError(f"{path}: expected a 2-D numeric depth array, found shape {raw.shape} "
                              f"dtype {raw.dtype}")
-        if not np.all(np.isfinite(raw)):
-            raise InputError(f"{path}: depth has NaN or infinite values")
+        bad = int(np.count_nonzero(~np.isfinite(raw)))
+        if bad:
+            raise InputError(f"{path}: depth has NaN or infinite values: expected finite depth units "
+                             f"(0 = no reading), found {bad} of {raw.size} pixels not finite")
         if np.any(raw < 0):
-            raise InputError(f"{path}: depth has negative values")
+            raise InputError(f"{path}: depth has negative values: expected depth units >= 0 (0 = no "
+                             f"reading), found a minimum of {raw.min():g}")
     else:
         try:
             with Image.open(source) as im:

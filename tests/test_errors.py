@@ -163,9 +163,11 @@ FRAME_CASES = [
     ("0002.png", png_rgb, "0002.png: expected a single-channel 16-bit depth PNG, found mode RGB"),
     ("0002.png", lambda p: write_depth_png(p, np.ones((50, 60))), "0002.png: expected 128x106 pixels"),
     ("0002.png", lambda p: write_depth_png(p, np.zeros((106, 128))), "0002.png: no depth readings"),
-    ("0002.npy", npy(np.full((106, 128), np.nan)), "0002.npy: depth has NaN or infinite values"),
+    ("0002.npy", npy(np.full((106, 128), np.nan)), "0002.npy: depth has NaN or infinite values: expected finite depth units (0 = no "
+     "reading), found 13568 of 13568 pixels not finite"),
     ("0002.npy", npy(np.full((106, 128), np.inf)), "0002.npy: depth has NaN or infinite values"),
-    ("0002.npy", npy(-np.ones((106, 128))), "0002.npy: depth has negative values"),
+    ("0002.npy", npy(-np.ones((106, 128))), "0002.npy: depth has negative values: expected depth units >= 0 "
+     "(0 = no reading), found a minimum of -1"),
 ]
 
 
