@@ -29,7 +29,8 @@ def resolve_device(name: str = "auto") -> str:
         name = "cuda:0"
     have = [str(d) for d in wp.get_devices()]
     if name not in have:
-        raise ValueError(f"device: expected one of auto, {', '.join(have)}, found {name!r}")
+        why = "" if any(d.startswith("cuda") for d in have) else " (Warp finds no CUDA device here)"
+        raise ValueError(f"device: expected one of auto, {', '.join(have)}, found {name!r}{why}")
     return name
 
 

@@ -161,8 +161,12 @@ def test_bad_config_is_one_line_exit_2(tmp_path, capsys, override, message):
 
 def test_unavailable_device_is_a_config_error(tmp_path, capsys):
     path = small_config(tmp_path)
+    import warp as wp
+
     assert main(["run", str(path), "--no-progress", "--device", "cuda:7"]) == 2
-    assert "device: expected one of auto, cpu" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "device: expected one of auto, cpu" in err and "found 'cuda:7'" in err
+    assert err.rstrip().endswith("(Warp finds no CUDA device here)") == (not wp.get_cuda_devices())
 
 
 def test_missing_frames_names_the_key(tmp_path, capsys):
