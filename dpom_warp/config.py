@@ -410,7 +410,7 @@ class GridSection(Node):
 class ObjectSection(Node):
     """The object's size and shape model, metres."""
 
-    width: Num = Field(0.5, gt=0, description="metres, across the line of sight")
+    width: Num = Field(0.4, gt=0, description="metres, across the line of sight (the solid: its body's diameter)")
     height: Num = Field(1.85, gt=0, description="metres")
     depth: Num | None = Field(None, gt=0, description="default: = width")
     shape: Literal["plane", "solid"] = Field(

@@ -13,7 +13,7 @@ from PIL import Image
 
 from dpom_warp import Detector, __version__
 from dpom_warp.cli import main
-from dpom_warp.config import ConfigError, json_schema, load_config
+from dpom_warp.config import ConfigError, json_schema, load_config, parse_config
 from dpom_warp.io import InputError, read_depth
 
 from test_cli import small_config
@@ -490,3 +490,18 @@ def test_camera_file_and_auto_pose_make_a_four_line_config(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert "\n" not in err and re.search(message, err), err
         assert not (tmp_path / "bad_out").exists()
+
+
+def test_package_defaults_are_the_demos_tuned_values():
+    """A config that gives only frames, camera and grid gets the object, model, detection,
+    engine and tracking settings the demo runs with ("Defaults and why"): the demo's config
+    states nothing the package's defaults do not (object.width was 0.5 by default, 0.4 in
+    the demo, for a user's own minimal config)."""
+    demo = load_config(ROOT / "configs" / "demo_people.yaml").resolved
+    raw = yaml.safe_load((ROOT / "configs" / "demo_people.yaml").read_text())
+    mine = parse_config({"input": {"frames": "frames/*.png", "background": "background/*.png"},
+                         "camera": raw["camera"], "grid": raw["grid"]}).resolved
+    for section in ("object", "model", "detection", "engine", "tracking"):
+        assert mine[section] == demo[section], section
+    assert {k: v for k, v in mine["input"].items() if k not in ("frames", "background", "fps")} == \
+        {k: v for k, v in demo["input"].items() if k not in ("frames", "background", "fps")}
