@@ -636,7 +636,8 @@ class OutputSection(Node):
 
     dir: FilePath = Field("runs/out", description="output folder (--output overrides)")
     images: Bool = Field(True, description="a picture per frame")
-    images_every: Int = Field(1, ge=1, description="live runs: a picture of every Nth frame")
+    images_every: Int = Field(1, ge=1, description="a picture of every Nth frame done (the 1st, the "
+                                                   "N+1th, ...; a long recording's run draws fewer)")
     rerun: FilePath | None = Field(None, description="also write a Rerun recording (.rrd) here: depth, "
                                                      "boxes, map and tracks per frame (the view extra)")
     ply: Bool = Field(False, description="the frame's points and the detected boxes as .ply files")

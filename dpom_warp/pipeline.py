@@ -462,7 +462,7 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     stamps = {f.name: plan.records[f.name].get("timestamp") for f in done}
     summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth, log=lambda *_: None,
                                     fps=fps_of(list(stamps.values())), camera=plan.spec.camera,
-                                    timestamps=stamps)
+                                    timestamps=stamps, redraw=not plan.spec.pictures)
     summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
     write_json_atomic(out / "summary.json", _jsonable(summary))
@@ -493,9 +493,10 @@ def fps_of(timestamps: list) -> float | None:
 
 
 def pictures_deferred(cfg: RunConfig, frames: int) -> bool:
-    """Whether a run's pictures are drawn after tracking (they show the tracks) rather than
-    by whoever infers each frame."""
-    return cfg.output.images and cfg.tracking.resolved_method(frames) != "off"
+    """Whether a run's pictures are drawn after tracking (they show the tracks), or after the
+    frames (a picture of every output.images_every-th frame done, counted in order), rather
+    than by whoever infers each frame."""
+    return cfg.output.images and (cfg.output.images_every > 1 or cfg.tracking.resolved_method(frames) != "off")
 
 
 VIEW: list = []  # --view: a Rerun viewer is spawned for the runs of this process
@@ -536,7 +537,9 @@ def tracked_picture(cfg: RunConfig, geometry, depth, rho_map, dets, name: str, t
 def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, truth, tracks,
                pictures: bool, timestamps: dict | None = None, camera=None) -> None:
     """After the frames: each frame's picture (with `tracks`, their identities and trails)
-    when `pictures`, and its Rerun log with output.rerun or --view (depth, boxes, map, tracks)."""
+    when `pictures` (of every output.images_every-th frame of `done`: the others' pictures,
+    left by an earlier drawing, are removed), and its Rerun log with output.rerun or --view
+    (depth, boxes, map, tracks)."""
     from .detect import detect_map
     from .tracking import per_frame
 
@@ -553,10 +556,15 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
     def one(i):
         """Frame i's detections, depth and (with `pictures`) picture file."""
         f = done[i]
+        due = pictures and i % cfg.output.images_every == 0
+        if pictures and not due:
+            (out / "images" / f"{f.stem}.png").unlink(missing_ok=True)
+        if not due and log is None:
+            return None
         rho_map = maps[i].reshape(cfg.grid.shape)
         dets = detect_map(rho_map, geometry, cfg.detection)
         depth = read_frame(cfg, f)
-        if pictures:
+        if due:
             png = tracked_picture(cfg, geometry, depth, rho_map, dets, f.name, truth.get(f.name) if truth else None,
                                   shown_all[i] if tracks is not None else None)
             write_bytes_atomic(out / "images" / f"{f.stem}.png", png)
@@ -588,12 +596,14 @@ def track_table_files(out: Path, tracks, names: list[str], fps: float, times: li
 
 
 def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None, log=print,
-              fps: float | None = None, camera=None, timestamps: dict | None = None) -> dict:
+              fps: float | None = None, camera=None, timestamps: dict | None = None,
+              redraw: bool = True) -> dict:
     """Tracks of a run whose maps are written (maps/<stem>.npy of the `done` frames, in
     order): tracks.csv and track_table.csv, then, when the run has pictures, every frame's
     picture with the tracks (deferred until now: pictures_deferred). `fps`: the frames' rate
     from their timestamps (default input.fps). Returns the `tracking` block of summary.json.
-    tracking.method off (or a single frame): no track files."""
+    tracking.method off (or a single frame): no track files, and the pictures are drawn here
+    only when `redraw` (False: whoever inferred the frames drew them)."""
     from .tracking import Cells, FrameMaps, run_tracker
 
     method = cfg.tracking.resolved_method(len(done))
@@ -601,8 +611,9 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
     if method == "off":
         for name in TRACK_FILES:
             (out / name).unlink(missing_ok=True)
-        if cfg.output.rerun or VIEW:  # the pictures are the workers'; the Rerun log is drawn here
-            frames_out(cfg, out, done, geometry, maps, truth, None, False, timestamps, camera)
+        pictures = cfg.output.images and redraw  # the Rerun log is always drawn here
+        if cfg.output.rerun or VIEW or pictures:
+            frames_out(cfg, out, done, geometry, maps, truth, None, pictures, timestamps, camera)
         why = ("tracking.method: off" if cfg.tracking.method == "off" else
                f"tracking.method {cfg.tracking.method} tracks 2 frames or more, found {len(done)}")
         return {"method": "off", "why": why}

@@ -182,6 +182,7 @@ class FrameWorker:
         cfg, geometry, f = self.cfg, self.geometry, Path(item.path)
         t1 = time.perf_counter()
         rho_map, dets = self.detections(res)
+        rho_map = rho_map.astype(np.float32)  # the map written, which later pictures are drawn from
         t2 = time.perf_counter()
         files = {}
         if self.pictures:
@@ -205,7 +206,7 @@ class FrameWorker:
                       "infer_s": infer_s, "detect_s": t2 - t1, "render_s": t3 - t2,
                       "worker": self.name, **{f"engine_{k}": v for k, v in res.timings.items()}},
         }
-        return f.name, FrameOutput(f.name, f.stem, rho_map.astype(np.float32), files, record,
+        return f.name, FrameOutput(f.name, f.stem, rho_map, files, record,
                                    list(grown)), None
 
 

@@ -174,3 +174,27 @@ def test_missing_frames_names_the_key(tmp_path, capsys):
     assert main(["run", str(path), "--no-progress", "--set", "synthetic=null",
                  "--set", f"input.frames={tmp_path}/nothing/*.png"]) == 2
     assert "input.frames: no files match" in capsys.readouterr().err
+
+
+def test_images_every_draws_every_nth_frame_with_or_without_tracks(tmp_path):
+    """output.images_every on a recorded run: pictures of the 1st, N+1th, ... frames done,
+    the same pictures as every frame's (with tracks or without); a retrack at another N
+    leaves no stale picture."""
+    path = small_config(tmp_path, frames=5)
+    stems = [f"{i:04d}" for i in range(5)]
+    pictures = {}
+    for method in ("ksp", "off"):
+        for every in (1, 2):
+            out = tmp_path / f"out_{method}_{every}"
+            assert main(["run", str(path), "--no-progress", "--output", str(out), "--set",
+                         f"tracking.method={method}", "--set", f"output.images_every={every}"]) == 0
+            pictures[method, every] = {p.stem: p.read_bytes() for p in (out / "images").iterdir()}
+        assert sorted(pictures[method, 1]) == stems and sorted(pictures[method, 2]) == stems[::2]
+        assert all(pictures[method, 2][s] == pictures[method, 1][s] for s in stems[::2])
+    assert pictures["ksp", 1] != pictures["off", 1]  # with tracks: their identities drawn
+    run = tmp_path / "out_ksp_1"
+    assert main(["track", str(run), "--set", "output.images_every=3"]) == 0
+    assert sorted(p.stem for p in (run / "images").iterdir()) == stems[::3]
+    assert main(["track", str(run), "--set", "tracking.method=off", "--set", "output.images_every=2"]) == 0
+    assert {p.stem: p.read_bytes() for p in (run / "images").iterdir()} == {
+        s: pictures["off", 1][s] for s in stems[::2]}
