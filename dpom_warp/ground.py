@@ -107,13 +107,35 @@ def backproject(depth_m: np.ndarray, camera: Camera, depth_max: float, stride: i
     return pts
 
 
+STEEP_DEG = 10.0  # within this of straight down the world's y turns to the image's up
+
+
+def steep_share(pitch_deg: float) -> float:
+    """How far the world's y follows the image's up rather than the camera's forward: 0 up to
+    STEEP_DEG short of straight down, 1 straight down, back to 0 STEEP_DEG past it."""
+    return float(np.clip(1.0 - abs(pitch_deg - 90.0) / STEEP_DEG, 0.0, 1.0))
+
+
 def pose_from_plane(normal: np.ndarray, offset: float) -> np.ndarray:
-    """T_world_from_camera for the floor normal . X + offset = 0 (camera frame, offset > 0)."""
+    """T_world_from_camera for the floor normal . X + offset = 0 (camera frame, offset > 0).
+    The world's y is the camera's forward direction on the floor, as pose_from_angles places
+    it; near straight down, where that direction is lost in the fit's noise (a camera at
+    pitch 89.99 had its world turned 19 degrees by it), it turns smoothly to the image's up
+    on the floor (pose_from_angles(h, 90) straight down)."""
     z_w = normal / np.linalg.norm(normal)
-    forward = np.array([0.0, 0.0, 1.0])
-    y_w = forward - (forward @ z_w) * z_w
-    if np.linalg.norm(y_w) < 1e-6:  # looking straight down: use the image's up direction
-        y_w = np.array([0.0, -1.0, 0.0]) - (-z_w[1]) * z_w
+
+    def on_floor(v):
+        v = v - (v @ z_w) * z_w
+        n = np.linalg.norm(v)
+        return v / n if n > 1e-9 else np.zeros(3)
+
+    forward, up = on_floor(np.array([0.0, 0.0, 1.0])), on_floor(np.array([0.0, -1.0, 0.0]))
+    t = steep_share(implied_pitch_roll(z_w)[0])
+    if t > 0 and forward @ up < 0:  # past straight down the forward direction points back
+        forward = -forward
+    y_w = (1.0 - t) * forward + t * up
+    if np.linalg.norm(y_w) < 1e-9:  # (no forward and no up on the floor: cannot happen)
+        y_w = up if np.any(up) else forward
     y_w /= np.linalg.norm(y_w)
     x_w = np.cross(y_w, z_w)
     r_wc = np.stack([x_w, y_w, z_w])  # rows: world axes in camera coordinates
@@ -341,6 +363,7 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
         n, d, count, rms = _refine(pts, n, d, options)
         ambiguity = None
     pitch, roll = implied_pitch_roll(n)
+    roll *= 1.0 - steep_share(pitch)  # straight down the pose has the image's up as y: no roll
     return GroundFit(normal=n, offset=d, T_world_from_camera=pose_from_plane(n, d),
                      camera_height=d, pitch_deg=pitch, roll_deg=roll, inlier_count=count, rms_m=rms,
                      ambiguity=ambiguity)

@@ -51,6 +51,36 @@ def test_recovers_height_pitch_roll_in_furnished_rooms(seed):
     np.testing.assert_allclose(fit.T_world_from_camera[:3, 3], [0, 0, h], atol=0.02)
 
 
+
+@pytest.mark.parametrize("pitch", [90.0, 89.7, 85.0])
+def test_world_y_near_straight_down_follows_the_image_up_not_the_noise(pitch):
+    """Near straight down the camera's forward direction on the floor is the fit's noise (a
+    camera at 89.99 deg had its world turned 19 deg by it, and its roll printed as 18.75): the
+    world's y turns to the image's up (linearly from 10 deg short of vertical: half at 85 deg),
+    the same from one noise draw to the next, and straight down the roll is 0."""
+    from dpom_warp.ground import pose_from_plane, steep_share
+
+    rng = np.random.default_rng(int(pitch * 10))
+    room, _ = room_meshes(SceneSpec(furniture=2), rng)
+    true = pose_from_angles(3.0, pitch, 0.0, yaw_deg=30.0, y_m=3.5)
+    fits = [fit_ground_frames(rendered(camera(true), room, rng, frames=2)[1], camera(np.eye(4)))
+            for _ in range(3)]
+    up_on_floor = []
+    for fit in fits:
+        assert fit.camera_height == pytest.approx(3.0, abs=0.02) and fit.pitch_deg == pytest.approx(pitch, abs=0.5)
+        z, y = fit.T_world_from_camera[2, :3], fit.T_world_from_camera[1, :3]  # world axes, camera frame
+        up = np.array([0.0, -1.0, 0.0]) - (-z[1]) * z
+        up_on_floor.append(np.degrees(np.arccos(np.clip(y @ up / np.linalg.norm(up), -1, 1))))
+        if pitch == 90.0:
+            assert abs(fit.roll_deg) < 0.5
+    assert [steep_share(a) for a in (79.0, 85.0, 90.0, 95.0, 101.0)] == [0.0, 0.5, 1.0, 0.5, 0.0]
+    assert max(up_on_floor) < 1.0  # (no roll: forward and up agree where forward is defined)
+    ys = [f.T_world_from_camera[1, :3] for f in fits]
+    assert all(np.degrees(np.arccos(np.clip(a @ ys[0], -1, 1))) < 1.0 for a in ys)  # steady
+    # straight down the pose is pose_from_angles(h, 90): the image's up is the world's y
+    want = pose_from_angles(3.0, 90.0)
+    np.testing.assert_allclose(pose_from_plane(np.array([0.0, 0.0, -1.0]), 3.0)[:3, :3], want[:3, :3], atol=1e-12)
+
 def test_large_table_top_does_not_win_over_the_floor():
     rng = np.random.default_rng(7)
     room, _ = room_meshes(SceneSpec(furniture=0), rng)
