@@ -194,6 +194,10 @@ def _fit_ground(args) -> int:
     print(f"camera {fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
           f"{fit.roll_deg:.2f} deg; {fit.inlier_count} floor points, rms {1000 * fit.rms_m:.1f} mm"
           + (f"; pose written to {args.output}" if args.output else ""))
+    if fit.floor_xy is not None:  # where a grid goes (people nearer than its near edge may be in view too)
+        x0, x1, y0, y1 = fit.floor_xy
+        print(f"floor in view within {args.depth_max:g} m, in this pose's world: x {x0:g} to {x1:g} m, "
+              f"y {y0:g} to {y1:g} m")
     if not args.output:
         print(text, end="")
     return 0

@@ -66,6 +66,9 @@ class GroundFit:
         ambiguity: with `up: auto`, one line when another plane would also have been a floor
             to a camera mounted otherwise (a level camera facing a wall sees what a camera
             looking straight down beside a wall sees), else None.
+        floor_xy: (x_min, x_max, y_min, y_max) of the floor in view, world metres: the 1st
+            and 99th percentiles of the inliers (within depth_max), outward to 0.1 m (where a
+            ground grid goes; people nearer than its near edge may still be in view).
     """
 
     normal: np.ndarray
@@ -77,6 +80,7 @@ class GroundFit:
     inlier_count: int
     rms_m: float
     ambiguity: str | None = None
+    floor_xy: tuple[float, float, float, float] | None = None
 
     def report(self) -> dict:
         """The pose as written by `dpom-warp fit-ground` (pastable into camera.extrinsics)."""
@@ -364,9 +368,23 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
         ambiguity = None
     pitch, roll = implied_pitch_roll(n)
     roll *= 1.0 - steep_share(pitch)  # straight down the pose has the image's up as y: no roll
-    return GroundFit(normal=n, offset=d, T_world_from_camera=pose_from_plane(n, d),
-                     camera_height=d, pitch_deg=pitch, roll_deg=roll, inlier_count=count, rms_m=rms,
-                     ambiguity=ambiguity)
+    pose = pose_from_plane(n, d)
+    return GroundFit(normal=n, offset=d, T_world_from_camera=pose, camera_height=d, pitch_deg=pitch,
+                     roll_deg=roll, inlier_count=count, rms_m=rms, ambiguity=ambiguity,
+                     floor_xy=floor_extent(in_range, n, d, pose, options.distance_threshold))
+
+
+def floor_extent(points: np.ndarray, normal: np.ndarray, offset: float, pose: np.ndarray,
+                 distance: float) -> tuple[float, float, float, float] | None:
+    """(x_min, x_max, y_min, y_max) in world metres of the camera-frame `points` within
+    `distance` of the floor: their 1st and 99th percentiles, outward to 0.1 m."""
+    on = points[np.abs(points @ normal + offset) < distance]
+    if len(on) < 2:
+        return None
+    xy = on @ pose[:2, :3].T + pose[:2, 3]
+    lo, hi = np.percentile(xy, 1, axis=0), np.percentile(xy, 99, axis=0)
+    lo, hi = np.floor(lo * 10 + 1e-9) / 10, np.ceil(hi * 10 - 1e-9) / 10
+    return (round(float(lo[0]), 1), round(float(hi[0]), 1), round(float(lo[1]), 1), round(float(hi[1]), 1))
 
 
 def fit_ground_frames(frames_m, camera: Camera, options: GroundOptions = GroundOptions()) -> GroundFit:

@@ -37,6 +37,14 @@ def _ambiguity(fit, log) -> dict:
     return {"ambiguity": fit.ambiguity}
 
 
+def floor_words(fit) -> str:
+    """'; floor in view x .. m, y .. m' of a floor fit (for the grid), or ''."""
+    if fit.floor_xy is None:
+        return ""
+    x0, x1, y0, y1 = fit.floor_xy
+    return f"; floor in view x {x0:g} to {x1:g} m, y {y0:g} to {y1:g} m"
+
+
 def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
     """camera.extrinsics: auto. Fit the floor on `files` (input.background's, else
     input.frames') and return the posed camera and a report for summary.json.
@@ -56,8 +64,8 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
     refuse_low_view_from_above(cfg, fit, frames_named(files, names))
     log(f"ground plane from {len(files)} {kind}{'s' if len(files) > 1 else ''}: camera "
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
-        f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")
-    report = {**fit.report(), "rms_m": fit.rms_m, "frames": [str(f) for f in files],
+        f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm){floor_words(fit)}")
+    report = {**fit.report(), "rms_m": fit.rms_m, "floor_xy": fit.floor_xy, "frames": [str(f) for f in files],
               "fit_s": time.perf_counter() - t, **_ambiguity(fit, log)}
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 
@@ -281,10 +289,13 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
     geometry = build_geometry(camera, cfg.grid, cfg.obj)  # full resolution: boxes, pictures
     if not np.any(geometry.rect_area > 0):  # a grid beside the view: every map would be empty
         c = camera.centre
+        floor = (ground or {}).get("floor_xy")
+        seen = (f" (the floor in view: x {floor[0]:g} to {floor[1]:g} m, y {floor[2]:g} to {floor[3]:g} m)"
+                if floor else "")
         raise ConfigError(
             f"grid: none of its {len(geometry.rect)} locations is in the camera's view (the camera "
             f"{'fitted ' if ground else ''}at x {c[0]:.2f} m, y {c[1]:.2f} m, {c[2]:.2f} m up); expected "
-            f"grid.x and grid.y{' and grid.z' if cfg.grid.mode == 'voxel' else ''} over what the camera sees")
+            f"grid.x and grid.y{' and grid.z' if cfg.grid.mode == 'voxel' else ''} over what the camera sees{seen}")
     if parallel and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers or --ray with it")
@@ -746,8 +757,8 @@ def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=pri
     refuse_low_view_from_above(cfg, fit, f"{files[0]} and {len(files) - 1} more frames (their estimated background)")
     log(f"ground plane from the background estimated on {len(files)} frames: camera "
         f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
-        f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm)")
-    report = {**fit.report(), "rms_m": fit.rms_m, "frames": "estimated background of "
+        f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm){floor_words(fit)}")
+    report = {**fit.report(), "rms_m": fit.rms_m, "floor_xy": fit.floor_xy, "frames": "estimated background of "
               f"{len(files)} frames", "fit_s": time.perf_counter() - t, **_ambiguity(fit, log)}
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 

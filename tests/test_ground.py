@@ -77,6 +77,12 @@ def test_world_y_near_straight_down_follows_the_image_up_not_the_noise(pitch):
     assert max(up_on_floor) < 1.0  # (no roll: forward and up agree where forward is defined)
     ys = [f.T_world_from_camera[1, :3] for f in fits]
     assert all(np.degrees(np.arccos(np.clip(a @ ys[0], -1, 1))) < 1.0 for a in ys)  # steady
+    # the floor in view, in that world: about the camera's footprint on the floor (a 256x212
+    # image at f = 182.5 px, 3 m up: +-2.1 m across, +-1.7 m along the image's up)
+    if pitch == 90.0:
+        x0, x1, y0, y1 = fits[0].floor_xy
+        assert x0 == pytest.approx(-2.1, abs=0.25) and x1 == pytest.approx(2.1, abs=0.25)
+        assert y0 == pytest.approx(-1.75, abs=0.25) and y1 == pytest.approx(1.75, abs=0.25)
     # straight down the pose is pose_from_angles(h, 90): the image's up is the world's y
     want = pose_from_angles(3.0, 90.0)
     np.testing.assert_allclose(pose_from_plane(np.array([0.0, 0.0, -1.0]), 3.0)[:3, :3], want[:3, :3], atol=1e-12)
@@ -163,7 +169,13 @@ def test_fit_ground_cli_writes_a_pose_that_pastes_into_a_config(tmp_path, capsys
     out = tmp_path / "pose.yaml"
     assert main(["fit-ground", str(REAL / "depth_mm.png"), "--camera", str(REAL / "camera.yaml"),
                  "--output", str(out)]) == 0
-    assert "m above the floor" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "m above the floor" in printed
+    # where the floor lies in view, in the pose's world: the corridor ahead, beyond the people
+    seen = re.search(r"floor in view within 6 m, in this pose's world: x (\S+) to (\S+) m, y (\S+) to (\S+) m",
+                     printed)
+    x0, x1, y0, y1 = map(float, seen.groups())
+    assert -2.0 < x0 < -1.0 and 1.0 < x1 < 2.0 and 1.5 < y0 < 3.0 and 5.0 < y1 <= 6.0
     pose = yaml.safe_load(out.read_text())
     assert set(pose) == {"T_world_from_camera", "camera_height", "pitch_deg", "roll_deg", "inlier_count"}
     cfg = yaml.safe_load(open(CONFIGS / "real_five_people.yaml"))
