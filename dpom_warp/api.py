@@ -112,6 +112,12 @@ class Detector:
         return self.setup.spec.camera
 
     @property
+    def ground_fit(self) -> dict | None:
+        """With extrinsics: auto, the floor fit as summary.json's ground_fit holds it (camera
+        height, pitch, roll, inliers, `floor_xy`: where the floor lies in view); else None."""
+        return self.setup.ground
+
+    @property
     def grid(self):
         return self.config.grid
 

@@ -477,6 +477,12 @@ def test_camera_file_and_auto_pose_make_a_four_line_config(tmp_path, capsys):
     assert rows == csv_rows(tmp_path / "full" / "detections.csv")
     assert sum(0.8 <= float(r[2]) <= 4.5 for r in rows) == 5  # the five people of the corridor
 
+    # the API holds the same floor fit as the run's summary
+    det = Detector.from_config(tmp_path / "short.yaml")
+    fit = json.loads((tmp_path / "short" / "summary.json").read_text())["ground_fit"]
+    assert det.ground_fit["floor_xy"] == tuple(fit["floor_xy"]) and det.ground_fit["pitch_deg"] == fit["pitch_deg"]
+    assert Detector.from_config(tmp_path / "full.yaml", {"camera.extrinsics": {"height": 1.3, "pitch_deg": 5}}
+                                ).ground_fit is None
     # the section's own keys and input.depth_scale win over the file's
     cfg = load_config(tmp_path / "short.yaml", ["camera.intrinsics.fx=500", "input.depth_scale=0.002"])
     assert cfg.camera.fx == 500 and cfg.camera.fy == 525 and cfg.inputs.depth_scale == 0.002
