@@ -27,7 +27,7 @@ import numpy as np
 
 from .config import ConfigError, RunConfig, apply_overrides, parse_config, read_config
 from .detect import Detected
-from .io import PLAUSIBLE_MEDIAN_M, InputError, depth_scale_hint, units_to_metres
+from .io import PLAUSIBLE_MEDIAN_M, InputError, array_to_metres, depth_scale_hint, implausible_median
 
 
 @dataclass
@@ -195,16 +195,14 @@ class Detector:
         if depth.shape != shape:
             raise InputError(f"depth (frame {index}): expected an array of shape {shape} (camera.height, "
                              f"camera.width), found {depth.shape}")
-        if np.issubdtype(depth.dtype, np.integer):
-            if depth.min(initial=0) < 0:
-                raise InputError(f"depth (frame {index}): expected depth units >= 0, found {depth.min()}")
-            metres = units_to_metres(depth, self.config.inputs.depth_scale)  # as read_depth
-        elif not np.issubdtype(depth.dtype, np.floating):
+        integer = np.issubdtype(depth.dtype, np.integer)
+        if not integer and not np.issubdtype(depth.dtype, np.floating):
             raise InputError(f"depth (frame {index}): expected an integer or float array, found {depth.dtype}")
-        else:
-            metres = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
-            if metres.min(initial=0) < 0:
-                raise InputError(f"depth (frame {index}): expected metres >= 0, found {metres.min():g}")
+        if integer and depth.min(initial=0) < 0:
+            raise InputError(f"depth (frame {index}): expected depth units >= 0, found {depth.min()}")
+        metres = array_to_metres(depth, self.config.inputs.depth_scale)  # integers as read_depth reads them
+        if metres.min(initial=0) < 0:
+            raise InputError(f"depth (frame {index}): expected metres >= 0, found {metres.min():g}")
         if not self._units_checked:
             self._warn_units(metres, depth.dtype, index)
         return metres
@@ -220,9 +218,8 @@ class Detector:
         if np.issubdtype(dtype, np.integer):
             hint = depth_scale_hint(metres, self.config.inputs.depth_scale)
         else:
-            median = float(np.median(metres[metres > 0]))
-            low, high = PLAUSIBLE_MEDIAN_M
-            hint = None if low <= median <= high else (
+            median, (low, high) = implausible_median(metres), PLAUSIBLE_MEDIAN_M
+            hint = None if median is None else (
                 f"a float array is read as metres, and its readings' median is {median:.4g} m: expected "
                 f"{low:g} to {high:g} m; pass metres, or the sensor's integer units (input.depth_scale)")
         if hint:

@@ -430,7 +430,7 @@ def recording_frames(path: str, topic: str | None, count: int, camera: Camera | 
     Raises:
         InputError: no camera information and none given, or no readable depth frame.
     """
-    from .io import InputError, units_to_metres
+    from .io import InputError, array_to_metres
     from .sources import open_source
 
     source = open_source(path, topic, "DEPTH")
@@ -446,9 +446,7 @@ def recording_frames(path: str, topic: str | None, count: int, camera: Camera | 
     for frame in source.frames():
         if frame.depth is None:  # a damaged message: the next one
             continue
-        d = frame.depth
-        frames.append(units_to_metres(d, info.depth_scale or 0.001) if np.issubdtype(d.dtype, np.integer)
-                      else np.where(np.isfinite(d), d, 0.0).astype(np.float32))
+        frames.append(array_to_metres(frame.depth, info.depth_scale or 0.001))
         names.append(f"{path} (frame {frame.index:06d})")
         if len(frames) == count:
             break

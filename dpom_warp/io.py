@@ -96,19 +96,34 @@ def units_to_metres(raw: np.ndarray, depth_scale: float) -> np.ndarray:
     return (np.asarray(raw).astype(np.float64) * depth_scale).astype(np.float32)
 
 
+def array_to_metres(depth: np.ndarray, depth_scale: float) -> np.ndarray:
+    """A depth array as float32 metres: integers are the sensor's units (units_to_metres),
+    floats metres already (NaN and inf: no reading, 0)."""
+    if np.issubdtype(depth.dtype, np.integer):
+        return units_to_metres(depth, depth_scale)
+    return np.where(np.isfinite(depth), depth, 0).astype(np.float32)
+
+
 PLAUSIBLE_MEDIAN_M = (0.15, 30.0)  # a depth camera's readings' median lies in here, metres
 
 
-def depth_scale_hint(depth_m: np.ndarray, depth_scale: float) -> str | None:
-    """A word about input.depth_scale when a frame's readings (metres; 0, NaN: none) have a
-    median no depth camera gives (PLAUSIBLE_MEDIAN_M), else None: a scale off by 1000 leaves
-    every reading beyond the grid, or in front of the camera's lens, and nothing is found."""
+def implausible_median(depth_m: np.ndarray) -> float | None:
+    """The median of a frame's readings (metres; 0, NaN: none) where no depth camera gives it
+    (outside PLAUSIBLE_MEDIAN_M), else None (None too without readings)."""
     d = np.asarray(depth_m)
     valid = d[np.isfinite(d) & (d > 0)]
     if not valid.size:
         return None
     median = float(np.median(valid))
-    if PLAUSIBLE_MEDIAN_M[0] <= median <= PLAUSIBLE_MEDIAN_M[1]:
+    return None if PLAUSIBLE_MEDIAN_M[0] <= median <= PLAUSIBLE_MEDIAN_M[1] else median
+
+
+def depth_scale_hint(depth_m: np.ndarray, depth_scale: float) -> str | None:
+    """A word about input.depth_scale when a frame's readings have a median no depth camera
+    gives (implausible_median), else None: a scale off by 1000 leaves every reading beyond
+    the grid, or in front of the camera's lens, and nothing is found."""
+    median = implausible_median(depth_m)
+    if median is None:
         return None
     return (f"its readings' median is {median:.4g} m, at input.depth_scale {depth_scale:g} m per unit: "
             f"expected {PLAUSIBLE_MEDIAN_M[0]:g} to {PLAUSIBLE_MEDIAN_M[1]:g} m; is the scale right?")
