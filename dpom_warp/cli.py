@@ -295,11 +295,10 @@ def stream_lines(streams: list[dict]) -> str:
     line = "  streams: " + "; ".join(one(s) for s in shown or streams[:8])
     rest = rest if shown else streams[8:]
     if rest:
-        kinds = {}
-        for s in rest:
-            kinds[s["type"]] = kinds.get(s["type"], 0) + 1
-        line += (f"; and {len(rest)} more (" + ", ".join(f"{k} {n}" for k, n in sorted(kinds.items(), key=lambda kv: -kv[1]))
-                 + "; --json lists them)")
+        from collections import Counter
+
+        kinds = Counter(s["type"] for s in rest).most_common()  # (ties in order of first appearance)
+        line += f"; and {len(rest)} more (" + ", ".join(f"{k} {n}" for k, n in kinds) + "; --json lists them)"
     return line
 
 

@@ -37,12 +37,22 @@ def _ambiguity(fit, log) -> dict:
     return {"ambiguity": fit.ambiguity}
 
 
-def floor_words(fit) -> str:
-    """'; floor in view x .. m, y .. m' of a floor fit (for the grid), or ''."""
-    if fit.floor_xy is None:
-        return ""
-    x0, x1, y0, y1 = fit.floor_xy
-    return f"; floor in view x {x0:g} to {x1:g} m, y {y0:g} to {y1:g} m"
+def floor_words(floor_xy) -> str:
+    """'floor in view x .. to .. m, y .. to .. m' of a floor fit's floor_xy (where the grid goes)."""
+    x0, x1, y0, y1 = floor_xy
+    return f"floor in view x {x0:g} to {x1:g} m, y {y0:g} to {y1:g} m"
+
+
+def posed(cfg: RunConfig, fit, fitted_on: str, frames, t0: float, log):
+    """The camera posed by a floor fit and summary.json's ground_fit report, the fit logged
+    ("ground plane from `fitted_on`: ..."); `frames`: what the report says it was fitted on."""
+    floor = f"; {floor_words(fit.floor_xy)}" if fit.floor_xy is not None else ""
+    log(f"ground plane from {fitted_on}: camera {fit.camera_height:.3f} m above the floor, pitch "
+        f"{fit.pitch_deg:.2f} deg, roll {fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms "
+        f"{1000 * fit.rms_m:.1f} mm){floor}")
+    report = {**fit.report(), "rms_m": fit.rms_m, "floor_xy": fit.floor_xy, "frames": frames,
+              "fit_s": time.perf_counter() - t0, **_ambiguity(fit, log)}
+    return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 
 
 def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
@@ -62,12 +72,7 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
     names = [f"{source} (frame {f.name})" for f in files] if source and is_recording(source) else None
     fit = fit_ground_files(files, cfg.camera, cfg.inputs.depth_scale, cfg.ground, names)
     refuse_low_view_from_above(cfg, fit, frames_named(files, names))
-    log(f"ground plane from {len(files)} {kind}{'s' if len(files) > 1 else ''}: camera "
-        f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
-        f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm){floor_words(fit)}")
-    report = {**fit.report(), "rms_m": fit.rms_m, "floor_xy": fit.floor_xy, "frames": [str(f) for f in files],
-              "fit_s": time.perf_counter() - t, **_ambiguity(fit, log)}
-    return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
+    return posed(cfg, fit, f"{len(files)} {kind}{'s' if len(files) > 1 else ''}", [str(f) for f in files], t, log)
 
 
 RUN_STATE = "run.json"
@@ -290,8 +295,7 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
     if not np.any(geometry.rect_area > 0):  # a grid beside the view: every map would be empty
         c = camera.centre
         floor = (ground or {}).get("floor_xy")
-        seen = (f" (the floor in view: x {floor[0]:g} to {floor[1]:g} m, y {floor[2]:g} to {floor[3]:g} m)"
-                if floor else "")
+        seen = f" ({floor_words(floor)})" if floor else ""
         raise ConfigError(
             f"grid: none of its {len(geometry.rect)} locations is in the camera's view (the camera "
             f"{'fitted ' if ground else ''}at x {c[0]:.2f} m, y {c[1]:.2f} m, {c[2]:.2f} m up); expected "
@@ -755,12 +759,8 @@ def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=pri
         raise InputError(f"{files[0]} and {len(files) - 1} more frames: in their estimated "
                          f"background: {e}") from None
     refuse_low_view_from_above(cfg, fit, f"{files[0]} and {len(files) - 1} more frames (their estimated background)")
-    log(f"ground plane from the background estimated on {len(files)} frames: camera "
-        f"{fit.camera_height:.3f} m above the floor, pitch {fit.pitch_deg:.2f} deg, roll "
-        f"{fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms {1000 * fit.rms_m:.1f} mm){floor_words(fit)}")
-    report = {**fit.report(), "rms_m": fit.rms_m, "floor_xy": fit.floor_xy, "frames": "estimated background of "
-              f"{len(files)} frames", "fit_s": time.perf_counter() - t, **_ambiguity(fit, log)}
-    return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
+    return posed(cfg, fit, f"the background estimated on {len(files)} frames",
+                 f"estimated background of {len(files)} frames", t, log)
 
 
 def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground, grown):
