@@ -212,6 +212,10 @@ class Engine:
         # full-resolution frames are reduced on a GPU (kernels.frames), by NumPy on the CPU
         self.reduce_on_device = wp.get_device(device).is_cuda
         self._full = self._full_host = None  # their buffers, made at the first such frame
+        # the joint test's lists copied out in pixel order by count, scan and fill on a GPU
+        # (compact_once's atomics leave them in any order, which the host then sorted: a
+        # third of a batched frame's time on an H200), in one pass on the CPU (in order)
+        self.ordered_joint_lists = wp.get_device(device).is_cuda
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
         self.sparse_on_lists = False  # the sparse passes walk the lists (nothing has died yet)
@@ -707,13 +711,15 @@ class Engine:
         else:
             direct[0](rec.bounds, direct[3])
 
-    def compact(self):
-        """Copy each pixel's list, in order, keeping the live locations (count, scan, fill)."""
+    def compact(self, live=None, done=None):
+        """Copy each pixel's list, in order, keeping the live locations (count, scan, fill):
+        those of self.live of the frames not self.done, or of `live` of the frames not `done`."""
         dim = self.batch * self.n_pixels
-        self._launch(K.count_live, dim, [self.offsets, self.counts, self.entry_loc, self.live, self.n_pixels,
-                                         self.done, self.live_counts])
+        live = self.live if live is None else live
+        self._launch(K.count_live, dim, [self.offsets, self.counts, self.entry_loc, live, self.n_pixels,
+                                         self.done if done is None else done, self.live_counts])
         wp.utils.array_scan(self.live_counts, self.live_offsets, inclusive=False)
-        self._launch(K.fill_live, dim, [self.offsets, self.counts, self.entry_loc, self.entry_delta, self.live,
+        self._launch(K.fill_live, dim, [self.offsets, self.counts, self.entry_loc, self.entry_delta, live,
                                         self.live_offsets, self.live_counts, self.live_loc, self.live_delta])
 
     def prune(self, logit_prior: float):
@@ -918,7 +924,8 @@ class Engine:
         iterations, max_change, done = self.iterations.numpy(), self.max_change.numpy(), self.done.numpy()
         live = self.live.numpy().reshape(self.batch, self.n_locations)
         pruned, live = (live == K.PRUNED).sum(1), (live == 1).sum(1)
-        kept = self.counts.numpy().reshape(self.batch, self.n_pixels).sum(1) if bound else [None] * self.batch
+        # (the entries prune_lists kept, counted by location: a GPU copies back less than the counts)
+        kept = self.per_location.numpy().reshape(self.batch, self.n_locations).sum(1) if bound else [None] * self.batch
         self._last_rho = rho[n - 1].copy()
         joint = [None] * n if self.joint_threshold is None else self.joint_lists(rho_star[:n])
         t3 = time.perf_counter()
@@ -936,24 +943,44 @@ class Engine:
     def joint_lists(self, rho_star: np.ndarray) -> list[JointLists]:
         """After a batch's inference, each frame's JointLists for the locations whose rho*
         (float32, as detect reads the maps) reaches joint_threshold: their entries copied out of
-        the lists in order (kernels.sparse.compact_once, every frame taken) with each pixel's
-        Delta_bg, and their readings behind (kernels.behind_count). Two launches and a few
-        reads for the batch; what the host then does with them is small."""
+        the lists in order (every frame taken) with each pixel's Delta_bg, and their readings
+        behind (kernels.behind_count). A few launches and reads for the batch: on a GPU
+        count, scan and fill (`compact`), whose slices come in pixel order, and the pixels'
+        counts read back; on the CPU kernels.sparse.compact_once in one pass, its slices
+        placed by atomic adds (in pixel order on one thread, sorted to be sure)."""
         n, locations = len(rho_star), self.n_locations
         marked = np.zeros((self.batch, locations), np.int32)
         marked[:n] = np.asarray(rho_star, np.float32) >= self.joint_threshold
         self.candidate.assign(marked.ravel())
-        self.live_count.zero_()
-        self._launch(K.compact_once, self.batch * self.n_pixels,
-                     [self.offsets, self.counts, self.entry_loc, self.entry_delta, self.candidate, self.n_pixels,
-                      self.not_done, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
-                      self.active, self.live_count])
-        _, entries, pixels = (int(x) for x in self.live_count.numpy())
-        # (slices: a GPU copies back what they hold, not the arrays' capacity)
-        active = np.sort(self.active[:pixels].numpy())  # pixel order (on a GPU they come in any)
-        first, count = self.live_offsets.numpy()[active], self.live_counts.numpy()[active]
-        loc, delta = self.live_loc[:entries].numpy(), self.live_delta[:entries].numpy()
-        dbg = self.delta_bg.numpy()[active]
+        if self.ordered_joint_lists:
+            self.compact(self.candidate, self.not_done)
+            # the pixels with entries in order: a flag each (into active_next), its inclusive
+            # scan (into listed), then each such pixel and its count placed at its rank (into
+            # active and active_next: the flags are spent); those arrays serve the iterations
+            dim = self.batch * self.n_pixels
+            self._launch(K.has_entries, dim, [self.live_counts, self.active_next])
+            wp.utils.array_scan(self.active_next, self.listed, inclusive=True)
+            self._launch(K.place_active, dim, [self.live_counts, self.listed, self.active, self.active_next])
+            pixels = int(self.listed[-1:].numpy()[0])
+            index = self.active[:pixels]
+            active, count = index.numpy(), self.active_next[:pixels].numpy()
+            entries = int(count.sum())
+            loc, delta = self.live_loc[:entries].numpy(), self.live_delta[:entries].numpy()
+            dbg = self.delta_bg[index].numpy()
+        else:
+            self.live_count.zero_()
+            self._launch(K.compact_once, self.batch * self.n_pixels,
+                         [self.offsets, self.counts, self.entry_loc, self.entry_delta, self.candidate, self.n_pixels,
+                          self.not_done, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
+                          self.active, self.live_count])
+            _, entries, pixels = (int(x) for x in self.live_count.numpy())
+            index = self.active[:pixels]
+            active = index.numpy()
+            order = np.argsort(active)
+            active = active[order]
+            first, count, dbg = (a[index].numpy()[order] for a in (self.live_offsets, self.live_counts, self.delta_bg))
+            at = np.repeat(first, count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
+            loc, delta = self.live_loc[:entries].numpy()[at], self.live_delta[:entries].numpy()[at]
         p = self.params
         behind = np.zeros((self.batch, locations))
         if p.behind_cost > 0:  # counted for every candidate (n_behind leaves out locations in no list)
@@ -961,13 +988,5 @@ class Engine:
                          [self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu, self.behind_var,
                           self.behind_half, p.behind_step, self.candidate, self.candidate_behind])
             behind = p.behind_cost * self.candidate_behind.numpy().reshape(self.batch, locations).astype(np.float64)
-        at = np.repeat(first, count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
-        pixel, loc, delta = np.repeat(active, count), loc[at], delta[at]
-        frame_of_entry, frame_of_pixel = pixel // self.n_pixels, active // self.n_pixels
-        out = []
-        for f in range(n):
-            cells, mine = np.flatnonzero(marked[f]), frame_of_entry == f
-            out.append(JointLists.of_entries(cells, pixel[mine], loc[mine] - f * locations, delta[mine],
-                                             dbg[frame_of_pixel == f], behind[f, cells],
-                                             self.geometry.locations[cells], p))
-        return out
+        return JointLists.of_batch(np.flatnonzero(marked[:n]), active, count, loc, delta, dbg, behind[:n],
+                                   self.geometry.locations, p, locations, self.n_pixels)

@@ -269,17 +269,20 @@ def sigmoid(x):
 
 def _padded_lists(pixel, loc, delta):
     """Per-pixel lists as (P_active, L) arrays padded with a transparent entry (rho = 0)."""
-    pix, start, count = np.unique(pixel, return_index=True, return_counts=True)
+    pix, count = np.unique(pixel, return_counts=True)
+    return (pix,) + _pad(count, loc, delta)
+
+
+def _pad(count, loc, delta):
+    """(valid, L, D) of lists of `count` entries each, given one after another."""
     width = int(count.max()) if len(count) else 0
-    slot = np.arange(len(pixel)) - np.repeat(start, count)
-    row = np.repeat(np.arange(len(pix)), count)
-    valid = np.zeros((len(pix), width), bool)
-    valid[row, slot] = True
-    L = np.zeros((len(pix), width), np.int64)
-    D = np.zeros((len(pix), width))
-    L[row, slot] = loc
-    D[row, slot] = delta
-    return pix, valid, L, D
+    flat = np.arange(int(count.sum())) + np.repeat(np.arange(len(count)) * width - (np.cumsum(count) - count), count)
+    valid = np.arange(width) < np.asarray(count)[:, None]
+    L = np.zeros(len(count) * width, np.int64)
+    D = np.zeros(len(count) * width)
+    L[flat] = loc
+    D[flat] = delta
+    return valid, L.reshape(len(count), width), D.reshape(len(count), width)
 
 
 def front_transparency(r):
@@ -349,6 +352,33 @@ class JointLists:
         return cls(cells, valid, L, D, np.asarray(dbg_of_pixel, np.float64), np.asarray(behind, np.float64),
                    np.asarray(locations, np.float64), float(np.log(params.prior) - np.log1p(-params.prior)),
                    float(params.exclusion), float(params.exclusion_radius))
+
+    @classmethod
+    def of_batch(cls, cells, active, count, loc, delta, dbg, behind, locations, params: ModelParams,
+                 n_locations: int, n_pixels: int) -> list["JointLists"]:
+        """Each frame's JointLists of a batch at once, what of_entries gives frame by frame:
+        `cells` (ascending) and `active` (ascending, the pixels with entries) index the batch
+        (frame f's from f x n_locations and f x n_pixels); each active pixel's `count` entries
+        (`loc`, `delta`) follow one another in list order, and `dbg` is its Delta_bg; `behind`
+        (frames, n_locations); `locations` (n_locations, 3). The padded lists are built once
+        and each frame takes its rows, trimmed to its own longest list."""
+        cells, active, count = (np.asarray(a, np.int64) for a in (cells, active, count))
+        frames = len(behind)
+        cell_at = np.searchsorted(cells, np.arange(frames + 1) * n_locations)
+        row_at = np.searchsorted(active, np.arange(frames + 1) * n_pixels)
+        position = np.zeros(frames * n_locations, np.int64)  # each cell's place among its frame's
+        position[cells] = np.arange(len(cells)) - cell_at[cells // n_locations]
+        valid, L, D = _pad(count, position[loc], np.asarray(delta, np.float64))
+        logit_prior = float(np.log(params.prior) - np.log1p(-params.prior))
+        out = []
+        for f in range(frames):
+            rows = slice(row_at[f], row_at[f + 1])
+            w = int(count[rows].max()) if row_at[f + 1] > row_at[f] else 0
+            mine = cells[cell_at[f]:cell_at[f + 1]] - f * n_locations
+            out.append(cls(mine, valid[rows, :w], L[rows, :w], D[rows, :w], np.asarray(dbg[rows], np.float64),
+                           np.asarray(behind[f, mine], np.float64), np.asarray(locations[mine], np.float64),
+                           logit_prior, float(params.exclusion), float(params.exclusion_radius)))
+        return out
 
     def log_odds(self, cells) -> np.ndarray:
         """(len(cells),) float64: each cell's log posterior odds with the other `cells` present

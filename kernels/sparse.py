@@ -369,3 +369,24 @@ def fill_live(
     p = wp.tid()
     if live_counts[p] > 0:
         copy_live(offsets[p], counts[p], entry_loc, entry_delta, live, live_offsets[p], live_loc, live_delta)
+
+
+@wp.kernel(enable_backward=False)
+def has_entries(live_counts: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32)):
+    """flag[p] = 1 where pixel p's compact list holds an entry (the scan's input of
+    place_active)."""
+    p = wp.tid()
+    flag[p] = wp.where(live_counts[p] > 0, 1, 0)
+
+
+@wp.kernel(enable_backward=False)
+def place_active(live_counts: wp.array(dtype=wp.int32), rank: wp.array(dtype=wp.int32),
+                 active: wp.array(dtype=wp.int32), active_counts: wp.array(dtype=wp.int32)):
+    """The pixels with entries in pixel order (NumPy's np.flatnonzero(live_counts)) and their
+    counts, from rank = the inclusive scan of has_entries: each such pixel p is the
+    rank[p]-th. No atomics, so the same order on every device."""
+    p = wp.tid()
+    n = live_counts[p]
+    if n > 0:
+        active[rank[p] - 1] = p
+        active_counts[rank[p] - 1] = n

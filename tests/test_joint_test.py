@@ -78,7 +78,8 @@ def test_engine_hands_over_the_joint_tests_lists(device, frames):
     geom, params, depth, bg_frames = random_scene(5, shape="solid")
     params = dataclasses.replace(params, behind_cost=2.0, exclusion=10.0, exclusion_radius=0.45,
                                  background_outside_grid=True)
-    engines = [Engine(geom, params, device), Engine(geom, params, device, batch=3)]
+    engines = [Engine(geom, params, device), Engine(geom, params, device, batch=3), Engine(geom, params, device, batch=3)]
+    engines[2].ordered_joint_lists = not engines[2].ordered_joint_lists  # the other device's way
     assert engines[0].infer(depth).joint is None  # off unless asked (make_engine: min_log_odds > 0)
     if frames:
         bg = ref.background_from_frames(bg_frames, params)
@@ -96,6 +97,14 @@ def test_engine_hands_over_the_joint_tests_lists(device, frames):
     candidates = np.flatnonzero(star >= threshold)
     np.testing.assert_array_equal(res.joint.cells, candidates)
     np.testing.assert_array_equal(batch[1].joint.cells, candidates)
+    for field in ("cells", "valid", "L", "D", "dbg", "behind", "locations"):  # a batch's lists: the frame's alone
+        np.testing.assert_array_equal(getattr(batch[1].joint, field), getattr(res.joint, field))
+    alone = engines[0].infer(bg_frames[0]).joint  # (the first frame's, fewer candidates or none)
+    other = engines[2].infer_batch(np.stack([bg_frames[0], depth]))  # (count, scan, fill or compact_once)
+    for field in ("cells", "valid", "L", "D", "dbg", "behind", "locations"):
+        np.testing.assert_array_equal(getattr(batch[0].joint, field), getattr(alone, field))
+        for f in (0, 1):
+            np.testing.assert_array_equal(getattr(other[f].joint, field), getattr(batch[f].joint, field))
     rng = np.random.default_rng(0)
     for size in (1, 3, len(candidates)):
         cells = rng.choice(candidates, size=size, replace=False)

@@ -581,3 +581,24 @@ def test_sparse_drop_matches_reference(device, seed, shape, graph):
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, sparse_drop=0.0))
     assert np.abs(plain["rho"] - want["rho"]).max() > 1e-9, "nothing was dropped: the option is not exercised"
+
+
+def test_place_active_is_flatnonzero_in_order(device):
+    """kernels.sparse.has_entries, an inclusive scan and place_active give the pixels with
+    entries in pixel order and their counts, as np.flatnonzero, on every device (no atomics:
+    a GPU's order too); none, and all, included."""
+    import warp as wp
+    from dpom_warp import kernels as K
+
+    rng = np.random.default_rng(3)
+    for counts in (rng.integers(0, 4, 5000) * (rng.random(5000) < 0.3), np.zeros(64, int), np.ones(64, int)):
+        counts = counts.astype(np.int32)
+        live_counts = wp.array(counts, dtype=wp.int32, device=device)
+        flag, rank, active, active_counts = (wp.zeros(len(counts), dtype=wp.int32, device=device) for _ in range(4))
+        wp.launch(K.has_entries, len(counts), [live_counts, flag], device=device)
+        wp.utils.array_scan(flag, rank, inclusive=True)
+        wp.launch(K.place_active, len(counts), [live_counts, rank, active, active_counts], device=device)
+        n = int(rank.numpy()[-1])
+        want = np.flatnonzero(counts)
+        np.testing.assert_array_equal(active.numpy()[:n], want)
+        np.testing.assert_array_equal(active_counts.numpy()[:n], counts[want])
