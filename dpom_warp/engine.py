@@ -213,8 +213,9 @@ class Engine:
         self.reduce_on_device = wp.get_device(device).is_cuda
         self._full = None  # their buffer, made at the first such frame
         # the joint test's lists copied out in pixel order by count, scan and fill on a GPU
-        # (compact_once's atomics leave them in any order, which the host then sorted: a
-        # third of a batched frame's time on an H200), in one pass on the CPU (in order)
+        # (compact_once's atomics leave them in any order, which the host then sorted: with
+        # the per-frame work since batched, half a batched frame's time on an H200), in one
+        # pass on the CPU (in order there)
         self.ordered_joint_lists = wp.get_device(device).is_cuda
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
@@ -945,8 +946,8 @@ class Engine:
         (float32, as detect reads the maps) reaches joint_threshold: their entries copied out of
         the lists in order (every frame taken) with each pixel's Delta_bg, and their readings
         behind (kernels.behind_count). A few launches and reads for the batch: on a GPU
-        count, scan and fill (`compact`), whose slices come in pixel order, and the pixels'
-        counts read back; on the CPU kernels.sparse.compact_once in one pass, its slices
+        count, scan and fill (`compact`), whose slices come in pixel order, and the pixels
+        with entries placed in that order (kernels.sparse.place_active); on the CPU kernels.sparse.compact_once in one pass, its slices
         placed by atomic adds (in pixel order on one thread, sorted to be sure)."""
         n, locations = len(rho_star), self.n_locations
         marked = np.zeros((self.batch, locations), np.int32)
@@ -956,7 +957,7 @@ class Engine:
             self.compact(self.candidate, self.not_done)
             # the pixels with entries in order: a flag each (into active_next), its inclusive
             # scan (into listed), then each such pixel and its count placed at its rank (into
-            # active and active_next: the flags are spent); those arrays serve the iterations
+            # active and active_next: the flags are spent), arrays the iterations are done with
             dim = self.batch * self.n_pixels
             self._launch(K.has_entries, dim, [self.live_counts, self.active_next])
             wp.utils.array_scan(self.active_next, self.listed, inclusive=True)
