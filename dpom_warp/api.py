@@ -135,7 +135,7 @@ class Detector:
         from .engine import ListOverflow
 
         frames = [self._metres(d, i) for i, d in enumerate(depths)]
-        engine, n = self.engine, self.config.engine.batch
+        engine, n = self.engine, self.engine.batch
         results = []
         for start in range(0, len(frames), n):
             chunk = np.stack(frames[start:start + n])

@@ -165,6 +165,19 @@ def _stride(v):
 Stride = Annotated[Union[Literal["auto"], Annotated[int, Field(ge=1, le=64)]], BeforeValidator(_stride)]
 
 
+def _batch(v):
+    if v == "auto":
+        return v
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise _fail(f"expected auto or an integer >= 1, found {_fmt(v)}")
+    if v < 1:
+        raise _fail(f"expected a value >= 1, found {v}")
+    return v
+
+
+Batch = Annotated[Union[Literal["auto"], Annotated[int, Field(ge=1)]], BeforeValidator(_batch)]
+
+
 def _up(v):
     if v == "auto":
         return v
@@ -650,7 +663,9 @@ class EngineSection(Node):
     max_entries: Int | None = Field(None, ge=1, description="hard cap on the list capacity; a frame "
                                                             "above it is refused, never truncated")
     memory_gb: Num | None = Field(8.0, gt=0, description="memory budget of the engine's buffers, GiB")
-    batch: Int = Field(1, ge=1, description="frames per engine call (for GPUs)")
+    batch: Batch = Field("auto", description="frames per engine call; auto: 16 for a recorded run on a GPU "
+                                             "(fewer where engine.memory_gb holds fewer), else 1 (the CPU, a "
+                                             "live camera, the Python API)")
     graph: Annotated[Literal["auto", "on", "off"], Switch] = Field("auto", description="replay the iteration loop as a "
                                                                     "captured graph; auto: on CUDA only")
     exact: Bool = Field(False, description="the exact path: full resolution, every pass full, no warm "
@@ -864,7 +879,7 @@ class EngineOptions:
     entries_per_pixel: float = 8.0
     max_entries: int | None = None
     memory_gb: float | None = 8.0
-    batch: int = 1
+    batch: int | str = "auto"  # (an int once a run has chosen: pipeline.set_up)
     graph: str = "auto"
     exact: bool = False
     mask_index: str = "auto"

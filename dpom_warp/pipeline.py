@@ -240,9 +240,9 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
         missing = [f.name for f in frames if f.name not in truth]
         if missing:
             raise InputError(f"{cfg.evaluation.ground_truth}: no ground truth for frame {missing[0]}")
-    s = set_up(cfg, frames, device, log, parallel, keep_engine)
+    s = set_up(cfg, frames, device, log, parallel, keep_engine, recorded=True)
     s.spec.pictures = cfg.output.images and not pictures_deferred(cfg, len(frames))
-    return RunPlan(**{f.name: getattr(s, f.name) for f in dataclasses.fields(Setup)}, cfg=cfg,
+    return RunPlan(**{f.name: getattr(s, f.name) for f in dataclasses.fields(Setup)}, cfg=s.spec.cfg,
                    out=out, frames=frames, skipped=skipped, truth=truth, t_start=t_start,
                    timestamps=timestamps)
 
@@ -261,12 +261,32 @@ def warn_depth_scale(cfg: RunConfig, path, depth: np.ndarray | None, log=print) 
         log(f"warning: {path}: {hint}")
 
 
+# engine.batch: auto on a GPU for a recorded run: on an H200 (docs/bench_cuda_h200.md) a kinect_v2
+# frame took 9.0 ms alone and 1.5 ms in a call of 16 (1.2 ms at 32, 1.05 at 128: little more
+# for a latency and memory 2 to 8 times larger)
+GPU_BATCH = 16
+
+
+def auto_batch(device: str, recorded: bool) -> int:
+    """engine.batch auto's frames a call (before the memory budget): GPU_BATCH for a recorded
+    run on a GPU; 1 on the CPU (one thread: a batch takes as long as its frames one by one),
+    for a live camera (a frame waits for no other) and the Python API (`detect` takes one)."""
+    return GPU_BATCH if recorded and device.startswith("cuda") else 1
+
+
+def with_batch(cfg: RunConfig, batch: int) -> RunConfig:
+    """cfg with engine.batch = batch."""
+    return dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, batch=batch))
+
+
 def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=print,
-           parallel: bool = False, keep_engine: bool = False) -> Setup:
+           parallel: bool = False, keep_engine: bool = False, recorded: bool = False) -> Setup:
     """The pose (fitted with extrinsics: auto), the background (frames, auto from `frames`,
     or the floor) and the engine of a run: what `dpom-warp run` and the Python API's
     Detector both infer with. `frames`: the run's frames (read only for `auto` background
-    and for a floor fit without background frames)."""
+    and for a floor fit without background frames). engine.batch auto is GPU_BATCH for a
+    `recorded` run on a GPU (halved until engine.memory_gb holds it), else 1; the Setup's
+    spec.cfg has the batch chosen."""
     auto_bg = cfg.inputs.auto_background
     bg_files = (expand(cfg.inputs.background, "input.background", cfg.inputs.topic, log)
                 if cfg.inputs.background and not auto_bg else [])
@@ -277,6 +297,9 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
         dev = resolve_device(device or cfg.device)
     except ValueError as e:
         raise ConfigError(str(e)) from None
+    batch_auto = cfg.engine.batch == "auto"
+    if batch_auto:
+        cfg = with_batch(cfg, auto_batch(dev, recorded))
     sample = ([frames[i] for i in sample_frames(len(frames), cfg.inputs.background_auto.max_frames)]
               if auto_bg else [])
     camera, ground = cfg.camera, None
@@ -304,10 +327,15 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers or --ray with it")
     log("setting up the engine (mask index; Warp kernels compiled on first use, then cached) ...")
-    try:
-        engine = make_engine(cfg, camera, dev, cfg.engine.batch)
-    except MemoryBudgetError as e:
-        raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
+    while True:
+        try:
+            engine = make_engine(cfg, camera, dev, cfg.engine.batch)
+            break
+        except MemoryBudgetError as e:
+            if batch_auto and cfg.engine.batch > 1:  # fewer frames a call where the budget holds fewer
+                cfg = with_batch(cfg, cfg.engine.batch // 2)
+                continue
+            raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
     auto_report, given = None, None
     if bg_frames:
         engine.set_background_frames(engine.resolution.frames(np.stack(bg_frames)))
@@ -330,7 +358,7 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
     r = engine.resolution
     inference = {"stride": r.stride, "reduce": r.reduce, "image": [engine.width, engine.height],
                  "sparse_epsilon": cfg.model.sparse_epsilon, "bound_rounds": cfg.model.bound_rounds,
-                 "warm_start": cfg.model.warm_start, "exact": cfg.engine.exact}
+                 "warm_start": cfg.model.warm_start, "exact": cfg.engine.exact, "batch": cfg.engine.batch}
     if parallel:  # an empty frame compiles every kernel into the cache the workers are given
         engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))
         engine = engine if keep_engine else None
@@ -347,7 +375,8 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
         f"{len(plan.frames)} frame{'' if len(plan.frames) == 1 else 's'}; background: {plan.background}; "
         f"inference at {i['image'][0]}x"
         f"{i['image'][1]} pixels (stride {i['stride']}{', ' + i['reduce'] if i['stride'] > 1 else ''}"
-        f"{', exact path' if cfg.engine.exact else ''})")
+        f"{', exact path' if cfg.engine.exact else ''}"
+        f"{f', {cfg.engine.batch} frames an engine call' if cfg.engine.batch > 1 else ''})")
     for f in plan.frames:
         record = out / "frames" / f"{f.stem}.json"
         if resume and record.exists():

@@ -15,6 +15,7 @@ import pytest
 import yaml
 from PIL import Image
 
+from dpom_warp.config import ConfigError
 from dpom_warp.cli import main
 from dpom_warp.io import TEMP_MARK, write_depth_png
 from dpom_warp.worker import CACHE_PREFIX
@@ -476,6 +477,27 @@ def test_batches_give_the_same_files_and_skip_bad_frames(tmp_path, scene, graph)
     summary = json.load(open(b / "summary.json"))
     assert [s["frame"] for s in summary["skipped"]] == ["0002.png"]
     assert summary["scores"] == json.load(open(a / "summary.json"))["scores"]
+    assert summary["inference"]["batch"] == 4  # as given; auto on the CPU: one frame a call
+    assert json.load(open(a / "summary.json"))["inference"]["batch"] == 1
+
+
+def test_auto_batch_is_a_gpus_and_shrinks_to_the_memory_budget(tmp_path, scene, monkeypatch):
+    """engine.batch auto: 16 frames a call for a recorded run on a GPU, one otherwise; where
+    engine.memory_gb holds fewer, halved until it holds them (given, the batch is refused
+    with the budget's error)."""
+    from dpom_warp import pipeline
+    from dpom_warp.api import Detector
+
+    assert pipeline.auto_batch("cuda:0", recorded=True) == 16
+    assert pipeline.auto_batch("cuda:0", recorded=False) == pipeline.auto_batch("cpu", recorded=True) == 1
+    path = write_config(tmp_path, scene[1])
+    held = {n: Detector.from_config(path, overrides={"engine.batch": n}).engine.memory_bytes() for n in (2, 8)}
+    budget = (held[2] + held[8]) / 2 / 2**30  # two frames' buffers fit, eight do not
+    with pytest.raises(ConfigError, match="engine.memory_gb: the engine needs at least"):
+        Detector.from_config(path, overrides={"engine.memory_gb": budget, "engine.batch": 8})
+    monkeypatch.setattr(pipeline, "auto_batch", lambda device, recorded: 8)  # (a GPU's choice, on the CPU)
+    det = Detector.from_config(path, overrides={"engine.memory_gb": budget})
+    assert 2 <= det.engine.batch < 8 and det.engine.memory_bytes() <= budget * 2**30
 
 
 def test_every_frame_over_max_entries_fails_and_leaves_nothing(tmp_path, scene, capsys):

@@ -173,7 +173,7 @@ def test_auto_stride_keeps_enough_pixels_on_the_farthest_object():
 
 def test_config_stride_reduce_and_exact(tmp_path):
     cfg = load_config(str(DEMO))
-    assert cfg.inputs.stride == "auto" and cfg.inputs.reduce == "median"
+    assert cfg.inputs.stride == "auto" and cfg.inputs.reduce == "median" and cfg.engine.batch == "auto"
     assert cfg.model.sparse_epsilon == 1e-4 and not cfg.model.warm_start
     exact = load_config(str(DEMO), ["engine.exact=true", "input.stride=3",
                                                      "model.warm_start=true"])
@@ -181,6 +181,8 @@ def test_config_stride_reduce_and_exact(tmp_path):
     assert load_config(str(DEMO), ["model.sparse_epsilon=1e-6"]).model.sparse_epsilon == 1e-6
     for sets, message in [(["input.stride=fast"], "input.stride: expected auto or an integer >= 1, found 'fast'"),
                           (["input.stride=0"], "input.stride: expected a value >= 1, found 0"),
+                          (["engine.batch=0"], "engine.batch: expected a value >= 1, found 0"),
+                          (["engine.batch=many"], "engine.batch: expected auto or an integer >= 1, found 'many'"),
                           (["input.reduce=mean"], "input.reduce: expected one of median, nearest, min, found 'mean'"),
                           (["model.sparse_epsilon=-1"], "model.sparse_epsilon: expected a value >= 0, found -1")]:
         with pytest.raises(ConfigError) as e:
