@@ -42,8 +42,9 @@ class Result:
         rho: the mean-field occupancy before the soft threshold, grid-shaped.
         iterations: mean-field iterations run.
         converged: False when the frame stopped at model.max_iterations above the tolerance.
-        timings: seconds: the engine's stages (`lists_s`, `iterations_s`, `threshold_s`),
-            `infer_s` (this frame's share of its engine call), `detect_s` and `total_s`.
+        timings: seconds: the engine's stages (`lists_s`, `iterations_s`, `threshold_s` and
+            within it `joint_lists_s`), `infer_s` (this frame's share of its engine call),
+            `detect_s` and `total_s`.
     """
 
     detections: list[Detected]
