@@ -115,9 +115,10 @@ def test_engine_hands_over_the_joint_tests_lists(device, frames):
     outside = int(np.flatnonzero(star < threshold)[0])
     with pytest.raises(ValueError, match="not among the frame's candidates"):
         res.joint.log_odds([candidates[0], outside])
-    engines[0].joint_threshold = float(star.max()) + 1e-3  # no candidate: nothing to copy
-    none = engines[0].infer(depth).joint
-    assert len(none.cells) == 0 and none.valid.size == 0 and len(none.log_odds([])) == 0
+    for e in (engines[0], engines[2]):  # no candidate: nothing to copy, either way
+        e.joint_threshold = float(star.max()) + 1e-3
+        none = e.infer(depth).joint
+        assert len(none.cells) == 0 and none.valid.size == 0 and len(none.log_odds([])) == 0
 
 
 def test_defaults_and_bad_values():
