@@ -950,8 +950,9 @@ class Engine:
         the lists in order (every frame taken) with each pixel's Delta_bg, and their readings
         behind (kernels.behind_count). A few launches and reads for the batch: on a GPU
         count, scan and fill (`compact`), whose slices come in pixel order, and the pixels
-        with entries placed in that order (kernels.sparse.place_active); on the CPU kernels.sparse.compact_once in one pass, its slices
-        placed by atomic adds (in pixel order on one thread, sorted to be sure)."""
+        with entries placed in that order (kernels.sparse.place_active); on the CPU
+        kernels.sparse.compact_once in one pass, its slices placed by atomic adds (in pixel
+        order on one thread, sorted to be sure)."""
         n, locations = len(rho_star), self.n_locations
         marked = np.zeros((self.batch, locations), np.int32)
         marked[:n] = np.asarray(rho_star, np.float32) >= self.joint_threshold

@@ -30,6 +30,7 @@ __all__ = [
     "background_delta", "background_from_frames", "behind_count", "behind_points", "bound_pass", "check_converged",
     "cluster_background", "cluster_frames", "compact_again", "compact_once", "count_entries", "count_iteration",
     "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background", "gather_live", "has_entries",
-    "keep_better_top", "mark_idle", "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "place_active", "prune", "prune_lists", "reduce_frames",
-    "soft_threshold", "table_pairs", "table_window", "top_band", "transparency_pass", "update_bound", "update_rho",
+    "keep_better_top", "mark_idle", "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "place_active", "prune",
+    "prune_lists", "reduce_frames", "soft_threshold", "table_pairs", "table_window", "top_band", "transparency_pass",
+    "update_bound", "update_rho",
 ]
