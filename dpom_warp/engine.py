@@ -952,7 +952,7 @@ class Engine:
         count, scan and fill (`compact`), whose slices come in pixel order, and the pixels
         with entries placed in that order (kernels.sparse.place_active); on the CPU
         kernels.sparse.compact_once in one pass, its slices placed by atomic adds (in pixel
-        order on one thread, sorted to be sure)."""
+        order on one thread, sorted to be sure) and read through NumPy views of the arrays."""
         n, locations = len(rho_star), self.n_locations
         marked = np.zeros((self.batch, locations), np.int32)
         marked[:n] = np.asarray(rho_star, np.float32) >= self.joint_threshold
@@ -979,19 +979,17 @@ class Engine:
                           self.not_done, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
                           self.active, self.live_count])
             _, entries, pixels = (int(x) for x in self.live_count.numpy())
-            index = self.active[:pixels]
-            active = index.numpy()
-            order = np.argsort(active)
-            active = active[order]
-            first, count, dbg = (a[index].numpy()[order] for a in (self.live_offsets, self.live_counts, self.delta_bg))
+            active = np.sort(self.active[:pixels].numpy())
+            first, count, dbg = (a.numpy()[active] for a in (self.live_offsets, self.live_counts, self.delta_bg))
             at = np.repeat(first, count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
             loc, delta = self.live_loc[:entries].numpy()[at], self.live_delta[:entries].numpy()[at]
         p = self.params
-        behind = np.zeros((self.batch, locations))
         if p.behind_cost > 0:  # counted for every candidate (n_behind leaves out locations in no list)
             self._launch(K.behind_count, len(self.candidate),
                          [self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu, self.behind_var,
                           self.behind_half, p.behind_step, self.candidate, self.candidate_behind])
             behind = p.behind_cost * self.candidate_behind.numpy().reshape(self.batch, locations).astype(np.float64)
+        else:
+            behind = np.zeros((self.batch, locations))
         return JointLists.of_batch(np.flatnonzero(marked[:n]), active, count, loc, delta, dbg, behind[:n],
                                    self.geometry.locations, p, locations, self.n_pixels)
