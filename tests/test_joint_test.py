@@ -97,11 +97,11 @@ def test_engine_hands_over_the_joint_tests_lists(device, frames):
     candidates = np.flatnonzero(star >= threshold)
     np.testing.assert_array_equal(res.joint.cells, candidates)
     np.testing.assert_array_equal(batch[1].joint.cells, candidates)
-    for field in ("cells", "valid", "L", "D", "dbg", "behind", "locations"):  # a batch's lists: the frame's alone
+    for field in ("cells", "count", "L", "D", "dbg", "behind", "locations"):  # a batch's lists: the frame's alone
         np.testing.assert_array_equal(getattr(batch[1].joint, field), getattr(res.joint, field))
     alone = engines[0].infer(bg_frames[0]).joint  # (the first frame's, fewer candidates or none)
     other = engines[2].infer_batch(np.stack([bg_frames[0], depth]))  # (count, scan, fill or compact_once)
-    for field in ("cells", "valid", "L", "D", "dbg", "behind", "locations"):
+    for field in ("cells", "count", "L", "D", "dbg", "behind", "locations"):
         np.testing.assert_array_equal(getattr(batch[0].joint, field), getattr(alone, field))
         for f in (0, 1):
             np.testing.assert_array_equal(getattr(other[f].joint, field), getattr(batch[f].joint, field))
@@ -118,7 +118,7 @@ def test_engine_hands_over_the_joint_tests_lists(device, frames):
     for e in (engines[0], engines[2]):  # no candidate: nothing to copy, either way
         e.joint_threshold = float(star.max()) + 1e-3
         none = e.infer(depth).joint
-        assert len(none.cells) == 0 and none.valid.size == 0 and len(none.log_odds([])) == 0
+        assert len(none.cells) == 0 and none.count.size == 0 and len(none.log_odds([])) == 0
 
 
 def test_defaults_and_bad_values():
