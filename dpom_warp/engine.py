@@ -217,6 +217,11 @@ class Engine:
         # the per-frame work since batched, half a batched frame's time on an H200), in one
         # pass on the CPU (in order there)
         self.ordered_joint_lists = wp.get_device(device).is_cuda
+        # the top band counted a thread per row of each rectangle on a GPU (kernels.top_band_rows:
+        # a thread per location, walking its whole rectangle, was the threshold step's longest
+        # kernel there), a thread per location on the CPU (one thread: the rows' launch would be
+        # the tallest rectangle's rows times longer for nothing)
+        self.top_band_by_row = wp.get_device(device).is_cuda
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
         self.sparse_on_lists = False  # the sparse passes walk the lists (nothing has died yet)
@@ -286,6 +291,7 @@ class Engine:
             self.shorter_top = [(h, self._geometry_arrays(geometry.shorter(h), self.geo)) for h in params.top_heights
                                 if geometry.height > 0]
             self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(5 if self.shorter_top else 0)]
+            self.top_rows = int((geometry.rect[:, 3] - geometry.rect[:, 1]).max(initial=-1)) + 1  # (shared)
             self.all_support = wp.zeros(L, dtype=wp.int32)  # the same counts, whole silhouette
             self.all_against = wp.zeros(L, dtype=wp.int32)
             self.all_hidden = wp.zeros(L, dtype=wp.int32)
@@ -899,9 +905,14 @@ class Engine:
                           self.rho_star])
 
         def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
-            self._launch(K.top_band, self.batch * self.n_locations,
-                         [self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]),
-                          lo, hi, TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate, *counts, self.forward])
+            args = [self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]), lo, hi,
+                    TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate]
+            if self.top_band_by_row:
+                self._launch(K.top_band_clear, self.batch * self.n_locations, [gate, TOP_MIN_RHO, *counts])
+                self._launch(K.top_band_rows, self.batch * self.n_locations * self.top_rows,
+                             [*args, self.top_rows, *counts, self.forward])
+            else:
+                self._launch(K.top_band, self.batch * self.n_locations, [*args, *counts, self.forward])
 
         if unhidden:
             top_band(-BAND_ALL, BAND_ALL, self.rho,

@@ -20,7 +20,8 @@ from .frames import reduce_frames
 from .masks import (PixelTable, TablePair, TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once, table_pairs,
                     table_window)
 from .mean_field import (ONE_STACK, SIZED_STACK, behind_count, behind_points, check_converged, evidence_pass, exclusion_pass,
-                         keep_better_top, soft_threshold, top_band, transparency_pass, update_rho)
+                         keep_better_top, soft_threshold, top_band, top_band_clear, top_band_rows,
+                         transparency_pass, update_rho)
 from .pixel_model import GeometryArrays, PixelModel
 from .sparse import (IDLE, PRUNED, bound_pass, compact_again, compact_once, count_entries, count_iteration, count_live,
                      fill_live, gather_live, has_entries, mark_idle, place_active, prune, prune_lists, update_bound)
@@ -31,6 +32,7 @@ __all__ = [
     "cluster_background", "cluster_frames", "compact_again", "compact_once", "count_entries", "count_iteration",
     "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background", "gather_live", "has_entries",
     "keep_better_top", "mark_idle", "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "place_active", "prune",
-    "prune_lists", "reduce_frames", "soft_threshold", "table_pairs", "table_window", "top_band", "transparency_pass",
+    "prune_lists", "reduce_frames", "soft_threshold", "table_pairs", "table_window", "top_band", "top_band_clear",
+    "top_band_rows", "transparency_pass",
     "update_bound", "update_rho",
 ]

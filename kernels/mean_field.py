@@ -35,6 +35,7 @@ ONE_STACK, SIZED_STACK = 1, 2  # `local` of the passes: one stack size (LOCAL_EN
 LocalScratch16 = wp.types.vector(length=LOCAL_SHORT, dtype=wp.float64)
 LocalScratch48 = wp.types.vector(length=LOCAL_MEDIUM, dtype=wp.float64)
 LocalScratch = wp.types.vector(length=LOCAL_ENTRIES, dtype=wp.float64)
+BandCounts = wp.types.vector(length=5, dtype=wp.int32)  # support, against, hidden, missing, seen
 
 
 @wp.func
@@ -464,6 +465,42 @@ def behind_count(
     behind[i] = n
 
 
+@wp.func
+def band_row(depth: wp.array3d(dtype=wp.float32), geo: GeometryArrays, pm: PixelModel, b: int, k: int, v: int,
+             r: wp.vec4i, span: wp.vec2d, centre_z: wp.float64, lo: wp.float64, hi: wp.float64,
+             support_sigmas: wp.float64, bg: wp.array2d(dtype=wp.float64), missing_read: wp.float64) -> BandCounts:
+    """top_band's counts (support, against, hidden, missing, seen) of row v of location k's
+    rectangle r in frame b; with the solid, a row none of whose points can lie in the band
+    (row_may_reach, `span` its solid_depth_span) counts nothing."""
+    s = int(0)
+    a = int(0)
+    f = int(0)
+    m = int(0)
+    n = int(0)
+    if geo.solid == 1 and not row_may_reach(geo, v, r[0], r[2], 1, centre_z, span, lo, hi):
+        return BandCounts(0, 0, 0, 0, 0)
+    for u in range(r[0], r[2] + 1):
+        d = geo.rays[v, u]
+        o = object_depth(geo, k, d)
+        mu = o[0]
+        if mu > f64(0.0):
+            h = centre_z + mu * d[2]
+            z = f64(depth[b, v, u])
+            if h >= lo and h <= hi:
+                n += 1
+                cls = reading_class(pm, z, mu, o[1], support_sigmas)
+                if cls == SUPPORTS:
+                    s += 1
+                elif cls == BEHIND:
+                    a += 1
+                elif cls == IN_FRONT:
+                    f += 1
+                elif mu <= pm.z_max:
+                    if bg[(b * depth.shape[1] + v) * depth.shape[2] + u, 2] < missing_read:
+                        m += 1
+    return BandCounts(s, a, f, m, n)
+
+
 @wp.kernel(enable_backward=False)
 def top_band(
     depth: wp.array3d(dtype=wp.float32),
@@ -501,45 +538,89 @@ def top_band(
     n_loc = geo.rect.shape[0]
     b = i / n_loc
     k = i - b * n_loc
-    s = int(0)
-    a = int(0)
-    f = int(0)
-    m = int(0)
-    n = int(0)
+    c = BandCounts()
     if rho[i] >= min_rho:
         r = geo.rect[k]
         span = solid_depth_span(geo, k, forward)
         for v in range(r[1], r[3] + 1):
-            # with the solid, a row none of whose points can lie in the band is skipped
-            if geo.solid == 1 and not row_may_reach(geo, v, r[0], r[2], 1, centre_z, span, lo, hi):
-                continue
-            for u in range(r[0], r[2] + 1):
-                d = geo.rays[v, u]
-                o = object_depth(geo, k, d)
-                mu = o[0]
-                if mu > f64(0.0):
-                    h = centre_z + mu * d[2]
-                    z = f64(depth[b, v, u])
-                    if h >= lo and h <= hi:
-                        n += 1
-                        c = reading_class(pm, z, mu, o[1], support_sigmas)
-                        if c == SUPPORTS:
-                            s += 1
-                        elif c == BEHIND:
-                            a += 1
-                        elif c == IN_FRONT:
-                            f += 1
-                        elif mu <= pm.z_max:
-                            if bg[(b * depth.shape[1] + v) * depth.shape[2] + u, 2] < missing_read:
-                                m += 1
-    support[i] = s
-    against[i] = a
-    hidden[i] = f
-    missing[i] = m
+            c = c + band_row(depth, geo, pm, b, k, v, r, span, centre_z, lo, hi, support_sigmas, bg,
+                             missing_read)
+    support[i] = c[0]
+    against[i] = c[1]
+    hidden[i] = c[2]
+    missing[i] = c[3]
     if rho[i] >= min_rho:
-        seen[i] = n
+        seen[i] = c[4]
     else:
         seen[i] = -1
+
+
+@wp.kernel(enable_backward=False)
+def top_band_clear(
+    rho: wp.array(dtype=wp.float64),
+    min_rho: wp.float64,
+    support: wp.array(dtype=wp.int32),
+    against: wp.array(dtype=wp.int32),
+    hidden: wp.array(dtype=wp.int32),
+    missing: wp.array(dtype=wp.int32),
+    seen: wp.array(dtype=wp.int32),
+):
+    """top_band_rows' start: each location's counts 0, and seen -1 where rho < min_rho (not
+    counted), as top_band leaves them."""
+    i = wp.tid()
+    support[i] = 0
+    against[i] = 0
+    hidden[i] = 0
+    missing[i] = 0
+    if rho[i] >= min_rho:
+        seen[i] = 0
+    else:
+        seen[i] = -1
+
+
+@wp.kernel(enable_backward=False)
+def top_band_rows(
+    depth: wp.array3d(dtype=wp.float32),
+    geo: GeometryArrays,
+    pm: PixelModel,
+    centre_z: wp.float64,
+    lo: wp.float64,
+    hi: wp.float64,
+    min_rho: wp.float64,
+    support_sigmas: wp.float64,
+    bg: wp.array2d(dtype=wp.float64),
+    missing_read: wp.float64,
+    rho: wp.array(dtype=wp.float64),
+    rows: int,
+    support: wp.array(dtype=wp.int32),
+    against: wp.array(dtype=wp.int32),
+    hidden: wp.array(dtype=wp.int32),
+    missing: wp.array(dtype=wp.int32),
+    seen: wp.array(dtype=wp.int32),
+    forward: wp.vec3d,
+):
+    """top_band's counts with one thread per row of each location's rectangle (`rows`: the
+    tallest rectangle's; top_band_clear first), added atomically: the same integers. For a
+    GPU, where one thread walking a whole rectangle was the threshold step's longest kernel."""
+    t = wp.tid()
+    i = t / rows
+    if rho[i] < min_rho:
+        return
+    n_loc = geo.rect.shape[0]
+    b = i / n_loc
+    k = i - b * n_loc
+    r = geo.rect[k]
+    v = r[1] + t - i * rows
+    if v > r[3]:
+        return
+    c = band_row(depth, geo, pm, b, k, v, r, solid_depth_span(geo, k, forward), centre_z, lo, hi, support_sigmas,
+                 bg, missing_read)
+    if c[4] > 0:
+        wp.atomic_add(support, i, c[0])
+        wp.atomic_add(against, i, c[1])
+        wp.atomic_add(hidden, i, c[2])
+        wp.atomic_add(missing, i, c[3])
+        wp.atomic_add(seen, i, c[4])
 
 
 @wp.func

@@ -29,10 +29,12 @@ def with_low_slabs(seed):
 
 @pytest.mark.parametrize("sigmas", [0.0, 1.5])
 @pytest.mark.parametrize("seed", [0, 1, 2, 9])  # scenes where bands are judged both ways
-def test_top_band_matches_reference(device, seed, sigmas):
+@pytest.mark.parametrize("by_row", [False, True])  # a thread a location (the CPU's) or a row (a GPU's)
+def test_top_band_matches_reference(device, seed, sigmas, by_row):
     geom, params, depth = with_low_slabs(seed)
     params = dataclasses.replace(params, sparse_epsilon=0.0, top_support=0.3, top_sigmas=sigmas)
     engine = Engine(geom, params, device)
+    engine.top_band_by_row = by_row
     got = engine.infer(depth)
     want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
     np.testing.assert_array_equal(engine.top_support.numpy(), want["top_support"])
@@ -41,6 +43,7 @@ def test_top_band_matches_reference(device, seed, sigmas):
     np.testing.assert_array_equal(engine.top_missing.numpy(), want["top_missing"])
     np.testing.assert_array_equal(engine.top_seen.numpy(), want["top_seen"])
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    assert (want["top_missing"] > 0).any() and (want["top_seen"] == -1).any()  # every count exercised
     judged = want["top_support"] + want["top_against"] + want["top_hidden"]
     assert np.all(judged[want["rho"] < TOP_MIN_RHO] == 0)
     # exercised: some bands judged for and some against (share above and below top_support)

@@ -314,9 +314,12 @@ def test_unhidden_share_matches_reference(device, seed, shape):
     params = dataclasses.replace(params, share_of="unhidden")
     bg = ref.floor_background(geom, params, depth)
     want = ref.mean_field(depth, geom, bg, params)
-    got = Engine(geom, params, device).infer(depth)
-    np.testing.assert_allclose(got.evidence_share, want["evidence_share"], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    engine = Engine(geom, params, device)
+    for by_row in (False, True):  # the band's counts a thread a location or a rectangle's row
+        engine.top_band_by_row = by_row
+        got = engine.infer(depth)
+        np.testing.assert_allclose(got.evidence_share, want["evidence_share"], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, share_of="silhouette"))
     assert np.any(want["evidence_share"] > plain["evidence_share"] + 1e-3)
 
@@ -461,10 +464,12 @@ def test_shorter_top_bands_match_reference(device, seed, shape, path):
     engine.set_background_frames(bg_frames)
     bg = ref.background_from_frames(bg_frames, params)
     want = ref.mean_field(depth, geom, bg, params)
-    got = engine.infer(depth)
-    for key in ("top_support", "top_against", "top_hidden", "top_missing", "top_seen"):
-        np.testing.assert_array_equal(getattr(engine, key).numpy(), want[key], err_msg=key)
-    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    for by_row in (False, True):  # a thread a location (the CPU's) or a rectangle's row (a GPU's)
+        engine.top_band_by_row = by_row
+        got = engine.infer(depth)
+        for key in ("top_support", "top_against", "top_hidden", "top_missing", "top_seen"):
+            np.testing.assert_array_equal(getattr(engine, key).numpy(), want[key], err_msg=key)
+        np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, top_heights=()))
     kept_shorter = np.any([want[k] != plain[k] for k in ("top_support", "top_against", "top_hidden")], axis=0)
     assert kept_shorter.any(), "no location kept a shorter band: the choice is not exercised"
