@@ -309,6 +309,8 @@ class Engine:
             self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
             self.kept_index = wp.zeros(L, dtype=wp.int32)
             self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.prune_lists
+            # each frame's entries, live, pruned and kept entries (kernels.sparse.frame_tally)
+            self.tallies = wp.zeros((4, batch), dtype=wp.int32)
             self.listed = wp.zeros(P, dtype=wp.int32)  # pixels whose list keeps an entry (prune_lists)
             self.n_listed_out = wp.zeros(1, dtype=wp.int32)
             self.live_count = wp.zeros(3, dtype=wp.int32)  # live locations, compact entries, active pixels
@@ -859,7 +861,8 @@ class Engine:
         n = len(depths_m)
         t0 = time.perf_counter()
         self.build_lists(depths_m)
-        entries = self.counts.numpy().reshape(self.batch, self.n_pixels).sum(1)  # (a view on the CPU: summed now)
+        self.tallies.zero_()  # (the entries counted now: the bound's pruning changes the counts)
+        self._launch(K.frame_tally, self.batch * self.n_pixels, [self.counts, self.n_pixels, K.TALLY_SUM, self.tallies, 0])
         wp.synchronize_device(dev)
         t1 = time.perf_counter()
         if start is None and p.warm_start and self._last_rho is not None:
@@ -931,13 +934,20 @@ class Engine:
                              [*counts, *self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
                               p.top_min_pixels, p.top_unseen, self.area, p.top_unseen_part])
         soft_threshold(top)
-        rho, rho_star, share = (a.numpy().reshape(self.batch, self.n_locations)
+        # each frame's live and pruned locations and the entries prune_lists kept, counted by
+        # location, tallied where they are (a GPU copies back a few integers, not the arrays)
+        dim = self.batch * self.n_locations
+        self._launch(K.frame_tally, dim, [self.live, self.n_locations, 1, self.tallies, 1])
+        self._launch(K.frame_tally, dim, [self.live, self.n_locations, K.PRUNED, self.tallies, 2])
+        if bound:
+            self._launch(K.frame_tally, dim, [self.per_location, self.n_locations, K.TALLY_SUM, self.tallies, 3])
+        entries, live, pruned, kept = self.tallies.numpy()
+        kept = kept if bound else [None] * self.batch
+        # the maps: a GPU's copies are the host's own (each frame's a row of them), the CPU's are
+        # views of the engine's arrays (copied, as the next call rewrites them)
+        rho, rho_star, share = (self._host(a).reshape(self.batch, self.n_locations)
                                 for a in (self.rho, self.rho_star, self.share))
         iterations, max_change, done = self.iterations.numpy(), self.max_change.numpy(), self.done.numpy()
-        live = self.live.numpy().reshape(self.batch, self.n_locations)
-        pruned, live = (live == K.PRUNED).sum(1), (live == 1).sum(1)
-        # (the entries prune_lists kept, counted by location: a GPU copies back less than the counts)
-        kept = self.per_location.numpy().reshape(self.batch, self.n_locations).sum(1) if bound else [None] * self.batch
         self._last_rho = rho[n - 1].copy()
         tj = time.perf_counter()
         joint = [None] * n if self.joint_threshold is None else self.joint_lists(rho_star[:n])
@@ -947,13 +957,18 @@ class Engine:
                    "total_s": t3 - t0}
         if self.batch > 1:
             timings["batch"] = n
-        return [FrameResult(rho=rho[f].copy(), rho_star=rho_star[f].copy(), evidence_share=share[f].copy(),
+        return [FrameResult(rho=rho[f], rho_star=rho_star[f], evidence_share=share[f],
                             iterations=int(iterations[f]), entries=int(entries[f]),
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
                             live=int(live[f]), converged=bool(done[f]),
                             kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]),
                             joint=joint[f])
                 for f in range(n)]
+
+    @staticmethod
+    def _host(a: wp.array) -> np.ndarray:
+        """A host array of `a`'s values that the engine's next call leaves alone."""
+        return a.numpy() if a.device.is_cuda else a.numpy().copy()
 
     def joint_lists(self, rho_star: np.ndarray) -> list[JointLists]:
         """After a batch's inference, each frame's JointLists for the locations whose rho*

@@ -23,14 +23,17 @@ from .mean_field import (ONE_STACK, SIZED_STACK, behind_count, behind_points, ch
                          keep_better_top, soft_threshold, top_band, top_band_clear, top_band_rows,
                          transparency_pass, update_rho)
 from .pixel_model import GeometryArrays, PixelModel
-from .sparse import (IDLE, PRUNED, bound_pass, compact_again, compact_once, count_entries, count_iteration, count_live,
-                     fill_live, gather_live, has_entries, mark_idle, place_active, prune, prune_lists, update_bound)
+from .sparse import (IDLE, PRUNED, TALLY_SUM, bound_pass, compact_again, compact_once, count_entries, count_iteration,
+                     count_live, fill_live, frame_tally, gather_live, has_entries, mark_idle, place_active, prune,
+                     prune_lists, update_bound)
 
 __all__ = [
-    "GeometryArrays", "IDLE", "ONE_STACK", "PRUNED", "SIZED_STACK", "PixelModel", "PixelTable", "TablePair", "TileIndex",
+    "GeometryArrays", "IDLE", "ONE_STACK", "PRUNED", "SIZED_STACK", "TALLY_SUM", "PixelModel", "PixelTable", "TablePair",
+    "TileIndex",
     "background_delta", "background_from_frames", "behind_count", "behind_points", "bound_pass", "check_converged",
     "cluster_background", "cluster_frames", "compact_again", "compact_once", "count_entries", "count_iteration",
-    "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background", "gather_live", "has_entries",
+    "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background", "frame_tally", "gather_live",
+    "has_entries",
     "keep_better_top", "mark_idle", "pair_depth_bounds", "pixel_entries", "pixel_entries_once", "place_active", "prune",
     "prune_lists", "reduce_frames", "soft_threshold", "table_pairs", "table_window", "top_band", "top_band_clear",
     "top_band_rows", "transparency_pass",

@@ -390,3 +390,21 @@ def place_active(live_counts: wp.array(dtype=wp.int32), rank: wp.array(dtype=wp.
     if n > 0:
         active[rank[p] - 1] = p
         active_counts[rank[p] - 1] = n
+
+
+TALLY_SUM = wp.constant(-(1 << 30))  # frame_tally's code for a sum (no live[k] code is that)
+
+
+@wp.kernel(enable_backward=False)
+def frame_tally(values: wp.array(dtype=wp.int32), per_frame: int, code: int, out: wp.array2d(dtype=wp.int32),
+                slot: int):
+    """Each frame's tally of `values` (frame i / per_frame) added to out[slot, frame]: their
+    sum with code TALLY_SUM, else how many equal `code`: the counts a frame's result reports,
+    without copying the per-pixel or per-location arrays back from a GPU."""
+    i = wp.tid()
+    v = values[i]
+    if code == TALLY_SUM:
+        if v != 0:
+            wp.atomic_add(out, slot, i / per_frame, v)
+    elif v == code:
+        wp.atomic_add(out, slot, i / per_frame, 1)

@@ -263,14 +263,21 @@ def test_batch_gives_each_frame_its_own_result(device, graph):
     assert len({w.iterations for w in want}) > 1, "frames should converge at different iterations"
     engine = Engine(geom, params, device, batch=4, graph=graph)
     engine.set_background_frames(frames)
+    calls = []
     for n in (3, 2):
         got = engine.infer_batch(depths[:n])
+        calls.append((got, [g.rho.copy() for g in got]))
         assert len(got) == n
         for g, w in zip(got, want):
-            assert (g.iterations, g.entries) == (w.iterations, w.entries)
+            assert (g.iterations, g.entries, g.live, g.pruned, g.kept_entries) == (
+                w.iterations, w.entries, w.live, w.pruned, w.kept_entries)
             np.testing.assert_allclose(g.rho, w.rho, rtol=0, atol=1e-12)
             np.testing.assert_allclose(g.rho_star, w.rho_star, rtol=0, atol=1e-12)
             np.testing.assert_allclose(g.max_change, w.max_change, rtol=0, atol=1e-12)
+    for got, rho in calls:  # a call's results are its own: the next call changes none of them
+        for g, r in zip(got, rho):
+            np.testing.assert_array_equal(g.rho, r)
+    assert not np.shares_memory(calls[0][0][0].rho, calls[1][0][0].rho)
 
 
 def test_graph_is_recaptured_when_the_lists_grow(device):
