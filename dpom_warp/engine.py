@@ -910,7 +910,8 @@ class Engine:
         def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
             args = [self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]), lo, hi,
                     TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate]
-            if self.top_band_by_row:
+            # (a thread a row while the launch's thread indices fit Warp's 32-bit tid)
+            if self.top_band_by_row and self.batch * self.n_locations * self.top_rows < 2 ** 31:
                 self._launch(K.top_band_clear, self.batch * self.n_locations, [gate, TOP_MIN_RHO, *counts])
                 self._launch(K.top_band_rows, self.batch * self.n_locations * self.top_rows,
                              [*args, self.top_rows, *counts, self.forward])
