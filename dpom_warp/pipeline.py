@@ -261,9 +261,10 @@ def warn_depth_scale(cfg: RunConfig, path, depth: np.ndarray | None, log=print) 
         log(f"warning: {path}: {hint}")
 
 
-# engine.batch: auto on a GPU for a recorded run: on an H200 (docs/bench_cuda_h200.md) a kinect_v2
-# frame took 9.0 ms alone and 1.5 ms in a call of 16 (1.2 ms at 32, 1.05 at 128: little more
-# for a latency and memory 2 to 8 times larger)
+# engine.batch: auto on a GPU for a recorded run: on an H200 (docs/bench_cuda_h200.md, third
+# lease) a kinect_v2 frame took 4.9 ms alone and 1.1 ms in a call of 16 (0.83 ms at 32, 0.54 at
+# 128, for a latency and memory 2 to 8 times larger: a run's reading, detection and writing on
+# the host take longer than that a frame)
 GPU_BATCH = 16
 
 
