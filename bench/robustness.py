@@ -6,7 +6,7 @@ rendered sequence, and reports MODA / precision / recall at 0.5 m.
 
     python -m bench.robustness [--frames 10] [--jobs 2] [--output runs/robustness]
                                [--background frames|auto|floor] [--set key.path=value ...] [--name NAME]
-                               [--tuning]
+                               [--tuning] [--device cpu|cuda:N] [--no-baseline]
 
 --background: the empty room's frames (default), `input.background: auto` (estimated from the
 variant's own frames), or the floor-only model (`--floor-only` is the same).
@@ -14,7 +14,9 @@ variant's own frames), or the floor-only model (`--floor-only` is the same).
 `--set` applies config overrides to every variant (e.g. `--set engine.exact=true` for the
 exact path); results go to OUTPUT/NAME.json and .md. `--tuning` runs another draw of every
 scene (seeds + 1000), on which the model's defaults were chosen; the tables report the draw
-above, which no parameter was chosen on.
+above, which no parameter was chosen on. `--device cuda:0` runs the variants' inference on a GPU
+(the same table, to compare a GPU's detections with the CPU's); `--no-baseline` leaves out the
+clustering baseline's column (it needs Open3D).
 """
 
 from __future__ import annotations
@@ -82,6 +84,8 @@ def scene_sets(name: str, overrides: list[str], frames: int, background: str, tu
 def run_variant(args):
     name, overrides, frames, out, background, extra = args[:6]
     tuning = len(args) > 6 and args[6]
+    device = args[7] if len(args) > 7 else "cpu"
+    baseline = len(args) <= 8 or args[8]
     import os
 
     os.environ.setdefault("WARP_CACHE_PATH", str(Path(".cache") / f"warp-{os.getpid()}"))
@@ -92,7 +96,7 @@ def run_variant(args):
     sets = scene_sets(name, overrides, frames, background, tuning) + list(extra)
     cfg = load_config("configs/demo_people.yaml", sets)
     tag = "_".join(x.replace("/", "-") for x in extra)
-    summary = run(cfg, str(Path(out) / slug / ({"frames": "bg"}.get(background, background) + tag)), "cpu",
+    summary = run(cfg, str(Path(out) / slug / ({"frames": "bg"}.get(background, background) + tag)), device,
                   progress=False, log=lambda *_: None, overwrite=True)
     s = summary["scores"]
     result = {k: s[k] for k in ("moda", "precision", "recall", "mean_error_m", "n_gt")} | {
@@ -101,7 +105,7 @@ def run_variant(args):
         "median_entries": summary["timings"]["median_entries"],
         "median_kept_entries": summary["timings"]["median_kept_entries"],
         "stride": summary["inference"]["stride"]}
-    if background == "frames" and not extra:  # the same frames through the clustering baseline
+    if baseline and background == "frames" and not extra:  # the same frames through the clustering baseline
         from bench.baseline import score_config
 
         b = score_config(cfg)
@@ -123,9 +127,12 @@ def main():
     ap.add_argument("--tuning", action="store_true",
                     help="the tuning draw: every scene with seed + 1000 (cached apart), for choosing "
                          "parameters without looking at the reported scenes")
+    ap.add_argument("--device", default="cpu", help="the variants' inference device: cpu or cuda:N")
+    ap.add_argument("--no-baseline", action="store_true", help="leave out the clustering baseline (needs Open3D)")
     a = ap.parse_args()
     background = "floor" if a.floor_only else a.background
-    jobs = [(n, o, a.frames, a.output, background, a.set, a.tuning) for n, o in VARIANTS.items()]
+    jobs = [(n, o, a.frames, a.output, background, a.set, a.tuning, a.device, not a.no_baseline)
+            for n, o in VARIANTS.items()]
     with ProcessPoolExecutor(a.jobs) as pool:
         results = dict(pool.map(run_variant, jobs))
     lines = ["| scene | people | MODA | precision | recall | mean error (m) | stride | median s/frame "
@@ -142,7 +149,7 @@ def main():
     lines.append(f"\nMODA over {len(modas)} variants: median {statistics.median(modas):.3f}, "
                  f"min {min(modas):.3f}, max {max(modas):.3f} "
                  f"({BACKGROUNDS[background]}"
-                 f"{'; ' + ', '.join(a.set) if a.set else ''})")
+                 f"{'; ' + ', '.join(a.set) if a.set else ''}; device {a.device})")
     print("\n".join(lines))
     Path(a.output).mkdir(parents=True, exist_ok=True)
     name = a.name or {"frames": "robustness", "auto": "robustness_auto", "floor": "robustness_floor"}[background]
