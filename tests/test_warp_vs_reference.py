@@ -614,3 +614,26 @@ def test_place_active_is_flatnonzero_in_order(device):
         want = np.flatnonzero(counts)
         np.testing.assert_array_equal(active.numpy()[:n], want)
         np.testing.assert_array_equal(active_counts.numpy()[:n], counts[want])
+
+
+def test_frame_tally_is_numpys_per_frame_sum_and_count(device):
+    """kernels.sparse.frame_tally adds each frame's sum of its values (TALLY_SUM) or count of
+    one code into its slot, as NumPy's per-row sum and count, on every device: the counts a
+    batch's results report (entries, live, pruned, kept)."""
+    import warp as wp
+    from dpom_warp import kernels as K
+
+    rng = np.random.default_rng(5)
+    frames, per_frame = 5, 997
+    values = rng.integers(-2, 40, frames * per_frame).astype(np.int32)
+    values[per_frame:2 * per_frame] = 0  # a frame with nothing
+    out = wp.zeros((4, frames), dtype=wp.int32, device=device)
+    a = wp.array(values, dtype=wp.int32, device=device)
+    for slot, code in enumerate((K.TALLY_SUM, 1, K.PRUNED, K.IDLE)):
+        wp.launch(K.frame_tally, len(values), [a, per_frame, code, out, slot], device=device)
+    rows = values.reshape(frames, per_frame)
+    got = out.numpy()
+    np.testing.assert_array_equal(got[0], rows.sum(1))
+    for slot, code in ((1, 1), (2, K.PRUNED), (3, K.IDLE)):
+        np.testing.assert_array_equal(got[slot], (rows == code).sum(1))
+    assert got[0, 1] == 0 and (got[1:, 0] > 0).all()
