@@ -268,13 +268,9 @@ def sigmoid(x):
 
 
 def _padded_lists(pixel, loc, delta):
-    """Per-pixel lists as (P_active, L) arrays padded with a transparent entry (rho = 0)."""
+    """Per-pixel lists as (P_active, L) arrays padded with a transparent entry (rho = 0):
+    (pixels, valid, L, D), from entries grouped by pixel, pixels ascending."""
     pix, count = np.unique(pixel, return_counts=True)
-    return (pix,) + _pad(count, loc, delta)
-
-
-def _pad(count, loc, delta):
-    """(valid, L, D) of lists of `count` entries each, given one after another."""
     width = int(count.max()) if len(count) else 0
     flat = np.arange(int(count.sum())) + np.repeat(np.arange(len(count)) * width - (np.cumsum(count) - count), count)
     valid = np.arange(width) < np.asarray(count)[:, None]
@@ -282,7 +278,7 @@ def _pad(count, loc, delta):
     D = np.zeros(len(count) * width)
     L[flat] = loc
     D[flat] = delta
-    return valid, L.reshape(len(count), width), D.reshape(len(count), width)
+    return pix, valid, L.reshape(len(count), width), D.reshape(len(count), width)
 
 
 def front_transparency(r):
