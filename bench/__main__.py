@@ -69,9 +69,9 @@ def median_time(fn, repeats):
 
 def load_scene(name, extra=()):
     """(config, first frame, background frames) of a standard scene, rendered if needed."""
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.io import read_depth
-    from dpom_warp.pipeline import expand
+    from dpom_warp.sources import expand
     from dpom_warp.synthetic import generate
 
     path, sets = SCENES[name]
@@ -93,7 +93,7 @@ def scene_frames(name, n, with_truth=False):
     ground truth."""
     from dpom_warp.evaluate import load_ground_truth
     from dpom_warp.io import read_depth
-    from dpom_warp.pipeline import expand
+    from dpom_warp.sources import expand
 
     cache = f".cache/bench/{name}_seq"
     cfg, _, bg = load_scene(name, [f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
@@ -113,7 +113,7 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     reduced by the engine inside the timed whole frame, as a run does (on a GPU by a kernel)."""
     import warp as wp
 
-    from dpom_warp.pipeline import make_engine
+    from dpom_warp.worker import make_engine
 
     cfg = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, graph="off"))
     t = time.perf_counter()
@@ -185,7 +185,7 @@ def ingredient_times(name, stride, device, repeats, table=True):
     import dataclasses as dc
 
     from dpom_warp import kernels as K
-    from dpom_warp.pipeline import make_engine
+    from dpom_warp.worker import make_engine
 
     engines = {}
     for key, sets in INGREDIENTS.items():
@@ -218,7 +218,7 @@ def batch_sweep(cfg, seq, device, repeats, sizes):
     same work a frame: the figure is time, not MODA). The parts are Engine.infer_batch's
     timings (the lists with the reduction, the iterations, the threshold and within it the joint
     test's lists) and the rest of the call (its results' copies)."""
-    from dpom_warp.pipeline import make_engine
+    from dpom_warp.worker import make_engine
 
     frames, bg = seq[0], seq[1]
     out, parts = {}, {}
@@ -255,7 +255,7 @@ def score_scene(cfg, device, seq, n):
     frame's rho*."""
     from dpom_warp.evaluate import score_frames
     from dpom_warp.geometry import build_geometry
-    from dpom_warp.pipeline import make_engine
+    from dpom_warp.worker import make_engine
     from dpom_warp.worker import detections_of
 
     frames, bg, names, truth = seq
@@ -287,7 +287,7 @@ def kernel_times(cfg, depth, bg, device, repeats, batch=1):
     import warp as wp
 
     from dpom_warp import engine as E
-    from dpom_warp.pipeline import make_engine
+    from dpom_warp.worker import make_engine
 
     cfg = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, graph="off"))
     engine = make_engine(cfg, cfg.camera, device, batch)
@@ -329,7 +329,7 @@ def whole_run_marginal(repeats, name="kinect_v2"):
     `repeats` runs after an untimed round."""
     import tempfile
 
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.pipeline import run
 
     path, sets = SCENES[name]

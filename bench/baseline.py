@@ -117,7 +117,7 @@ def score_config(cfg, params: ClusterParams = ClusterParams()) -> dict:
     (evaluate.score_frames at evaluation.match_distance)."""
     from dpom_warp.evaluate import load_ground_truth, score_frames
     from dpom_warp.geometry import build_geometry
-    from dpom_warp.pipeline import expand
+    from dpom_warp.sources import expand
     from dpom_warp.worker import read_frame
 
     geometry = build_geometry(cfg.camera, cfg.grid, cfg.obj)
@@ -137,8 +137,8 @@ def main():
     ap.add_argument("config")
     ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
     a = ap.parse_args()
-    from dpom_warp.config import load_config
-    from dpom_warp.pipeline import render_synthetic
+    from dpom_warp.loading import load_config
+    from dpom_warp.frames import render_synthetic
 
     cfg = load_config(a.config, a.set)
     render_synthetic(cfg)

@@ -42,11 +42,12 @@ def score(res, cfg, geometry, truth) -> tuple[int, int]:
 
 
 def main():
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.evaluate import load_ground_truth
     from dpom_warp.geometry import build_geometry
     from dpom_warp.io import read_depth
-    from dpom_warp.pipeline import expand, make_engine
+    from dpom_warp.sources import expand
+    from dpom_warp.worker import make_engine
     from dpom_warp.synthetic import generate
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -124,7 +124,7 @@ def _members(tp):
 # -- runs -------------------------------------------------------------------------------------------
 def run_config(config: str, out: Path, sets=()) -> dict:
     """`dpom-warp run` in this process; returns its summary."""
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.pipeline import run
 
     cfg = load_config(ROOT / config, list(sets))
@@ -167,7 +167,7 @@ def demo_block(out: Path) -> str:
         same &= rows == (out / "demo_people" / "detections.csv").read_text().splitlines()[1:]
     api_s, cli_s = statistics.median(api), statistics.median(cli)
     from bench.baseline import score_config
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
 
     base = score_config(load_config(ROOT / "configs" / "demo_people.yaml"))
     lines = [HEAD,

@@ -93,7 +93,7 @@ def main():
     from dpom_warp.api import Detector
     from dpom_warp.evaluate import load_ground_truth, match
     from dpom_warp.io import read_depth
-    from dpom_warp.pipeline import expand
+    from dpom_warp.sources import expand
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--tuning", action="store_true", help="the tuning draw (seeds + 1000)")

@@ -26,10 +26,10 @@ def fit_scene(name: str, overrides: list[str], tuning: bool, up="auto") -> dict:
     import dataclasses
 
     from bench.robustness import scene_sets
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.ground import fit_ground_files
     from dpom_warp.io import InputError
-    from dpom_warp.pipeline import render_synthetic
+    from dpom_warp.frames import render_synthetic
 
     cfg = load_config("configs/demo_people.yaml", scene_sets(name, overrides, 10, "frames", tuning))
     render_synthetic(cfg, log=lambda *_: None)

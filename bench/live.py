@@ -92,15 +92,18 @@ def main():
     ap.add_argument("--output", default="runs/live")
     a = ap.parse_args()
     os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.evaluate import load_ground_truth
     from dpom_warp.live import LIVE_WORKERS
+    from dpom_warp.frames import render_synthetic
     from dpom_warp.pipeline import run
-    from dpom_warp.sources.realsense import SoftwareCamera
+    from dpom_warp.sources import expand
+    from dpom_warp.sources.software import SoftwareCamera
 
     demo = ROOT / "configs" / "demo_people.yaml"
     stream_cfg = load_config(demo, stream_sets(a.fps, a.stream_frames))
-    cam = SoftwareCamera.of_config(stream_cfg, a.fps).register()  # renders the stream the first time
+    render_synthetic(stream_cfg, lambda *_: None)  # the stream, rendered the first time
+    cam = SoftwareCamera.of_files(expand(stream_cfg.inputs.frames, "input.frames"), stream_cfg.camera, a.fps).register()
     truth = load_ground_truth(stream_cfg.evaluation.ground_truth)
     truth = [truth[k] for k in sorted(truth)]
     sets = stream_sets(a.fps, a.stream_frames) + [

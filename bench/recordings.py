@@ -29,9 +29,10 @@ def main():
     os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
     import yaml
 
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.io import read_depth
-    from dpom_warp.pipeline import render_synthetic, run
+    from dpom_warp.frames import render_synthetic
+    from dpom_warp.pipeline import run
     from dpom_warp.sources import materialise
     from test_recordings import messages, typestore, write_bag
 

@@ -89,7 +89,7 @@ def run_variant(args):
     import os
 
     os.environ.setdefault("WARP_CACHE_PATH", str(Path(".cache") / f"warp-{os.getpid()}"))
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.pipeline import run
 
     slug = slug_of(name)

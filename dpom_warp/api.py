@@ -25,7 +25,8 @@ from typing import Mapping
 
 import numpy as np
 
-from .config import ConfigError, RunConfig, apply_overrides, parse_config, read_config
+from .config import ConfigError, RunConfig, apply_overrides, read_config
+from .loading import config_from_mapping
 from .detect import Detected
 from .io import PLAUSIBLE_MEDIAN_M, InputError, array_to_metres, depth_scale_hint, implausible_median
 
@@ -89,7 +90,9 @@ class Detector:
         Raises:
             ConfigError, InputError: one line naming the key or file.
         """
-        from .pipeline import expand, render_synthetic, set_up
+        from .frames import render_synthetic
+        from .session import set_up
+        from .sources import expand
 
         if isinstance(config, Mapping):
             raw, where = dict(config), "config"
@@ -98,7 +101,7 @@ class Detector:
         if isinstance(overrides, Mapping):
             overrides = [f"{k}={_yaml(v)}" for k, v in overrides.items()]
         try:
-            cfg = parse_config(apply_overrides(raw, list(overrides or [])))
+            cfg = config_from_mapping(apply_overrides(raw, list(overrides or [])))
         except ConfigError as e:
             raise ConfigError(f"{where}: {e}") from None
         quiet = log or (lambda *_: None)
@@ -164,7 +167,7 @@ class Detector:
         as in a run of the recording). Returns (tracks, report): each track has `id`, `frames`
         (indices into `results`), `xyz` (metres), `rho` and `bridged` (frames without a map
         peak)."""
-        from .pipeline import fps_of
+        from .outputs import fps_of
         from .tracking import Cells, run_tracker
 
         cfg, geometry = self.config, self.worker.geometry

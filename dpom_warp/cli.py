@@ -18,7 +18,8 @@ import argparse
 import signal
 import sys
 
-from .config import ConfigError, load_config
+from .config import ConfigError
+from .loading import load_config
 from .io import InputError, WorkerError
 
 
@@ -47,7 +48,7 @@ def _run(args) -> int:
     cfgs = [load_config(c, args.set) for c in args.config]
     outputs = output_dirs(args.config, cfgs, args.output)
     if args.view:
-        from .pipeline import VIEW
+        from .outputs import VIEW
         from .view import _rerun
 
         _rerun()  # not installed: say so before any work
@@ -161,7 +162,7 @@ def _fit_ground(args) -> int:
     from .config import load_camera_file
     from .ground import GroundOptions, fit_ground_files, fit_ground_named, frames_named, recording_frames
     from .io import InputError, write_text_atomic
-    from .sources import is_recording
+    from .names import is_recording
 
     camera, scale = load_camera_file(args.camera) if args.camera else (None, None)
     up = args.up
@@ -222,7 +223,7 @@ def eval_output(run: str, compare: list[str], output: str | None):
 def _eval(args) -> int:
     from .evaluate import evaluate_runs, markdown_table, tracking_table
     from .io import write_json_atomic
-    from .pipeline import _jsonable
+    from .outputs import _jsonable
 
     results = evaluate_runs([args.run] + args.compare, args.ground_truth, args.hidden_visibility,
                             args.min_rho)

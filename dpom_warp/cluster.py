@@ -186,7 +186,8 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
     `sources` names each run's config and `devices` gives its device setting (for errors);
     `workers`: the number of actors (None: one per CPU, or per GPU, of the cluster).
     Nothing is written before the first actor has started."""
-    from .pipeline import abandon_if_empty, accept, finish_run, open_output, progress_bar, remove_temporaries
+    from .outputs import remove_temporaries
+    from .pipeline import abandon_if_empty, accept, finish_run, open_output, progress_bar
 
     with connect(address) as where:
         ray = import_ray()

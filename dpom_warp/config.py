@@ -28,6 +28,7 @@ from .detect import EDGE_RADIUS, MIN_LOG_ODDS
 from .geometry import Camera, Grid, ObjectBox, pose_from_angles
 from .ground import GroundOptions
 from .model import BEHIND_COST, EXACT_BETA, TOP_SHORTER, AutoBackground, ModelParams
+from .names import is_live
 from .resolution import REDUCERS
 from .synthetic import SceneSpec
 from .tracking import TrackingOptions
@@ -918,51 +919,7 @@ def _fill(cls, section: BaseModel, **changes):
     return cls(**{k: v for k, v in section.model_dump().items() if k in names}, **changes)
 
 
-def camera_from_recording(raw: dict) -> dict:
-    """A config whose input.frames is a recording or a live camera, with the camera keys it leaves out
-    (camera.width, height, intrinsics, distortion, input.depth_scale, and with extrinsics:
-    auto camera.ground.up from its accelerometer) taken from the recording (the keys it gives
-    win: the run says where they differ)."""
-    from .io import InputError
-    from .sources import is_recording, open_source
-    from .sources.realsense import is_live
-
-    inp, cam = raw.get("input"), raw.get("camera", {})
-    if (not isinstance(inp, dict) or not isinstance(inp.get("frames"), str) or not isinstance(cam, dict)
-            or not (is_recording(inp["frames"]) or is_live(inp["frames"]))):
-        return raw
-    missing = [k for k in ("width", "height", "intrinsics", "distortion") if k not in cam]
-    ground = cam.get("ground") if isinstance(cam.get("ground"), dict) else {}
-    wants_up = cam.get("extrinsics") == "auto" and ground.get("up", "auto") == "auto"
-    if not missing and "depth_scale" in inp and not wants_up:
-        return raw
-    try:
-        info = open_source(inp["frames"], inp.get("topic")).info()
-    except InputError as e:
-        raise ConfigError(str(e)) from None
-    out = copy.deepcopy(raw)
-    cam = out.setdefault("camera", {})
-    if "intrinsics" not in cam:
-        if info.intrinsics is None:
-            raise ConfigError(f"camera.intrinsics: required key is missing, and {inp['frames']} carries no "
-                              f"camera information for {info.topic} (no sensor_msgs/CameraInfo); expected "
-                              f"camera.intrinsics in the config")
-        cam["intrinsics"] = dict(info.intrinsics)
-    for key, value in (("width", info.width), ("height", info.height)):
-        if key not in cam and value:
-            cam[key] = value
-    if "distortion" not in cam and info.distortion:
-        cam["distortion"] = list(info.distortion)
-    if "depth_scale" not in inp:
-        out["input"]["depth_scale"] = float(f"{info.depth_scale:.7g}") if info.depth_scale else 0.001
-    if wants_up and info.gravity_up:  # the accelerometer says where up is: the floor fit's prior
-        if not isinstance(cam.get("ground"), dict):
-            cam["ground"] = {}
-        cam["ground"]["up"] = [round(float(x), 6) for x in info.gravity_up]
-    return out
-
-
-def _camera_shorthand(raw: dict) -> dict:
+def camera_shorthand(raw: dict) -> dict:
     """`camera: FILE` is `camera: {file: FILE}`."""
     if isinstance(raw, dict) and isinstance(raw.get("camera"), str):
         return {**raw, "camera": {"file": raw["camera"]}}
@@ -995,10 +952,9 @@ def camera_from_file(raw: dict) -> dict:
 
 
 def parse_config(raw: dict[str, Any]) -> RunConfig:
-    """Validate a config mapping (as loaded from YAML) into a RunConfig (camera.file, then a
-    recording's camera, fill in the camera keys the config leaves out)."""
-    if isinstance(raw, dict):
-        raw = camera_from_recording(camera_from_file(_camera_shorthand(raw)))
+    """Validate a config mapping into a RunConfig. No file is read: the camera keys a camera file
+    or a recording gives are filled in before (loading.config_from_mapping; a run folder's
+    run.json has them all)."""
     try:
         c = ConfigFile.model_validate(raw)
     except ValidationError as e:
@@ -1107,9 +1063,7 @@ def resolve_paths(raw: dict, base: str | Path) -> dict:
     """A copy of `raw` whose relative path values (path_keys) are joined to `base`, the config
     file's folder (normalised, so a config in configs/ naming ../x gives x); `auto` and a live
     camera (`realsense[:SERIAL]`) are not paths."""
-    from .sources.realsense import is_live
-
-    out = copy.deepcopy(_camera_shorthand(raw))
+    out = copy.deepcopy(camera_shorthand(raw))
     for key in path_keys():
         *parents, last = key.split(".")
         node = out
@@ -1142,16 +1096,6 @@ def read_config(path: str | Path) -> dict:
     if not isinstance(raw, dict):
         raise ConfigError(f"{path}: expected a YAML mapping at the top, found {_fmt(raw)}")
     return resolve_paths(raw, path.parent)
-
-
-def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConfig:
-    """Read, override and validate a YAML run config. Relative paths in the file are relative
-    to its folder; those in `overrides` to the current folder."""
-    raw = read_config(path)
-    try:
-        return parse_config(apply_overrides(raw, overrides or []))
-    except ConfigError as e:
-        raise ConfigError(f"{path}: {e}") from None
 
 
 class CameraFile(Node):

@@ -105,7 +105,7 @@ def detect_map(rho_star: np.ndarray, geometry, detection, threshold: float | Non
 def joint_detections(rho_map: np.ndarray, geometry, detection, log_odds=None) -> tuple[np.ndarray, list[Detected]]:
     """detect_map, then the joint test: while the weakest detection's log posterior odds with
     the other detections present and every other location empty (`log_odds(cells)` -> (n,),
-    a frame's reference.JointLists.log_odds) is under detection.min_log_odds, its cell leaves
+    a frame's joint.JointLists.log_odds) is under detection.min_log_odds, its cell leaves
     the map (rho* 0) and the map is detected again. Returns the map (a copy where a cell left
     it) and its detections, which detect_map finds again in that map, each with its log odds;
     `log_odds` None or min_log_odds 0: the map and detect_map's."""

@@ -13,8 +13,8 @@ import warp as wp
 
 from . import kernels as K
 from .geometry import Geometry, neighbour_lists
+from .joint import JointLists
 from .model import BAND_ALL, MISSING_READ, TOP_MIN_RHO, AutoBackground, Background, ModelParams
-from .reference import JointLists
 from .resolution import Resolution, min_readings
 from .warp_setup import init_warp
 
@@ -145,7 +145,7 @@ class FrameResult:
     pruned: int = 0  # locations the pruning bound removed
     converged: bool = True  # False: stopped at max_iterations above the tolerance
     # with Engine.joint_threshold: what the detections' joint test needs of the frame, for the
-    # locations whose rho* reaches that threshold (reference.JointLists; detect.joint_detections)
+    # locations whose rho* reaches that threshold (joint.JointLists; detect.joint_detections)
     joint: JointLists | None = None
 
 

@@ -180,8 +180,8 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     written and tracked in the order they were taken. None: default_workers."""
     from .detect import detect_map
     from .io import write_bytes_atomic
-    from .pipeline import (ShownTracks, _jsonable, prepare_output, set_up, summarise, track_table_files,
-                           tracked_picture)
+    from .outputs import ShownTracks, _jsonable, prepare_output, summarise, track_table_files, tracked_picture
+    from .session import set_up
     from .sources.realsense import RealSenseLive
     from .tracking import Cells, OnlineTracker, frames_without_map
     from .worker import FrameItem, FrameWorker, failed_future, write_output
@@ -216,7 +216,7 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     log(f"live: {info.kind}, {info.width}x{info.height} at {fps:g} frames/s; device {dev}, "
         f"{workers} process{'es' * (workers > 1)}; background: "
         f"{background}; until Ctrl-C{f' or {max_frames} frames' if max_frames else ''}")
-    from .pipeline import VIEW
+    from .outputs import VIEW
 
     view = None
     if cfg.output.rerun or VIEW:

@@ -50,7 +50,7 @@ def frames_of(tracks: dict[str, list], truth: dict[str, list[dict]], frames: lis
         if hidden_visibility is not None and len(objs):
             hidden = np.array([o.get("visibility", 1.0) < hidden_visibility for o in objs])
             if hidden.any() and len(tr):
-                from .evaluate import assign
+                from .matching import assign
 
                 d = _distances(tr, gt[hidden])
                 drop = {i for i, _ in assign(d, gate)}

@@ -542,7 +542,7 @@ def link_naive(positions: list[np.ndarray], gate: float) -> list[list[int]]:
     """The naive baseline: each frame's detections matched to the previous frame's by the
     Hungarian method within `gate` metres; an unmatched detection starts a new identity.
     Returns the identity of every detection, frame by frame."""
-    from .evaluate import match
+    from .matching import match
 
     out, prev, prev_ids, next_id = [], None, [], 0
     for pos in positions:

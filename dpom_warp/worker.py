@@ -99,7 +99,7 @@ def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engi
                     table={"auto": None, "table": True, "tiles": False}[cfg.engine.mask_index],
                     resolution=resolution,
                     background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
-    if cfg.detection.min_log_odds > 0:  # results carry the joint test's lists (reference.JointLists)
+    if cfg.detection.min_log_odds > 0:  # results carry the joint test's lists (joint.JointLists)
         engine.joint_threshold = cfg.detection.threshold
     return engine
 

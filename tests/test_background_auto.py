@@ -246,8 +246,8 @@ def test_fitted_pose_with_too_few_frames_for_an_estimate(tmp_path):
     import yaml
 
     cfg = yaml.safe_load(path.read_text())
-    from dpom_warp.config import load_config
-    from dpom_warp.pipeline import render_synthetic
+    from dpom_warp.loading import load_config
+    from dpom_warp.frames import render_synthetic
 
     render_synthetic(load_config(path, ["synthetic.frames=4"]), lambda *_: None)  # the frames first
     assert main(["run", str(path), "--no-progress"] + sets) == 0

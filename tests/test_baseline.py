@@ -51,8 +51,8 @@ def test_heads_keep_distance_and_height():
 
 
 def test_baseline_scores_a_rendered_scene(tmp_path):
-    from dpom_warp.config import load_config
-    from dpom_warp.pipeline import render_synthetic
+    from dpom_warp.loading import load_config
+    from dpom_warp.frames import render_synthetic
 
     import yaml
 

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from bench.__main__ import kernel_times, time_scene
-from dpom_warp.config import load_config
+from dpom_warp.loading import load_config
 from dpom_warp.io import read_depth
-from dpom_warp.pipeline import expand, make_engine
+from dpom_warp.sources import expand
+from dpom_warp.worker import make_engine
 from dpom_warp.synthetic import generate
 
 from test_cli import small_config

@@ -9,7 +9,7 @@ import pytest
 
 from bench.baseline import score_config
 from bench.robustness import PLANE
-from dpom_warp.config import load_config
+from dpom_warp.loading import load_config
 from dpom_warp.pipeline import run
 from dpom_warp.synthetic import generate
 from paths import CONFIGS

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from dpom_warp.config import load_config
+from dpom_warp.loading import load_config
 from dpom_warp.detect import detect, local_maxima
 from dpom_warp.geometry import build_geometry
 from paths import ROOT

@@ -485,17 +485,17 @@ def test_auto_batch_is_a_gpus_and_shrinks_to_the_memory_budget(tmp_path, scene, 
     """engine.batch auto: 16 frames a call for a recorded run on a GPU, one otherwise; where
     engine.memory_gb holds fewer, halved until it holds them (given, the batch is refused
     with the budget's error)."""
-    from dpom_warp import pipeline
+    from dpom_warp import session
     from dpom_warp.api import Detector
 
-    assert pipeline.auto_batch("cuda:0", recorded=True) == 16
-    assert pipeline.auto_batch("cuda:0", recorded=False) == pipeline.auto_batch("cpu", recorded=True) == 1
+    assert session.auto_batch("cuda:0", recorded=True) == 16
+    assert session.auto_batch("cuda:0", recorded=False) == session.auto_batch("cpu", recorded=True) == 1
     path = write_config(tmp_path, scene[1])
     held = {n: Detector.from_config(path, overrides={"engine.batch": n}).engine.memory_bytes() for n in (2, 8)}
     budget = (held[2] + held[8]) / 2 / 2**30  # two frames' buffers fit, eight do not
     with pytest.raises(ConfigError, match="engine.memory_gb: the engine needs at least"):
         Detector.from_config(path, overrides={"engine.memory_gb": budget, "engine.batch": 8})
-    monkeypatch.setattr(pipeline, "auto_batch", lambda device, recorded: 8)  # (a GPU's choice, on the CPU)
+    monkeypatch.setattr(session, "auto_batch", lambda device, recorded: 8)  # (a GPU's choice, on the CPU)
     det = Detector.from_config(path, overrides={"engine.memory_gb": budget})
     assert 2 <= det.engine.batch < 8 and det.engine.memory_bytes() <= budget * 2**30
 
@@ -610,7 +610,7 @@ def test_a_batch_over_max_entries_is_retried_frame_by_frame(tmp_path, scene):
 def test_a_frame_unreadable_inside_a_batch_is_skipped_alone(tmp_path, scene):
     """A frame that cannot be read when its batch comes (its file replaced after the run's
     checks): its outcome is the reason, the batch's other frames are inferred."""
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.pipeline import plan_run
     from dpom_warp.worker import FrameItem, FrameWorker
 

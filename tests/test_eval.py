@@ -90,7 +90,7 @@ def test_csv_reading_and_errors(tmp_path):
 
 
 def test_resolved_config_parses_back_to_itself(tmp_path):
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
 
     cfg = load_config(small_config(tmp_path))
     assert parse_config(cfg.resolved).resolved == cfg.resolved

@@ -13,7 +13,8 @@ from PIL import Image
 
 from dpom_warp import Detector, __version__
 from dpom_warp.cli import main
-from dpom_warp.config import ConfigError, json_schema, load_config, parse_config
+from dpom_warp.config import ConfigError, json_schema, parse_config
+from dpom_warp.loading import load_config
 from dpom_warp.io import InputError, read_depth
 
 from test_cli import small_config

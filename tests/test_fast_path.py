@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from dpom_warp import reference as ref
-from dpom_warp.config import ConfigError, load_config
+from dpom_warp.config import ConfigError
+from dpom_warp.loading import load_config
 from dpom_warp.engine import Engine
 from dpom_warp.kernels import PRUNED
 from dpom_warp.geometry import Camera, Grid, ObjectBox, pose_from_angles
@@ -346,7 +347,8 @@ def test_sparse_path_within_bound_on_rendered_people(tmp_path):
     BOUND_RENDERED eps of the exact path's, and the same detections."""
     from dpom_warp.detect import detect
     from dpom_warp.geometry import build_geometry
-    from dpom_warp.pipeline import expand, make_engine, read_frame
+    from dpom_warp.sources import expand
+    from dpom_warp.worker import make_engine, read_frame
     from dpom_warp.synthetic import generate
 
     from test_cli import small_config
@@ -381,7 +383,8 @@ def test_mask_index_option_gives_the_same_results(tmp_path):
     """engine.mask_index: the run's engine takes the pixel table with a solid on auto, the
     tiles when told (and with facing planes), and both give the same rho* on rendered people;
     an unknown index is a one-line config error."""
-    from dpom_warp.pipeline import expand, make_engine, read_frame
+    from dpom_warp.sources import expand
+    from dpom_warp.worker import make_engine, read_frame
     from dpom_warp.synthetic import generate
 
     from test_cli import small_config

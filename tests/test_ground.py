@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from dpom_warp.cli import main
-from dpom_warp.config import load_config
+from dpom_warp.loading import load_config
 from dpom_warp.geometry import Camera, pose_from_angles
 from dpom_warp.ground import GroundFitError, GroundOptions, backproject, fit_ground_frames
 from dpom_warp.synthetic import SceneSpec, _box, _scene, person_mesh, render, room_meshes, sensor_noise

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from dpom_warp import reference as ref
-from dpom_warp.config import Detection, load_config
+from dpom_warp.config import Detection
+from dpom_warp.loading import load_config
 from dpom_warp.detect import MIN_LOG_ODDS, detect_map, joint_detections
 from dpom_warp.engine import Engine
 from paths import CONFIGS
@@ -56,16 +57,6 @@ def test_log_odds_are_the_joint_probability_with_and_without_each_cell(seed, sha
     want = [whole - log_joint(depth, geom, bg, params, np.delete(cells, i)) for i in range(len(cells))]
     np.testing.assert_allclose(odds, want, rtol=0, atol=1e-6)
     assert np.ptp(odds) > 1.0, "the cells' odds do not differ: the comparison is not exercised"
-    # the logit of the mean-field update at that binary state, on every location's lists
-    valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, bg, params)
-    r = np.where(valid, np.isin(L, cells), 0.0)
-    evidence = ref.evidence_sums(valid, L, D, dbg, r, len(geom.rect))[cells]
-    behind = ref.behind_evidence(depth, geom, params, valid, L)
-    behind = behind[cells] if np.ndim(behind) else behind
-    where = geom.locations[cells]
-    close = (np.linalg.norm(where[:, None] - where[None], axis=-1) < params.exclusion_radius).sum(1) - 1
-    logit = np.log(params.prior) - np.log1p(-params.prior) + evidence - behind - params.exclusion * close
-    np.testing.assert_allclose(odds, logit, rtol=0, atol=1e-6)
 
 
 @pytest.mark.parametrize("frames", [True, False])

@@ -16,11 +16,15 @@ from dpom_warp.cli import main
 def camera_config(tmp_path):
     from test_cli import small_config
 
-    from dpom_warp.config import load_config
-    from dpom_warp.sources.realsense import SoftwareCamera
+    from dpom_warp.loading import load_config
+    from dpom_warp.frames import render_synthetic
+    from dpom_warp.sources import expand
+    from dpom_warp.sources.software import SoftwareCamera
 
     path = small_config(tmp_path, frames=6)
-    cam = SoftwareCamera.of_config(load_config(path)).register()  # the rendered frames at 30 fps
+    cfg = load_config(path)
+    render_synthetic(cfg, lambda *_: None)
+    cam = SoftwareCamera.of_files(expand(cfg.inputs.frames, "input.frames"), cfg.camera).register()  # at 30 fps
     (tmp_path / "plain.yaml").write_text(path.read_text())  # the same frames as files (plain_maps)
     cfg = yaml.safe_load(path.read_text())
     del cfg["synthetic"]
@@ -77,7 +81,7 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     from dpom_warp.detect import detect_map
     from dpom_warp.geometry import build_geometry
     from dpom_warp.io import units_to_metres
-    from dpom_warp.pipeline import ShownTracks, tracked_picture
+    from dpom_warp.outputs import ShownTracks, tracked_picture
     from dpom_warp.tracking import Cells, per_frame, run_tracker, tracks_csv
 
     cfg = parse_config(summary["config"])
@@ -324,9 +328,9 @@ def test_a_frame_handed_to_a_pool_already_broken_is_a_future_of_that_error(camer
 
     import numpy as np
 
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.live import Helpers
-    from dpom_warp.pipeline import set_up
+    from dpom_warp.session import set_up
 
     _, _, tmp = camera_config
     setup = set_up(load_config(tmp / "plain.yaml"), [], "cpu", log=lambda *a: None)
@@ -421,7 +425,7 @@ def test_a_live_run_without_workers_uses_both_cores_on_the_cpu(tmp_path, monkeyp
     where it has one, on a GPU and with warm starts (frames in order, one process). The
     unplugged-camera test runs the default end to end."""
     from dpom_warp import live
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from test_cli import small_config
 
     cfg = load_config(small_config(tmp_path, frames=2))

@@ -398,7 +398,7 @@ def test_azure_kinect_accelerometer_gives_up(tmp_path):
     the floor fit's camera.ground.up when extrinsics are auto and the config gives no up."""
     import open3d as o3d
 
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.geometry import Camera
     from dpom_warp.sources import open_source
 
@@ -450,9 +450,9 @@ def test_a_wall_faced_is_not_taken_for_a_floor_seen_from_above(tmp_path, capsys)
     up given or on a voxel grid, are left alone."""
     import dataclasses
 
-    from dpom_warp.config import load_config
+    from dpom_warp.loading import load_config
     from dpom_warp.io import InputError
-    from dpom_warp.pipeline import refuse_low_view_from_above
+    from dpom_warp.session import refuse_low_view_from_above
 
     path, line = run_auto_pose_fails(tmp_path, capsys, RS_BAG)
     assert line.startswith(f"dpom-warp: error: {RS_BAG} (frame 000000) and 1 more frames: ")
@@ -518,7 +518,7 @@ def test_a_recording_with_no_floor_in_view_is_named_in_the_error(tmp_path, capsy
 def test_realsense_sdk_db3_gives_the_png_run(tmp_path, scene):
     """A RealSense SDK recording (.db3, compressedDepth) made by the SDK's own recorder from a
     SoftwareCamera playing the rendered frames: the PNG run's detections."""
-    from dpom_warp.sources.realsense import SoftwareCamera
+    from dpom_warp.sources.software import SoftwareCamera
 
     tmp, cfg = scene
     frames = [np.asarray(Image.open(f)).astype(np.uint16) for f in sorted((tmp / "scene" / "frames").glob("*.png"))]

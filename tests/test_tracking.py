@@ -254,7 +254,7 @@ def test_frame_steps_count_the_camera_frames_between_maps():
     assert frame_steps([0.0, 0.1, 0.13], 0.1) is None  # closer than the rate: the rate is wrong
     assert frame_steps([5.0, 5.104, 5.196, 5.5], 0.1).tolist() == [0, 1, 2, 5]  # jitter is not time
     assert frames_without_map([5.0, 5.104, 5.196, 5.5], 0.1) == 2 and frames_without_map(None, 0.1) == 0
-    from dpom_warp.pipeline import fps_of
+    from dpom_warp.outputs import fps_of
 
     # the rate of a recording with frame 2 skipped: the interval over it is not one frame's
     assert fps_of([100.0, 100.1, 100.3]) == pytest.approx(10.0) and fps_of([1.0, None]) is None

@@ -17,124 +17,46 @@ time and topic, so a changed recording is read again.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import os
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
 from ..io import InputError, atomic_path, write_json_atomic
+from ..names import is_live, is_recording
+from .base import INSTALL, Frame, Source, SourceInfo, gravity_direction, need  # noqa: F401 - the package's names
 
-RECORDING_SUFFIXES = {".bag": "ROS 1 bag", ".db3": "ROS 2 bag (sqlite)", ".mcap": "ROS 2 bag (MCAP)",
-                      ".mkv": "Azure Kinect recording"}
 CACHE_VERSION = 2  # 2: .npy frames
-INSTALL = 'pip install "dpom-warp[sensors]"'
-
-
-@dataclasses.dataclass
-class SourceInfo:
-    """What a source holds. `depth_scale`: metres per unit of its depth values (None: float
-    metres); `intrinsics`: fx, fy, cx, cy in pixels (None when the source has no camera
-    information); `distortion`: OpenCV's k1, k2, p1, p2, k3 (and k4, k5, k6 for the rational
-    model), or None; `gravity_up`: the accelerometer's mean reading at rest (it measures +g
-    upwards) turned into the depth camera's frame (OpenCV: x right, y down, z forward), when
-    the source has one and says how it sits relative to the depth camera."""
-
-    kind: str
-    path: str
-    frames: int
-    width: int | None = None
-    height: int | None = None
-    intrinsics: dict | None = None
-    distortion: list | None = None
-    depth_scale: float | None = None
-    encoding: str | None = None
-    topic: str | None = None
-    streams: list = dataclasses.field(default_factory=list)
-    duration_s: float | None = None
-    rate_hz: float | None = None
-    imu: bool = False
-    gravity_up: list | None = None  # unit "up" in the depth camera's frame, from the accelerometer
-
-    def as_json(self) -> dict:
-        return dataclasses.asdict(self)
-
-
-@dataclasses.dataclass
-class Frame:
-    """One frame of a source: its index in the depth stream, its timestamp (seconds, None when
-    the source has none), and the depth (2-D, in the source's units: integers, or float32
-    metres with 0 / NaN / inf for no reading) or why it cannot be read."""
-
-    index: int
-    timestamp: float | None
-    depth: np.ndarray | None
-    reason: str | None = None
-
-
-class Source:
-    """A recording or a folder of frames."""
-
-    def info(self) -> SourceInfo:
-        raise NotImplementedError
-
-    def frames(self) -> Iterator[Frame]:
-        raise NotImplementedError
-
-
-def is_recording(spec: str | os.PathLike) -> bool:
-    """Whether input.frames names a recording (by its suffix, or a ROS 2 bag's folder)."""
-    p = Path(os.path.expanduser(str(spec)))
-    return p.suffix.lower() in RECORDING_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
 
 
 def open_source(spec: str | os.PathLike, topic: str | None = None, key: str = "input.frames") -> Source:
     """The source input.frames names: a live camera (`realsense[:SERIAL]`), a recording (their
     readers need the [sensors] extra) or a glob of frame files."""
-    from .realsense import RealSenseLive, is_live
-
     if is_live(spec):
-        return RealSenseLive(str(spec), key)
+        return _reader("live")(str(spec), key)
     p = Path(os.path.expanduser(str(spec)))
     if not is_recording(p):
-        from .files import FileFrames
-
-        return FileFrames(str(spec), key)
+        return _reader("files")(str(spec), key)
     if not p.exists():
         raise InputError(f"{key}: {p}: no such recording")
-    if p.suffix.lower() == ".mkv":
-        from .azure import AzureKinect
-
-        return AzureKinect(p, key)
-    from .bags import Bag
-
-    return Bag(p, topic, key)
+    kind = p.suffix.lower() if p.suffix.lower() in READERS else ".db3"  # a ROS 2 bag's folder: the bags'
+    return _reader(kind)(p, topic, key)
 
 
-def gravity_direction(readings) -> list | None:
-    """Unit "up" from accelerometer readings at rest (m/s^2; an accelerometer measures +g
-    upwards): their mean, normalised; None when there are none or they do not add up to a
-    reading of gravity (a mean under 1 m/s^2)."""
-    if not len(readings):
-        return None
-    up = np.mean(np.asarray(readings, float), axis=0)
-    n = np.linalg.norm(up)
-    return (up / n).tolist() if n > 1.0 else None
+# each kind of source: its module (a file of this package) and class, imported when used (the
+# readers' packages are the optional [sensors] extra); a new kind is a file and an entry here
+READERS = {"live": ("realsense", "RealSenseLive"), "files": ("files", "FileFrames"),
+           ".mkv": ("azure", "AzureKinect"), ".bag": ("bags", "Bag"), ".db3": ("bags", "Bag"),
+           ".mcap": ("bags", "Bag")}
 
 
-def need(module: str, what: str, package: str | None = None, install: str = INSTALL):
-    """Import an optional package (a reader: the sensors extra) or say in one line how to
-    install it; `package`: its name on PyPI, when not the module's."""
+def _reader(kind: str) -> type:
     import importlib
 
-    try:
-        return importlib.import_module(module)
-    except ImportError:
-        raise InputError(f"{what} needs the optional package {package or module.split('.')[0]}; install it "
-                         f"with {install}") from None
+    module, name = READERS[kind]
+    return getattr(importlib.import_module(f"{__name__}.{module}"), name)
 
 
 # -- the cache a run reads a recording from ---------------------------------------------------
@@ -187,3 +109,22 @@ def materialise(spec: str, topic: str | None = None, key: str = "input.frames", 
             "folder": str(folder), "recording": str(path)}
     write_json_atomic(meta_path, meta)  # last: a folder without it is read again
     return meta
+
+
+# -- the frame files a run reads --------------------------------------------------------------
+def expand(pattern: str, key: str, topic: str | None = None, log=print) -> list[Path]:
+    """The frame files input.frames (or input.background) names: a glob's files in sorted
+    order, or a recording's frames read into its cache (sources.materialise)."""
+    return source_frames(pattern, key, topic, log)[0]
+
+
+def source_frames(pattern: str, key: str, topic: str | None = None, log=print) -> tuple[list[Path], dict | None]:
+    """(frame files, the recording's source.json or None for a glob)."""
+    if is_recording(pattern):
+        meta = materialise(pattern, topic, key, log)
+        files = [Path(meta["folder"]) / f["frame"] for f in meta["frames"]]
+        if not files:
+            reason = meta["skipped"][0]["reason"] if meta["skipped"] else "no depth frames"
+            raise InputError(f"{key}: {pattern}: no readable depth frame ({reason})")
+        return files, meta
+    return _reader("files")(pattern, key).files, None

@@ -18,7 +18,7 @@ from typing import Iterator
 import numpy as np
 
 from ..io import InputError
-from . import Frame, Source, SourceInfo, gravity_direction, need
+from .base import Frame, Source, SourceInfo, gravity_direction, need
 
 MODES = {  # depth mode: (binned sensor size, crop offset, output size)
     "NFOV_UNBINNED": ((1024, 1024), (192, 180), (640, 576)),
@@ -72,7 +72,8 @@ def depth_camera(calibration: dict, mode: str) -> tuple[dict, list]:
 
 
 class AzureKinect(Source):
-    def __init__(self, path: Path, key: str = "input.frames"):
+    def __init__(self, path: Path, topic: str | None = None, key: str = "input.frames"):
+        """`topic`: unused (a Matroska file has one depth track), as every recording reader takes."""
         need("av", f"{key}: {path} (an Azure Kinect recording)")
         self.path, self.key = Path(path), key
         self._info = None

@@ -18,7 +18,7 @@ from typing import Iterator
 import numpy as np
 
 from ..io import InputError
-from . import Frame, Source, SourceInfo, gravity_direction, need
+from .base import Frame, Source, SourceInfo, gravity_direction, need
 
 IMAGE, COMPRESSED, INFO = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/CameraInfo"
 DEPTH_ENCODINGS = {"16UC1": np.uint16, "mono16": np.uint16, "32FC1": np.float32}

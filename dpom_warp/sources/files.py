@@ -10,7 +10,7 @@ from typing import Iterator
 import numpy as np
 
 from ..io import InputError
-from . import Frame, Source, SourceInfo
+from .base import Frame, Source, SourceInfo
 
 
 FRAME_SUFFIXES = (".png", ".npy")
@@ -35,7 +35,7 @@ class FileFrames(Source):
                              f"config file are relative to its folder)")
         first = self.files[0]
         if len(self.files) == 1 and first.suffix and first.suffix.lower() not in FRAME_SUFFIXES:
-            from . import RECORDING_SUFFIXES
+            from ..names import RECORDING_SUFFIXES
 
             raise InputError(f"{key}: {first}: unknown format {first.suffix!r}; expected a glob of 16-bit "
                              f"PNG or .npy frames, or a recording ({', '.join(RECORDING_SUFFIXES)}, a ROS 2 "

@@ -13,9 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import ConfigError, RunConfig
-from ..io import InputError, read_depth
-from ..synthetic import generate
+from .config import ConfigError, RunConfig
+from .io import InputError, read_depth
+from .sources import source_frames
+from .synthetic import generate
 
 
 @dataclasses.dataclass
@@ -66,28 +67,6 @@ def render_synthetic(cfg: RunConfig, log=print) -> None:
     generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
     log(f"synthetic scene: {cfg.synthetic.frames} frames in {cfg.synthetic_cache} "
         f"({'checked' if cached else 'generated'} in {time.perf_counter() - t:.1f} s)")
-
-
-def expand(pattern: str, key: str, topic: str | None = None, log=print) -> list[Path]:
-    """The frame files input.frames (or input.background) names: a glob's files in sorted
-    order, or a recording's frames read into its cache (sources.materialise)."""
-    return source_frames(pattern, key, topic, log)[0]
-
-
-def source_frames(pattern: str, key: str, topic: str | None = None, log=print) -> tuple[list[Path], dict | None]:
-    """(frame files, the recording's source.json or None for a glob)."""
-    from . import is_recording, materialise
-
-    if is_recording(pattern):
-        meta = materialise(pattern, topic, key, log)
-        files = [Path(meta["folder"]) / f["frame"] for f in meta["frames"]]
-        if not files:
-            reason = meta["skipped"][0]["reason"] if meta["skipped"] else "no depth frames"
-            raise InputError(f"{key}: {pattern}: no readable depth frame ({reason})")
-        return files, meta
-    from .files import FileFrames
-
-    return FileFrames(pattern, key).files, None
 
 
 def recording_notes(cfg: RunConfig, meta: dict) -> list[str]:

@@ -1,0 +1,72 @@
+"""A config made ready to run: read from its file, overridden with --set, its camera keys
+filled in from a camera file (`camera.file`) or from the recording or live camera input.frames
+names, then validated (config.parse_config, which reads nothing). Every path from a YAML file or
+a mapping to a RunConfig goes through here: the CLI, the Python API and the benchmarks."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+from .config import ConfigError, RunConfig, apply_overrides, camera_from_file, camera_shorthand, parse_config, read_config
+from .io import InputError
+from .names import is_live, is_recording
+from .sources import open_source
+
+
+def camera_from_recording(raw: dict) -> dict:
+    """A config whose input.frames is a recording or a live camera, with the camera keys it leaves out
+    (camera.width, height, intrinsics, distortion, input.depth_scale, and with extrinsics:
+    auto camera.ground.up from its accelerometer) taken from the recording (the keys it gives
+    win: the run says where they differ)."""
+    inp, cam = raw.get("input"), raw.get("camera", {})
+    if (not isinstance(inp, dict) or not isinstance(inp.get("frames"), str) or not isinstance(cam, dict)
+            or not (is_recording(inp["frames"]) or is_live(inp["frames"]))):
+        return raw
+    missing = [k for k in ("width", "height", "intrinsics", "distortion") if k not in cam]
+    ground = cam.get("ground") if isinstance(cam.get("ground"), dict) else {}
+    wants_up = cam.get("extrinsics") == "auto" and ground.get("up", "auto") == "auto"
+    if not missing and "depth_scale" in inp and not wants_up:
+        return raw
+    try:
+        info = open_source(inp["frames"], inp.get("topic")).info()
+    except InputError as e:
+        raise ConfigError(str(e)) from None
+    out = copy.deepcopy(raw)
+    cam = out.setdefault("camera", {})
+    if "intrinsics" not in cam:
+        if info.intrinsics is None:
+            raise ConfigError(f"camera.intrinsics: required key is missing, and {inp['frames']} carries no "
+                              f"camera information for {info.topic} (no sensor_msgs/CameraInfo); expected "
+                              f"camera.intrinsics in the config")
+        cam["intrinsics"] = dict(info.intrinsics)
+    for key, value in (("width", info.width), ("height", info.height)):
+        if key not in cam and value:
+            cam[key] = value
+    if "distortion" not in cam and info.distortion:
+        cam["distortion"] = list(info.distortion)
+    if "depth_scale" not in inp:
+        out["input"]["depth_scale"] = float(f"{info.depth_scale:.7g}") if info.depth_scale else 0.001
+    if wants_up and info.gravity_up:  # the accelerometer says where up is: the floor fit's prior
+        if not isinstance(cam.get("ground"), dict):
+            cam["ground"] = {}
+        cam["ground"]["up"] = [round(float(x), 6) for x in info.gravity_up]
+    return out
+
+
+def config_from_mapping(raw: dict) -> RunConfig:
+    """A config mapping (as loaded from YAML, overrides applied) validated into a RunConfig, with
+    the camera keys it leaves out taken from `camera.file`, then from the recording it names."""
+    if isinstance(raw, dict):
+        raw = camera_from_recording(camera_from_file(camera_shorthand(raw)))
+    return parse_config(raw)
+
+
+def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConfig:
+    """Read, override and validate a YAML run config. Relative paths in the file are relative
+    to its folder; those in `overrides` to the current folder."""
+    raw = read_config(path)
+    try:
+        return config_from_mapping(apply_overrides(raw, overrides or []))
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}") from None

@@ -1,0 +1,25 @@
+"""What `input.frames` names, told from the name alone (no file is opened but a folder's
+metadata.yaml looked for): a live camera (`realsense[:SERIAL]`), a recording (by its suffix,
+or a ROS 2 bag's folder) or, otherwise, a glob of frame files. The config (which of its
+values are paths) and the sources (which reader opens one) both ask."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+LIVE_PREFIX = "realsense"
+RECORDING_SUFFIXES = {".bag": "ROS 1 bag", ".db3": "ROS 2 bag (sqlite)", ".mcap": "ROS 2 bag (MCAP)",
+                      ".mkv": "Azure Kinect recording"}
+
+
+def is_live(spec) -> bool:
+    """Whether input.frames names a live camera."""
+    s = str(spec)
+    return s == LIVE_PREFIX or s.startswith(LIVE_PREFIX + ":")
+
+
+def is_recording(spec: str | os.PathLike) -> bool:
+    """Whether input.frames names a recording (by its suffix, or a ROS 2 bag's folder)."""
+    p = Path(os.path.expanduser(str(spec)))
+    return p.suffix.lower() in RECORDING_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())

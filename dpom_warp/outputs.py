@@ -1,0 +1,246 @@
+"""What a run writes into its output folder, besides each frame`s own files (worker.write_output):
+the folder made ready (run.json, --overwrite, --resume), the pictures drawn with tracks, the
+tracks` tables, summary.json. The recorded and the live run write through these."""
+
+from __future__ import annotations
+
+import json
+import platform
+import shutil
+import statistics
+from pathlib import Path
+import numpy as np
+from .config import ConfigError, RunConfig
+from .evaluate import score_frames
+from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
+from .io import TEMP_MARK, write_bytes_atomic, write_json_atomic, write_text_atomic
+from .worker import (read_frame)
+
+
+CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
+
+
+RUN_STATE = "run.json"
+
+
+TRACK_FILES = ("tracks.csv", "track_table.csv")
+
+
+OUTPUTS = ("maps", "images", "frames", "plots", "ply", "detections.csv", "summary.json", "eval.json",
+           *TRACK_FILES, RUN_STATE)
+
+
+def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> None:
+    """Make `out` ready: refuse a non-empty folder unless overwriting or resuming a run of
+    the same config; remove what an interrupted write left behind."""
+    state = {"config": _jsonable(resolved)}
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"output.dir: {out} is a file; expected an empty or new folder")
+    if out.exists() and any(out.iterdir()):
+        if resume:
+            path = out / RUN_STATE
+            try:
+                before = json.loads(path.read_text())
+            except (OSError, json.JSONDecodeError):
+                raise ConfigError(f"--resume: {out} holds no resumable run ({RUN_STATE} missing "
+                                  f"or unreadable)") from None
+            if before != json.loads(json.dumps(state)):
+                diff = _first_difference(before.get("config", {}), state["config"])
+                raise ConfigError(f"--resume: {out} holds a run of another config ({diff}); "
+                                  f"expected the same config, or use --overwrite")
+        elif overwrite:
+            for name in OUTPUTS:
+                target = out / name
+                if target.is_dir():
+                    shutil.rmtree(target)
+                elif target.exists():
+                    target.unlink()
+        else:
+            raise ConfigError(f"output.dir: {out} is not empty; expected an empty or new folder "
+                              f"(use --overwrite to replace its results or --resume to continue)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:  # a file where a folder above it should be, no permission
+        raise ConfigError(f"output.dir: {out}: cannot make the folder ({e.strerror or e}); expected a "
+                          f"path where a new folder can be made") from None
+    remove_temporaries(out)  # of a killed run
+    write_json_atomic(out / RUN_STATE, state)
+
+
+def remove_temporaries(out: Path) -> None:
+    """The temporary files of atomic writes left in a run's folder: by a killed run, or by
+    Ctrl-C landing between a temporary file's creation and the write's own cleanup."""
+    for stale in list(out.glob(f".*{TEMP_MARK}*")) + list(out.glob(f"*/.*{TEMP_MARK}*")):
+        stale.unlink(missing_ok=True)
+
+
+def _first_difference(a, b, path=""):
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            if a.get(k) != b.get(k):
+                return _first_difference(a.get(k), b.get(k), f"{path}.{k}" if path else k)
+    return f"{path}: {a!r} then, {b!r} now"
+
+
+def fps_of(timestamps: list) -> float | None:
+    """The frame rate of frames with timestamps, None without: one over the median interval
+    between consecutive frames, the intervals over frames dropped or skipped between left
+    out (those over 1.5 times the intervals' 10th percentile: a short recording with a frame
+    skipped has as many of those as of the others)."""
+    ts = [t for t in timestamps if t is not None]
+    if len(ts) < 2 or len(ts) < len(timestamps):
+        return None
+    gaps = np.array([b - a for a, b in zip(ts, ts[1:]) if b > a])
+    if not len(gaps):
+        return None
+    return 1.0 / float(np.median(gaps[gaps <= 1.5 * np.percentile(gaps, 10)]))
+
+
+def pictures_deferred(cfg: RunConfig, frames: int) -> bool:
+    """Whether a run's pictures are drawn after tracking (they show the tracks), or after the
+    frames (a picture of every output.images_every-th frame done, counted in order), rather
+    than by whoever infers each frame."""
+    return cfg.output.images and (cfg.output.images_every > 1 or cfg.tracking.resolved_method(frames) != "off")
+
+
+VIEW: list = []  # --view: a Rerun viewer is spawned for the runs of this process
+
+
+class ShownTracks:
+    """What a frame's picture and Rerun log show of the tracks, frame after frame (`at`, in
+    order): each track's id, box (the silhouette of the cell nearest to it), bridged flag and
+    trail (its positions over the last tracking.trail frames, this one's included). Holds
+    only the trails' frames."""
+
+    def __init__(self, geometry, trail: int):
+        self.geometry, self.trail = geometry, max(1, trail)
+        self.history: dict[int, list] = {}
+
+    def at(self, i: int, rows: list) -> list[dict]:
+        """Frame i's tracks from rows [(id, xyz, bridged)]."""
+        shown = []
+        for tid, xyz, bridged in rows:
+            self.history.setdefault(tid, []).append((i, xyz))
+            past = [p for j, p in self.history[tid] if j > i - self.trail]
+            k = int(np.argmin(np.linalg.norm(self.geometry.locations - xyz, axis=1)))
+            shown.append({"id": tid, "box": self.geometry.rect[k], "bridged": bridged, "trail": past, "xyz": xyz})
+        self.history = {tid: [(j, p) for j, p in h if j > i - self.trail] for tid, h in self.history.items()
+                        if h[-1][0] > i - self.trail}
+        return shown
+
+
+def tracked_picture(cfg: RunConfig, geometry, depth, rho_map, dets, name: str, truth, shown) -> bytes:
+    """A frame's picture with the tracks `shown` on it (ShownTracks; None: no tracks), as a
+    finished run and a live run draw it."""
+    from .render import frame_picture
+
+    return frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2], truth, name,
+                         in_view=geometry.rect_area > 0, tracks=shown, trail=cfg.tracking.trail)
+
+
+def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, truth, tracks,
+               pictures: bool, timestamps: dict | None = None, camera=None) -> None:
+    """After the frames: each frame's picture (with `tracks`, their identities and trails)
+    when `pictures` (of every output.images_every-th frame of `done`: the others' pictures,
+    left by an earlier drawing, are removed), and its Rerun log with output.rerun or --view
+    (depth, boxes, map, tracks)."""
+    from .detect import detect_map
+    from .tracking import per_frame
+
+    log = None
+    if cfg.output.rerun or VIEW:
+        from .view import RerunLog
+
+        log = RerunLog(cfg.output.rerun, spawn=bool(VIEW))
+        log.camera(camera or cfg.camera)
+    now = per_frame(tracks, len(done)) if tracks is not None else [[] for _ in done]
+    trails = ShownTracks(geometry, cfg.tracking.trail)
+    shown_all = [trails.at(i, now[i]) for i in range(len(done))]
+
+    def one(i):
+        """Frame i's detections, depth and (with `pictures`) picture file."""
+        f = done[i]
+        due = pictures and i % cfg.output.images_every == 0
+        if pictures and not due:
+            (out / "images" / f"{f.stem}.png").unlink(missing_ok=True)
+        if not due and log is None:
+            return None
+        rho_map = maps[i].reshape(cfg.grid.shape)
+        dets = detect_map(rho_map, geometry, cfg.detection)
+        depth = read_frame(cfg, f)
+        if due:
+            png = tracked_picture(cfg, geometry, depth, rho_map, dets, f.name, truth.get(f.name) if truth else None,
+                                  shown_all[i] if tracks is not None else None)
+            write_bytes_atomic(out / "images" / f"{f.stem}.png", png)
+        return (rho_map, dets, depth) if log is not None else None
+
+    # two threads: PNG encoding and Pillow's drawing release the GIL, so on two cores one
+    # picture is drawn while the other is encoded; 64 frames in flight at most
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(2) as pool:
+        for start in range(0, len(done), 64):
+            span = range(start, min(len(done), start + 64))
+            for i, got in zip(span, pool.map(one, span)):
+                if log is not None:
+                    rho_map, dets, depth = got
+                    log.frame(i, (timestamps or {}).get(done[i].name), depth, dets, rho_map,
+                              shown_all[i] if tracks is not None else None)
+    if log is not None:
+        log.close()
+
+
+def track_table_files(out: Path, tracks, names: list[str], fps: float, times: list | None = None) -> None:
+    """tracks.csv and track_table.csv of `tracks` over the frames `names` (`times`: their
+    timestamps, None where unknown)."""
+    from .tracking import track_table, tracks_csv
+
+    write_text_atomic(out / "tracks.csv", tracks_csv(tracks, names))
+    write_text_atomic(out / "track_table.csv", track_table(tracks, names, fps, times))
+
+
+def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground, grown):
+    """detections.csv and the summary, from the frame records in frame order."""
+    rows = [CSV_HEADER] + [r for f in done for r in records[f.name]["rows"]]
+    write_text_atomic(out / "detections.csv", "\n".join(rows) + "\n")
+    per_frame = [records[f.name]["stats"] for f in done]
+
+    def median(key):
+        return statistics.median(p[key] for p in per_frame) if per_frame else float("nan")
+
+    summary = {
+        "config": cfg.resolved,
+        "device": dev, "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
+        "background": background, "ground_fit": ground, "frames": len(done),
+        "skipped": skipped, "detections": sum(p["detections"] for p in per_frame),
+        "unconverged": [p["frame"] for p in per_frame if not p.get("converged", True)],
+        "list_capacity_growth": grown,
+        "timings": {"median_read_s": median("read_s"), "median_infer_s": median("infer_s"),
+                    "median_lists_s": median("engine_lists_s"),
+                    "median_iterations_s": median("engine_iterations_s"),
+                    "median_detect_s": median("detect_s"), "median_write_s": median("write_s"),
+                    "median_iterations": median("iterations"),
+                    "median_entries": median("entries"),
+                    "median_kept_entries": median("kept_entries") if per_frame and all(
+                        p.get("kept_entries") is not None for p in per_frame) else None},
+        "per_frame": per_frame,
+    }
+    if truth is not None and done:
+        dims = 3 if cfg.grid.mode == "voxel" else 2
+        det_xy = {f.name: np.array(records[f.name]["xy"]).reshape(-1, dims) for f in done}
+        summary["scores"] = score_frames(det_xy, {f.name: truth[f.name] for f in done},
+                                         cfg.evaluation.match_distance,
+                                         cfg.evaluation.hidden_visibility, geometry.centre[:2])
+    return summary
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return None if not np.isfinite(x) else float(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    return x

@@ -1,0 +1,256 @@
+"""A run set up from its config, before any frame is inferred: the device, the floor fit
+(`camera.extrinsics: auto`), the background (frames, `auto`, floor-only), the engine and the
+batch. Every way of running frames starts from `set_up`: the recorded run and its executors
+(one process, --workers, Ray), the live run and the Python API."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+import numpy as np
+from .background import BackgroundEstimator, sample_frames
+from .config import ConfigError, RunConfig
+from .engine import Engine, MemoryBudgetError, resolve_device
+from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
+from .geometry import build_geometry
+from .ground import fit_ground_files, frames_named
+from .io import InputError, depth_scale_hint
+from .resolution import Resolution
+from .sources import expand
+from .worker import (WorkerSpec, make_engine,
+                     read_frame)
+
+
+def _ambiguity(fit, log) -> dict:
+    """A floor fit's ambiguity (camera.ground.up: auto), logged and for summary.json's ground."""
+    if not fit.ambiguity:
+        return {}
+    log(f"warning: {fit.ambiguity}")
+    return {"ambiguity": fit.ambiguity}
+
+
+def floor_words(floor_xy) -> str:
+    """'floor in view x .. to .. m, y .. to .. m' of a floor fit's floor_xy (where the grid goes)."""
+    x0, x1, y0, y1 = floor_xy
+    return f"floor in view x {x0:g} to {x1:g} m, y {y0:g} to {y1:g} m"
+
+
+def posed(cfg: RunConfig, fit, fitted_on: str, frames, t0: float, log):
+    """The camera posed by a floor fit and summary.json's ground_fit report, the fit logged
+    ("ground plane from `fitted_on`: ..."); `frames`: what the report says it was fitted on."""
+    floor = f"; {floor_words(fit.floor_xy)}" if fit.floor_xy is not None else ""
+    log(f"ground plane from {fitted_on}: camera {fit.camera_height:.3f} m above the floor, pitch "
+        f"{fit.pitch_deg:.2f} deg, roll {fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms "
+        f"{1000 * fit.rms_m:.1f} mm){floor}")
+    report = {**fit.report(), "rms_m": fit.rms_m, "floor_xy": fit.floor_xy, "frames": frames,
+              "fit_s": time.perf_counter() - t0, **_ambiguity(fit, log)}
+    return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
+
+
+def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
+    """camera.extrinsics: auto. Fit the floor on `files` (input.background's, else
+    input.frames') and return the posed camera and a report for summary.json.
+
+    Raises:
+        InputError: naming the frames (a recording's by the recording and frame), when no
+            floor plane is found in them.
+    """
+    from .names import is_recording
+
+    t = time.perf_counter()
+    kind = "background frame" if cfg.inputs.background else "frame"
+    log(f"fitting the floor on {len(files)} {kind}{'s' if len(files) > 1 else ''} ...")
+    source = cfg.inputs.background or cfg.inputs.frames
+    names = [f"{source} (frame {f.name})" for f in files] if source and is_recording(source) else None
+    fit = fit_ground_files(files, cfg.camera, cfg.inputs.depth_scale, cfg.ground, names)
+    refuse_low_view_from_above(cfg, fit, frames_named(files, names))
+    return posed(cfg, fit, f"{len(files)} {kind}{'s' if len(files) > 1 else ''}", [str(f) for f in files], t, log)
+
+
+@dataclasses.dataclass
+class Setup:
+    """What a run infers with, built from its config: the device, the posed camera, the
+    full-resolution geometry (boxes, pictures, scores) and the engine with its background."""
+
+    device: str
+    spec: WorkerSpec  # how a worker builds the run's engine
+    geometry: object  # full resolution: boxes, pictures, scores
+    ground: dict | None
+    background: str
+    auto_report: dict | None
+    inference: dict
+    engine: Engine | None  # this process's engine (None when workers infer the frames)
+    setup_s: float
+
+
+def warn_depth_scale(cfg: RunConfig, path, depth: np.ndarray | None, log=print) -> None:
+    """A warning (`log`) when the first frame's readings are no depth camera's at the config's
+    input.depth_scale (io.depth_scale_hint); `depth`: the frame at `path`, read if None."""
+    if path is None:
+        return
+    try:
+        depth = read_frame(cfg, path) if depth is None else depth
+    except InputError:  # a bad frame is reported where frames are read
+        return
+    hint = depth_scale_hint(depth, cfg.inputs.depth_scale)
+    if hint:
+        log(f"warning: {path}: {hint}")
+
+
+# engine.batch: auto on a GPU for a recorded run: on an H200 (docs/bench_cuda_h200.md, third
+# lease) a kinect_v2 frame took 4.9 ms alone and 1.1 ms in a call of 16 (0.83 ms at 32, 0.54 at
+# 128, for a latency and memory 2 to 8 times larger: a run's reading, detection and writing on
+# the host take longer than that a frame)
+GPU_BATCH = 16
+
+
+def auto_batch(device: str, recorded: bool) -> int:
+    """engine.batch auto's frames a call (before the memory budget): GPU_BATCH for a recorded
+    run on a GPU; 1 on the CPU (one thread: a batch takes as long as its frames one by one),
+    for a live camera (a frame waits for no other) and the Python API (`detect` takes one)."""
+    return GPU_BATCH if recorded and device.startswith("cuda") else 1
+
+
+def with_batch(cfg: RunConfig, batch: int) -> RunConfig:
+    """cfg with engine.batch = batch."""
+    return dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, batch=batch))
+
+
+def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=print,
+           parallel: bool = False, keep_engine: bool = False, recorded: bool = False) -> Setup:
+    """The pose (fitted with extrinsics: auto), the background (frames, auto from `frames`,
+    or the floor) and the engine of a run: what `dpom-warp run` and the Python API's
+    Detector both infer with. `frames`: the run's frames (read only for `auto` background
+    and for a floor fit without background frames). engine.batch auto is GPU_BATCH for a
+    `recorded` run on a GPU (halved until engine.memory_gb holds it), else 1; the Setup's
+    spec.cfg has the batch chosen."""
+    auto_bg = cfg.inputs.auto_background
+    bg_files = (expand(cfg.inputs.background, "input.background", cfg.inputs.topic, log)
+                if cfg.inputs.background and not auto_bg else [])
+    bg_frames = [read_frame(cfg, f) for f in bg_files]  # a bad one is fatal
+    warn_depth_scale(cfg, bg_files[0] if bg_files else frames[0] if frames else None,
+                     bg_frames[0] if bg_frames else None, log)
+    try:
+        dev = resolve_device(device or cfg.device)
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
+    batch_auto = cfg.engine.batch == "auto"
+    if batch_auto:
+        cfg = with_batch(cfg, auto_batch(dev, recorded))
+    sample = ([frames[i] for i in sample_frames(len(frames), cfg.inputs.background_auto.max_frames)]
+              if auto_bg else [])
+    camera, ground = cfg.camera, None
+    if cfg.pose_auto:
+        if auto_bg and len(sample) >= cfg.inputs.background_auto.min_frames:
+            camera, ground = fit_pose_on_estimate(cfg, sample, dev, log)
+        else:
+            fit_on = bg_files or frames[:cfg.ground_frames]
+            if not fit_on:
+                raise ConfigError("camera.extrinsics: auto needs frames to fit the floor on; expected "
+                                  "input.frames or input.background, found neither")
+            camera, ground = fit_camera_pose(cfg, fit_on, log)
+
+    t = time.perf_counter()
+    geometry = build_geometry(camera, cfg.grid, cfg.obj)  # full resolution: boxes, pictures
+    if not np.any(geometry.rect_area > 0):  # a grid beside the view: every map would be empty
+        c = camera.centre
+        floor = (ground or {}).get("floor_xy")
+        seen = f" ({floor_words(floor)})" if floor else ""
+        raise ConfigError(
+            f"grid: none of its {len(geometry.rect)} locations is in the camera's view (the camera "
+            f"{'fitted ' if ground else ''}at x {c[0]:.2f} m, y {c[1]:.2f} m, {c[2]:.2f} m up); expected "
+            f"grid.x and grid.y{' and grid.z' if cfg.grid.mode == 'voxel' else ''} over what the camera sees{seen}")
+    if parallel and cfg.model.warm_start:
+        raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
+                          "must run in order in one process; expected no --workers or --ray with it")
+    log("setting up the engine (mask index; Warp kernels compiled on first use, then cached) ...")
+    while True:
+        try:
+            engine = make_engine(cfg, camera, dev, cfg.engine.batch)
+            break
+        except MemoryBudgetError as e:
+            if batch_auto and cfg.engine.batch > 1:  # fewer frames a call where the budget holds fewer
+                cfg = with_batch(cfg, cfg.engine.batch // 2)
+                continue
+            raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
+    auto_report, given = None, None
+    if bg_frames:
+        engine.set_background_frames(engine.resolution.frames(np.stack(bg_frames)))
+        given = (engine.background(0), None) if parallel else None
+        background = f"{len(bg_files)} background frames"
+    elif auto_bg:
+        if len(sample) >= cfg.inputs.background_auto.min_frames:
+            log(f"estimating the background from {len(sample)} frames ...")
+        estimator, auto_report = estimate_background(cfg, sample, engine.height, engine.width, dev,
+                                                     engine.resolution)
+        given = estimator.result()  # (Background, fallback): also what other workers take
+        engine.set_background(*given)
+        auto_report["fallback_pixels"] = engine.fallback_pixels
+        auto_report["fallback_share"] = engine.fallback_pixels / engine.n_pixels
+        background = (f"auto from {len(sample)} of the frames ({engine.fallback_pixels} of "
+                      f"{engine.n_pixels} pixels left to the floor-only model)")
+    else:
+        background = "floor plane only"
+    del bg_frames
+    r = engine.resolution
+    inference = {"stride": r.stride, "reduce": r.reduce, "image": [engine.width, engine.height],
+                 "sparse_epsilon": cfg.model.sparse_epsilon, "bound_rounds": cfg.model.bound_rounds,
+                 "warm_start": cfg.model.warm_start, "exact": cfg.engine.exact, "batch": cfg.engine.batch}
+    if parallel:  # an empty frame compiles every kernel into the cache the workers are given
+        engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))
+        engine = engine if keep_engine else None
+    return Setup(dev, WorkerSpec(cfg, camera, dev, given), geometry, ground, background, auto_report,
+                 inference, engine, time.perf_counter() - t)
+
+
+def estimate_background(cfg: RunConfig, files: list[Path], height: int, width: int, device: str,
+                        resolution: Resolution | None = None, chunk: int = 16):
+    """input.background: auto over `files`, streamed `chunk` frames at a time, reduced by
+    `resolution` (None: full resolution). Returns the estimator and a report."""
+    t = time.perf_counter()
+    estimator = BackgroundEstimator(height, width, cfg.model, cfg.inputs.background_auto, device)
+    for i in range(0, len(files), chunk):
+        batch = np.stack([read_frame(cfg, f) for f in files[i:i + chunk]])
+        estimator.add(resolution.frames(batch) if resolution else batch)
+    return estimator, {"frames": len(files), "pixels": height * width,
+                       "memory_bytes": estimator.memory_bytes(),
+                       "estimate_s": time.perf_counter() - t}
+
+
+def refuse_low_view_from_above(cfg: RunConfig, fit, where: str) -> None:
+    """camera.ground.up: auto (no IMU in the recording, none in the config): a plane facing the
+    camera reads the same as a floor seen from straight down and as a wall faced level, and
+    auto takes the floor. On a ground grid, a camera looking down (within 10 degrees of
+    straight down) from lower than its objects' height sees none of them whole: the plane is
+    taken for a wall, and the run stops with an InputError saying how to give the pose."""
+    from .ground import AUTO_MARGIN_DEG, HINT
+
+    if not isinstance(cfg.ground.up, str) or cfg.grid.mode != "ground":
+        return
+    if abs(fit.pitch_deg - 90.0) <= AUTO_MARGIN_DEG and fit.camera_height < cfg.obj.height:
+        raise InputError(
+            f"{where}: camera.extrinsics: auto: the floor found is a plane {fit.camera_height:.2f} m away facing "
+            f"the camera; as a floor the camera would look down on it (pitch {fit.pitch_deg:.1f} deg) from lower "
+            f"than the {cfg.obj.height:g} m objects it is to find, so it is more likely a wall the camera faces; "
+            f"{HINT}, or give camera.extrinsics")
+
+
+def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=print):
+    """camera.extrinsics: auto with background: auto: the floor is fitted on the estimated
+    background at full resolution (the floor people hide in a frame shows in the estimate)."""
+    from .ground import GroundFitError, fit_ground_frames
+
+    t = time.perf_counter()
+    log(f"fitting the floor on the background estimated from {len(files)} frames ...")
+    estimator, _ = estimate_background(cfg, files, cfg.camera.height, cfg.camera.width, device)
+    bg, fallback = estimator.result()
+    depth = np.where(fallback | (bg.outlier >= 1), 0.0, bg.mu)
+    try:
+        fit = fit_ground_frames([depth], cfg.camera, cfg.ground)
+    except GroundFitError as e:
+        raise InputError(f"{files[0]} and {len(files) - 1} more frames: in their estimated "
+                         f"background: {e}") from None
+    refuse_low_view_from_above(cfg, fit, f"{files[0]} and {len(files) - 1} more frames (their estimated background)")
+    return posed(cfg, fit, f"the background estimated on {len(files)} frames",
+                 f"estimated background of {len(files)} frames", t, log)

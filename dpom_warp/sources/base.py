@@ -1,0 +1,88 @@
+"""What every source is: its description (`SourceInfo`), its frames (`Frame`), the `Source`
+interface the readers implement, and the helpers they share (an optional package imported or
+named in one line; gravity from accelerometer readings)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Iterator
+
+import numpy as np
+
+from ..io import InputError
+
+INSTALL = 'pip install "dpom-warp[sensors]"'
+
+
+@dataclasses.dataclass
+class SourceInfo:
+    """What a source holds. `depth_scale`: metres per unit of its depth values (None: float
+    metres); `intrinsics`: fx, fy, cx, cy in pixels (None when the source has no camera
+    information); `distortion`: OpenCV's k1, k2, p1, p2, k3 (and k4, k5, k6 for the rational
+    model), or None; `gravity_up`: the accelerometer's mean reading at rest (it measures +g
+    upwards) turned into the depth camera's frame (OpenCV: x right, y down, z forward), when
+    the source has one and says how it sits relative to the depth camera."""
+
+    kind: str
+    path: str
+    frames: int
+    width: int | None = None
+    height: int | None = None
+    intrinsics: dict | None = None
+    distortion: list | None = None
+    depth_scale: float | None = None
+    encoding: str | None = None
+    topic: str | None = None
+    streams: list = dataclasses.field(default_factory=list)
+    duration_s: float | None = None
+    rate_hz: float | None = None
+    imu: bool = False
+    gravity_up: list | None = None  # unit "up" in the depth camera's frame, from the accelerometer
+
+    def as_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclasses.dataclass
+class Frame:
+    """One frame of a source: its index in the depth stream, its timestamp (seconds, None when
+    the source has none), and the depth (2-D, in the source's units: integers, or float32
+    metres with 0 / NaN / inf for no reading) or why it cannot be read."""
+
+    index: int
+    timestamp: float | None
+    depth: np.ndarray | None
+    reason: str | None = None
+
+
+class Source:
+    """A recording or a folder of frames."""
+
+    def info(self) -> SourceInfo:
+        raise NotImplementedError
+
+    def frames(self) -> Iterator[Frame]:
+        raise NotImplementedError
+
+
+def gravity_direction(readings) -> list | None:
+    """Unit "up" from accelerometer readings at rest (m/s^2; an accelerometer measures +g
+    upwards): their mean, normalised; None when there are none or they do not add up to a
+    reading of gravity (a mean under 1 m/s^2)."""
+    if not len(readings):
+        return None
+    up = np.mean(np.asarray(readings, float), axis=0)
+    n = np.linalg.norm(up)
+    return (up / n).tolist() if n > 1.0 else None
+
+
+def need(module: str, what: str, package: str | None = None, install: str = INSTALL):
+    """Import an optional package (a reader: the sensors extra) or say in one line how to
+    install it; `package`: its name on PyPI, when not the module's."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise InputError(f"{what} needs the optional package {package or module.split('.')[0]}; install it "
+                         f"with {install}") from None
