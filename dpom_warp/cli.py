@@ -160,7 +160,8 @@ def _fit_ground(args) -> int:
     import yaml
 
     from .config import load_camera_file
-    from .ground import GroundOptions, fit_ground_files, fit_ground_named, frames_named, recording_frames
+    from .ground import GroundOptions, fit_ground_files, fit_ground_named, frames_named
+    from .sources import recording_frames
     from .io import InputError, write_text_atomic
     from .names import is_recording
 

@@ -422,39 +422,6 @@ def fit_ground_named(frames_m, camera: Camera, options: GroundOptions, named: st
         raise InputError(f"{named}: {e}" + (f" ({hint})" if hint else "")) from None
 
 
-def recording_frames(path: str, topic: str | None, count: int, camera: Camera | None = None):
-    """The first `count` readable depth frames of a recording, for a floor fit: (camera,
-    frames in metres, their names for messages, the accelerometer's up or None). The camera
-    is the recording's (size, intrinsics, distortion) unless `camera` is given.
-
-    Raises:
-        InputError: no camera information and none given, or no readable depth frame.
-    """
-    from .io import InputError, array_to_metres
-    from .sources import open_source
-
-    source = open_source(path, topic, "DEPTH")
-    info = source.info()
-    if camera is None:
-        i = info.intrinsics
-        if i is None:
-            raise InputError(f"{path}: no camera information for {info.topic} (no sensor_msgs/CameraInfo); "
-                             f"expected --camera CAMERA.yaml")
-        camera = Camera(info.width, info.height, i["fx"], i["fy"], i["cx"], i["cy"],
-                        distortion=tuple(info.distortion) if info.distortion else None)
-    frames, names = [], []
-    for frame in source.frames():
-        if frame.depth is None:  # a damaged message: the next one
-            continue
-        frames.append(array_to_metres(frame.depth, info.depth_scale or 0.001))
-        names.append(f"{path} (frame {frame.index:06d})")
-        if len(frames) == count:
-            break
-    if not frames:
-        raise InputError(f"{path}: no readable depth frame")
-    return camera, frames, names, info.gravity_up
-
-
 def frames_named(files, names: list[str] | None = None) -> str:
     """How messages name the frames a floor is fitted on: the first (by `names`, else its
     path) and how many more."""

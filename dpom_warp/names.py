@@ -9,8 +9,18 @@ import os
 from pathlib import Path
 
 LIVE_PREFIX = "realsense"
-RECORDING_SUFFIXES = {".bag": "ROS 1 bag", ".db3": "ROS 2 bag (sqlite)", ".mcap": "ROS 2 bag (MCAP)",
-                      ".mkv": "Azure Kinect recording"}
+# every kind of source: what it is, and its reader (module in dpom_warp/sources/, class), imported
+# when used (the recordings' readers need the optional [sensors] extra); recordings by suffix.
+# A new kind is its reader's file and one entry here.
+READERS = {
+    "live": ("a live RealSense camera", "realsense", "RealSenseLive"),
+    "files": ("depth frame files", "files", "FileFrames"),
+    ".bag": ("ROS 1 bag", "bags", "Bag"),
+    ".db3": ("ROS 2 bag (sqlite)", "bags", "Bag"),
+    ".mcap": ("ROS 2 bag (MCAP)", "bags", "Bag"),
+    ".mkv": ("Azure Kinect recording", "azure", "AzureKinect"),
+}
+RECORDING_SUFFIXES = {k: what for k, (what, _, _) in READERS.items() if k.startswith(".")}
 
 
 def is_live(spec) -> bool:

@@ -24,8 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import InputError, atomic_path, write_json_atomic
-from ..names import is_live, is_recording
+from ..geometry import Camera
+from ..io import InputError, array_to_metres, atomic_path, write_json_atomic
+from ..names import READERS, is_live, is_recording
 from .base import INSTALL, Frame, Source, SourceInfo, gravity_direction, need  # noqa: F401 - the package's names
 
 CACHE_VERSION = 2  # 2: .npy frames
@@ -45,17 +46,10 @@ def open_source(spec: str | os.PathLike, topic: str | None = None, key: str = "i
     return _reader(kind)(p, topic, key)
 
 
-# each kind of source: its module (a file of this package) and class, imported when used (the
-# readers' packages are the optional [sensors] extra); a new kind is a file and an entry here
-READERS = {"live": ("realsense", "RealSenseLive"), "files": ("files", "FileFrames"),
-           ".mkv": ("azure", "AzureKinect"), ".bag": ("bags", "Bag"), ".db3": ("bags", "Bag"),
-           ".mcap": ("bags", "Bag")}
-
-
 def _reader(kind: str) -> type:
     import importlib
 
-    module, name = READERS[kind]
+    _, module, name = READERS[kind]
     return getattr(importlib.import_module(f"{__name__}.{module}"), name)
 
 
@@ -128,3 +122,34 @@ def source_frames(pattern: str, key: str, topic: str | None = None, log=print) -
             raise InputError(f"{key}: {pattern}: no readable depth frame ({reason})")
         return files, meta
     return _reader("files")(pattern, key).files, None
+
+
+# -- the first frames of a source, for a floor fit ---------------------------------------------
+def recording_frames(path: str, topic: str | None, count: int, camera: Camera | None = None):
+    """The first `count` readable depth frames of a recording, for a floor fit: (camera,
+    frames in metres, their names for messages, the accelerometer's up or None). The camera
+    is the recording's (size, intrinsics, distortion) unless `camera` is given.
+
+    Raises:
+        InputError: no camera information and none given, or no readable depth frame.
+    """
+    source = open_source(path, topic, "DEPTH")
+    info = source.info()
+    if camera is None:
+        i = info.intrinsics
+        if i is None:
+            raise InputError(f"{path}: no camera information for {info.topic} (no sensor_msgs/CameraInfo); "
+                             f"expected --camera CAMERA.yaml")
+        camera = Camera(info.width, info.height, i["fx"], i["fy"], i["cx"], i["cy"],
+                        distortion=tuple(info.distortion) if info.distortion else None)
+    frames, names = [], []
+    for frame in source.frames():
+        if frame.depth is None:  # a damaged message: the next one
+            continue
+        frames.append(array_to_metres(frame.depth, info.depth_scale or 0.001))
+        names.append(f"{path} (frame {frame.index:06d})")
+        if len(frames) == count:
+            break
+    if not frames:
+        raise InputError(f"{path}: no readable depth frame")
+    return camera, frames, names, info.gravity_up
