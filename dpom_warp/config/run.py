@@ -1,0 +1,194 @@
+"""The typed run config the pipeline uses (`RunConfig`), made from a validated config file by
+`parse_config`, which reads no file: the defaults that depend on other keys are chosen here."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ValidationError
+
+from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
+from ..geometry import Camera, Grid, ObjectBox, pose_from_angles
+from ..ground import GroundOptions
+from ..model import BEHIND_COST, EXACT_BETA, TOP_SHORTER, AutoBackground, ModelParams
+from ..synthetic import SceneSpec
+from ..tracking import TrackingOptions
+from .camera import PoseMatrix
+from .schema import ConfigFile
+from .values import ConfigError, _d, _first_error
+
+
+# -- the typed run config the pipeline uses ----------------------------------------------------
+@dataclass(frozen=True)
+class Detection:
+    threshold: float = 0.5
+    nms_radius: float = 0.4
+    edge_radius: float = 0.0
+    edge_view: float = 0.5
+    min_log_odds: float = MIN_LOG_ODDS
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    ground_truth: str | None = None
+    match_distance: float = 0.5
+    hidden_visibility: float = 0.1
+    plots: bool = False
+
+
+@dataclass(frozen=True)
+class Inputs:
+    frames: str | None = None
+    background: str | None = None
+    depth_scale: float = 0.001
+    fps: float = 15.0
+    topic: str | None = None
+    stride: int | str = "auto"  # "auto" or an integer >= 1 (dpom_warp.resolution)
+    reduce: str = "median"
+    background_auto: AutoBackground = AutoBackground()  # for background: auto
+
+    @property
+    def auto_background(self) -> bool:
+        return self.background == "auto"
+
+
+@dataclass(frozen=True)
+class Output:
+    dir: str = "runs/out"
+    images: bool = True
+    images_every: int = 1
+    rerun: str | None = None
+    ply: bool = False
+
+
+@dataclass(frozen=True)
+class EngineOptions:
+    entries_per_pixel: float = 8.0
+    max_entries: int | None = None
+    memory_gb: float | None = 8.0
+    batch: int | str = "auto"  # (an int once a run has chosen: pipeline.set_up)
+    graph: str = "auto"
+    exact: bool = False
+    mask_index: str = "auto"
+
+
+@dataclass
+class RunConfig:
+    """A validated run configuration; `resolved` is the config with every default filled in.
+
+    With `pose_auto` (camera.extrinsics: auto) the camera's pose is a placeholder until the
+    run fits the floor with `ground` options on `ground_frames` frames.
+    """
+
+    device: str
+    inputs: Inputs
+    camera: Camera
+    grid: Grid
+    obj: ObjectBox
+    model: ModelParams
+    detection: Detection
+    evaluation: Evaluation
+    output: Output
+    engine: EngineOptions
+    synthetic: SceneSpec | None
+    synthetic_cache: str | None
+    resolved: dict
+    pose_auto: bool = False
+    ground: GroundOptions = GroundOptions()
+    ground_frames: int = 5
+    tracking: TrackingOptions = TrackingOptions()
+
+
+def _fill(cls, section: BaseModel, **changes):
+    """A domain dataclass from a validated section (the fields they share)."""
+    names = {f.name for f in fields(cls)} - set(changes)
+    return cls(**{k: v for k, v in section.model_dump().items() if k in names}, **changes)
+
+
+def parse_config(raw: dict[str, Any]) -> RunConfig:
+    """Validate a config mapping into a RunConfig. No file is read: the camera keys a camera file
+    or a recording gives are filled in before (loading.config_from_mapping; a run folder's
+    run.json has them all)."""
+    try:
+        c = ConfigFile.model_validate(raw)
+    except ValidationError as e:
+        raise ConfigError(_first_error(e)) from None
+    s = c.input
+    inputs = Inputs(frames=s.frames, background=s.background, depth_scale=s.depth_scale, fps=s.fps,
+                    topic=s.topic, stride=s.stride, reduce=s.reduce,
+                    background_auto=_fill(AutoBackground, s.background_auto))
+    cam, ext = c.camera, c.camera.extrinsics
+    pose_auto = ext == "auto"
+    if pose_auto:
+        pose, pose_resolved = np.eye(4), "auto"
+    elif isinstance(ext, PoseMatrix):
+        pose = np.array(ext.T_world_from_camera, dtype=np.float64)
+        pose_resolved = {"T_world_from_camera": pose.tolist()}
+    else:
+        pose_resolved = ext.model_dump()
+        pose = pose_from_angles(ext.height, ext.pitch_deg, ext.roll_deg, ext.yaw_deg, ext.x, ext.y)
+    i = cam.intrinsics
+    camera = Camera(cam.width, cam.height, i.fx, i.fy, i.cx, i.cy, pose, cam.distortion)
+    ground = _fill(GroundOptions, cam.ground)
+    grid = Grid(x=c.grid.x, y=c.grid.y, mode=c.grid.mode, z=c.grid.z)
+    obj = _fill(ObjectBox, c.object)
+    m = c.model
+    damping_max = m.damping_max if m.damping_max is not None else max(_d(ModelParams, "damping_max"), m.damping)
+    exclusion = m.exclusion if m.exclusion is not None else (_d(ModelParams, "exclusion") if c.grid.mode == "ground" else 0.0)
+    behind_cost = (m.behind_cost if m.behind_cost is not None else  # the core is the solid's
+                   (BEHIND_COST if c.grid.mode == "ground" and c.object.shape == "solid" else 0.0))
+    # a person shorter than the solid; not floor-only, where the band is what tells furniture
+    # from people and a shorter one lets a cabinet of that height through
+    top_heights = (m.top_heights if m.top_heights is not None else
+                   ((round(c.object.height - TOP_SHORTER, 6),) if c.grid.mode == "ground" and c.object.shape == "solid"
+                    and c.object.height > 1.0 and c.input.background is not None else ()))
+    # a cell whose band is out of the image is not judged by it (people entering the view, a
+    # ceiling camera's edges); floor-only it is rejected: a table at the image's edge supports
+    # the lower part of such a solid, and without a background nothing tells it from a person
+    top_unseen = m.top_unseen if m.top_unseen is not None else (1.0 if c.input.background is not None else 0.0)
+    # eq. 13's cut-off, chosen for each path on the tuning draw (README, Defaults and why)
+    beta = m.beta if m.beta is not None else (EXACT_BETA if c.engine.exact else _d(ModelParams, "beta"))
+    model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost,
+                  top_heights=top_heights, top_unseen=top_unseen, beta=beta)
+    edge_radius = (c.detection.edge_radius if c.detection.edge_radius is not None else
+                   EDGE_RADIUS if c.grid.mode == "ground" else 0.0)
+    detection = _fill(Detection, c.detection, edge_radius=edge_radius)
+    evaluation = _fill(Evaluation, c.evaluation)
+    output = _fill(Output, c.output)
+    engine = _fill(EngineOptions, c.engine)
+    tracking = _fill(TrackingOptions, c.tracking, regions=tuple(tuple(r) for r in c.tracking.regions))
+    if engine.exact:  # the exact path: full resolution, every pass full, no warm start
+        inputs = dataclasses.replace(inputs, stride=1)
+        model = dataclasses.replace(model, sparse_epsilon=0.0, warm_start=False)
+    synthetic = _fill(SceneSpec, c.synthetic) if c.synthetic is not None else None
+    cache = c.synthetic.cache if c.synthetic is not None else None
+
+    def plain(v):
+        return list(v) if isinstance(v, tuple) else v
+
+    resolved = {
+        "device": c.device,
+        "input": {**vars_of(inputs), "background_auto": vars_of(inputs.background_auto)},
+        "camera": {"width": cam.width, "height": cam.height,
+                   "intrinsics": {"fx": i.fx, "fy": i.fy, "cx": i.cx, "cy": i.cy},
+                   "extrinsics": pose_resolved,
+                   "distortion": list(cam.distortion) if cam.distortion else None,
+                   "ground": {"frames": cam.ground.frames, **{k: plain(v) for k, v in vars_of(ground).items()}}},
+        "grid": {"mode": grid.mode, "x": list(grid.x), "y": list(grid.y), **({"z": list(grid.z)} if grid.z else {})},
+        "object": vars_of(obj),
+        "model": {k: plain(v) for k, v in vars_of(model).items()},
+        "detection": vars_of(detection), "evaluation": vars_of(evaluation),
+        "tracking": {**vars_of(tracking), "regions": [list(r) for r in tracking.regions]},
+        "output": vars_of(output), "engine": vars_of(engine),
+    }
+    if synthetic is not None:
+        resolved["synthetic"] = {"cache": cache, **{k: plain(v) for k, v in vars_of(synthetic).items()}}
+    return RunConfig(c.device, inputs, camera, grid, obj, model, detection, evaluation, output,
+                     engine, synthetic, cache, resolved, pose_auto, ground, cam.ground.frames, tracking)
+
+
+def vars_of(dc) -> dict:
+    return {f.name: getattr(dc, f.name) for f in fields(dc)}

@@ -1,0 +1,107 @@
+"""The whole config file (`ConfigFile`), its JSON Schema (`dpom-warp schema`), which keys are
+paths, and pydantic's errors said in one line."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from .camera import CameraSection
+from .model_section import ModelSection
+from .sections import (
+    DetectionSection,
+    EngineSection,
+    EvaluationSection,
+    GridSection,
+    InputSection,
+    ObjectSection,
+    OutputSection,
+    SyntheticSection,
+    TrackingSection,
+)
+from .values import Device, Node, PathValue, _fail
+
+
+class ConfigFile(Node):
+    """A dpom-warp run config (`dpom-warp run CONFIG`)."""
+
+    model_config = ConfigDict(title="dpom-warp run config")
+
+    device: Device = Field("auto", description="auto (first CUDA device, else the CPU), cpu, cuda, cuda:N")
+    input: InputSection
+    camera: CameraSection
+    grid: GridSection
+    object: ObjectSection = ObjectSection()
+    model: ModelSection = ModelSection()
+    detection: DetectionSection = DetectionSection()
+    evaluation: EvaluationSection = EvaluationSection()
+    tracking: TrackingSection = TrackingSection()
+    output: OutputSection = OutputSection()
+    engine: EngineSection = EngineSection()
+    synthetic: SyntheticSection | None = None
+
+    @model_validator(mode="after")
+    def _across_sections(self):
+        grid, obj = self.grid, self.object
+        sizes = [("x", "width", obj.width), ("y", "depth" if obj.depth else "width", obj.depth or obj.width)]
+        if grid.mode == "voxel":
+            sizes.append(("z", "height", obj.height))
+        for axis, key, size in sizes:
+            lo, hi, _ = getattr(grid, axis)
+            if size > hi - lo:
+                raise _fail(f"expected at most the grid's {axis} extent {hi - lo:g} m, found {size:g}",
+                            f"object.{key}")
+        heights = self.model.top_heights or ()
+        if grid.mode == "voxel" and heights:
+            raise _fail(f"expected [] in voxel mode (no top-band test there), found {list(heights)}",
+                        "model.top_heights")
+        if any(h >= obj.height for h in heights):
+            raise _fail(f"expected heights below object.height ({obj.height:g} m), found {list(heights)}",
+                        "model.top_heights")
+        if self.synthetic is not None and self.camera.extrinsics == "auto":
+            raise _fail("rendering needs a camera pose; expected camera.extrinsics given as "
+                        "{height, pitch_deg, ...} or a matrix, found auto", "synthetic")
+        return self
+
+
+def json_schema() -> dict:
+    """The JSON Schema of a run config (what `dpom-warp schema` writes)."""
+    schema = ConfigFile.model_json_schema()
+    # width, height and intrinsics may come from camera.file or a recording, the whole section
+    # from a recording (parse_config says when they come from neither), and `camera: FILE` is
+    # short for {file: FILE}
+    schema["$defs"]["CameraSection"].pop("required", None)
+    schema["required"] = [k for k in schema["required"] if k != "camera"]
+    schema["properties"]["camera"] = {"anyOf": [
+        {"$ref": "#/$defs/CameraSection"},
+        {"type": "string", "description": "a camera file: short for {file: FILE}"}]}
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **schema}
+
+
+def path_keys(model: type[BaseModel] = ConfigFile, prefix: str = "") -> list[str]:
+    """Dotted keys of the config values that are paths (PathValue), from the models."""
+    keys = []
+    for name, info in model.model_fields.items():
+        key = f"{prefix}{name}"
+        if any(isinstance(m, PathValue) for m in info.metadata) or _has_path(info.annotation):
+            keys.append(key)
+        for sub in _sections(info.annotation):
+            keys += path_keys(sub, key + ".")
+    return keys
+
+
+def _args(tp):
+    return getattr(tp, "__args__", ()) or ()
+
+
+def _has_path(tp) -> bool:
+    meta = getattr(tp, "__metadata__", ())
+    return any(isinstance(m, PathValue) for m in meta) or any(_has_path(a) for a in _args(tp))
+
+
+def _sections(tp) -> list[type[BaseModel]]:
+    if isinstance(tp, type) and issubclass(tp, Node):
+        return [tp]
+    return [s for a in _args(tp) for s in _sections(a)]
+
+
+# -- errors as one line -------------------------------------------------------------------------

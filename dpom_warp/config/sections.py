@@ -1,0 +1,262 @@
+"""The config's other sections: input, grid, object, detection, evaluation, tracking, output,
+engine and synthetic (the camera and the model have files of their own)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+from pydantic import BeforeValidator, Field, model_validator
+
+from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
+from ..geometry import ObjectBox
+from ..model import AutoBackground
+from ..resolution import REDUCERS
+from ..synthetic import SceneSpec
+from ..tracking import TrackingOptions
+from .values import (
+    Axis,
+    Batch,
+    Bool,
+    FilePath,
+    Int,
+    Node,
+    Num,
+    Pair,
+    Str,
+    Stride,
+    _d,
+    _fail,
+    _numbers,
+)
+
+
+class BackgroundAutoSection(Node):
+    """How `input.background: auto` estimates the background from the run's own frames."""
+
+    max_frames: Int = Field(_d(AutoBackground, "max_frames"), ge=1,
+                            description="frames used, evenly spread over the sequence")
+    min_frames: Int = Field(_d(AutoBackground, "min_frames"), ge=1,
+                            description="fewer frames: the floor-only model everywhere")
+    min_share: Num = Field(_d(AutoBackground, "min_share"), gt=0, le=1,
+                           description="share of the frames a cluster must hold to be the background")
+    slots: Int = Field(_d(AutoBackground, "slots"), ge=1, le=16, description="clusters kept per pixel")
+    cluster_sigmas: Num = Field(_d(AutoBackground, "cluster_sigmas"), ge=0,
+                                description="a reading joins a cluster within cluster_sigmas sensor "
+                                            "sigmas + cluster_floor of its mean")
+    cluster_floor: Num = Field(_d(AutoBackground, "cluster_floor"), ge=0, description="metres")
+
+    @model_validator(mode="after")
+    def _frames(self):
+        if self.min_frames > self.max_frames:
+            raise _fail(f"expected at most max_frames ({self.max_frames}), found {self.min_frames}",
+                        "min_frames")
+        return self
+
+
+class InputSection(Node):
+    """The depth frames and the background."""
+
+    frames: FilePath | None = Field(None, description="glob (or folder) of depth frames (16-bit PNG or .npy, "
+                                                      "in depth units), processed in sorted order, or a "
+                                                      "recording (.bag, .db3, .mcap, a ROS 2 bag folder, "
+                                                      ".mkv); required by dpom-warp run")
+    background: Union[Literal["auto"], FilePath, None] = Field(
+        None, description="glob (or folder) of background frames (no people); auto: estimated from the "
+                          "run's own frames; null: the floor-only background")
+    depth_scale: Num = Field(0.001, gt=0, description="metres per unit of the files' values; 0 = no "
+                                                      "reading (default: the recording's, else 0.001)")
+    topic: Str | None = Field(None, description="a recording's depth stream (default: its only one)")
+    stride: Stride = Field("auto", description="inference on blocks of stride x stride pixels; auto: the "
+                                               "coarsest stride (up to 8) leaving 6 pixels across the "
+                                               "object at the farthest cell; pictures, boxes and the "
+                                               "floor fit stay at full resolution")
+    reduce: Literal[REDUCERS] = Field("median", description="how a block becomes one reading: median "
+                                                            "(lower median of its readings), nearest "
+                                                            "(one pixel), min")
+    fps: Num = Field(15.0, gt=0, description="frames per second of the frames (tracking's speeds)")
+    background_auto: BackgroundAutoSection = BackgroundAutoSection()
+
+
+class GridSection(Node):
+    """The locations: cells of a ground grid or voxels of a 3D grid."""
+
+    mode: Literal["ground", "voxel"] = Field("ground", description="ground: objects standing on cells "
+                                                                   "of the floor; voxel: objects centred "
+                                                                   "on voxels")
+    x: Axis = Field(description="[min, max, step] metres; cells tile [min, max]")
+    y: Axis = Field(description="[min, max, step] metres")
+    z: Axis | None = Field(None, description="[min, max, step] metres; voxel mode only")
+
+    @model_validator(mode="after")
+    def _z(self):
+        if self.mode == "ground" and self.z is not None:
+            raise _fail("expected no z axis in ground mode (objects stand on the floor); use mode: "
+                        "voxel for a 3D grid", "z")
+        if self.mode == "voxel" and self.z is None:
+            raise _fail("required key is missing", "z")
+        return self
+
+
+class ObjectSection(Node):
+    """The object's size and shape model, metres."""
+
+    width: Num = Field(0.4, gt=0, description="metres, across the line of sight (the solid: its body's diameter)")
+    height: Num = Field(1.85, gt=0, description="metres")
+    depth: Num | None = Field(None, gt=0, description="default: = width")
+    shape: Literal["plane", "solid"] = Field(
+        _d(ObjectBox, "shape"), description="plane: a pixel expects the depth of the plane facing the "
+        "camera (the paper); solid: the depth where its ray enters an upright body and head "
+        "(README, How it works)")
+    radius: Num | None = Field(None, gt=0, description="solid: body radius, metres (default width / 2)")
+    head_radius: Num = Field(_d(ObjectBox, "head_radius"), ge=0,
+                             description="solid: head radius, metres (0: no head; ground grids)")
+    shoulder: Num = Field(_d(ObjectBox, "shoulder"), gt=0, le=1,
+                          description="solid: where the head begins, share of the height")
+    height_spread: Num = Field(_d(ObjectBox, "height_spread"), ge=0,
+                               description="solid: spread of the heights of its tops, metres")
+    leg_radius: Num | None = Field(_d(ObjectBox, "leg_radius"), gt=0,
+                                   description="solid, ground grids: the legs' radius below hip x "
+                                               "height, metres (null: the body reaches the floor)")
+    hip: Num = Field(_d(ObjectBox, "hip"), gt=0, lt=1,
+                     description="solid: where the legs end, share of the height")
+    depth_radius: Num | None = Field(_d(ObjectBox, "depth_radius"), gt=0,
+                                     description="solid, ground grids: the body's half-depth along the line of sight, "
+                                                 "metres (an ellipse facing the camera; null: = radius)")
+
+
+class DetectionSection(Node):
+    """Detections from the rho* map."""
+
+    threshold: Num = Field(0.5, gt=0, lt=1, description="minimum rho* of a detection (a local maximum)")
+    nms_radius: Num = Field(0.4, ge=0, description="greedy non-maximum suppression: a weaker maximum closer than "
+                                                   "this (by more than rounding) goes, metres")
+    edge_radius: Num | None = Field(None, ge=0, description=(
+        "a detection whose silhouette is mostly outside the image (its share in view under edge_view) is dropped "
+        f"within this distance of one in view, metres (README, Known behaviour); default {EDGE_RADIUS:g} on ground "
+        f"grids, 0 (off) in voxel mode"))
+    edge_view: Num = Field(0.5, gt=0, le=1, description=(
+        "the share of a silhouette's rectangle inside the image under which edge_radius applies"))
+    min_log_odds: Num = Field(MIN_LOG_ODDS, ge=0, description=(
+        "the joint test: a detection whose log posterior odds, with the other detections present and nothing "
+        "else, is under this (nats) leaves the map (README, How it works); 0: off"))
+
+
+class EvaluationSection(Node):
+    """Scores against ground truth."""
+
+    ground_truth: FilePath | None = Field(None, description="ground-truth JSON; scores go into summary.json")
+    match_distance: Num = Field(0.5, gt=0, description="matching gate on the ground plane, metres")
+    hidden_visibility: Num = Field(0.1, ge=0, le=1,
+                                   description="people less visible than this are not penalised in "
+                                               "the second protocol")
+    plots: Bool = Field(False, description="also write the evaluation figures into plots/")
+
+
+def _td(name):
+    return _d(TrackingOptions, name)
+
+
+def _switch(v):
+    """YAML 1.1 reads a bare on / off as true / false: the words they were."""
+    return {True: "on", False: "off"}.get(v, v) if isinstance(v, bool) else v
+
+
+Switch = BeforeValidator(_switch)
+
+
+class TrackingSection(Node):
+    """Tracks with identities over the run's maps (K-shortest paths as a min-cost flow)."""
+
+    method: Annotated[Literal["auto", "ksp", "online", "off"], Switch] = Field(
+        _td("method"), description="auto: ksp for runs of two frames or more; ksp: offline, globally "
+                                   "optimal; online: causal, committed `delay` frames behind; off: no tracks")
+    max_speed: Num = Field(_td("max_speed"), gt=0, description="fastest move between frames, m/s")
+    prune: Num = Field(_td("prune"), gt=0, lt=1, description="cells below this rho* are left out of the graph")
+    peak: Num = Field(_td("peak"), gt=0, lt=1, description="map peaks at least this high may be bridged "
+                                                           "across hidden frames")
+    min_rho: Num = Field(_td("min_rho"), gt=0, lt=0.5, description="rho* floor of a node's cost: a "
+                                                                   "bridged frame costs -log(min_rho / (1 - min_rho))")
+    max_rho: Num = Field(_td("max_rho"), gt=0.5, lt=1, description="rho* ceiling of a node's cost")
+    jitter: Num = Field(_td("jitter"), ge=0, description="how far a map's peak may wander from the "
+                                                         "person between frames, metres (reach = "
+                                                         "max_speed / fps + jitter)")
+    entry_cost: Num = Field(_td("entry_cost"), ge=0, description="starting or ending a track at an entry "
+                                                                 "cell (grid border, edge of the view, regions)")
+    appear_cost: Num = Field(_td("appear_cost"), ge=0, description="starting or ending one anywhere else")
+    max_gap: Int = Field(_td("max_gap"), ge=0, description="most frames a track is bridged across")
+    window: Int = Field(_td("window"), ge=2, description="ksp: frames per solved window")
+    overlap: Int = Field(_td("overlap"), ge=0, description="ksp: frames two windows share (stitched there)")
+    delay: Int = Field(_td("delay"), ge=0, description="online: frames between the newest and the committed one")
+    regions: list[Annotated[tuple[float, float, float, float], _numbers(4)]] = Field(
+        [], description="more entry areas [x_min, x_max, y_min, y_max], metres (doors)")
+    trail: Int = Field(_td("trail"), ge=0, description="frames of trail drawn behind a track in the pictures")
+
+
+class OutputSection(Node):
+    """What the run writes."""
+
+    dir: FilePath = Field("runs/out", description="output folder (--output overrides)")
+    images: Bool = Field(True, description="a picture per frame")
+    images_every: Int = Field(1, ge=1, description="a picture of every Nth frame done (the 1st, the "
+                                                   "N+1th, ...; a long recording's run draws fewer)")
+    rerun: FilePath | None = Field(None, description="also write a Rerun recording (.rrd) here: depth, "
+                                                     "boxes, map and tracks per frame (the view extra)")
+    ply: Bool = Field(False, description="the frame's points and the detected boxes as .ply files")
+
+
+class EngineSection(Node):
+    """The Warp engine's buffers and launches."""
+
+    entries_per_pixel: Num = Field(8.0, gt=0, description="initial mask-list capacity per pixel")
+    max_entries: Int | None = Field(None, ge=1, description="hard cap on the list capacity; a frame "
+                                                            "above it is refused, never truncated")
+    memory_gb: Num | None = Field(8.0, gt=0, description="memory budget of the engine's buffers, GiB")
+    batch: Batch = Field("auto", description="frames per engine call; auto: 16 for a recorded run on a GPU "
+                                             "(fewer where engine.memory_gb holds fewer), else 1 (the CPU, a "
+                                             "live camera, the Python API)")
+    graph: Annotated[Literal["auto", "on", "off"], Switch] = Field("auto", description="replay the iteration loop as a "
+                                                                    "captured graph; auto: on CUDA only")
+    exact: Bool = Field(False, description="the exact path: full resolution, every pass full, no warm "
+                                           "start (the NumPy reference's results to 1e-6)")
+    mask_index: Literal["auto", "table", "tiles"] = Field(
+        "auto", description="the static index the mask lists are built from (the same lists): table: "
+                            "every silhouette pixel's object depth stored; tiles: image tiles, less "
+                            "memory; auto: the table with a solid where it takes <= 256 MiB and fits "
+                            "memory_gb")
+
+
+def _sd(name):
+    return _d(SceneSpec, name)
+
+
+class SyntheticSection(Node):
+    """Render a synthetic sequence before the run (once; later runs reuse it)."""
+
+    cache: FilePath = Field(description="folder of the rendered frames, background and ground truth")
+    seed: Int = Field(_sd("seed"), ge=0, description="seed of the whole sequence")
+    frames: Int = Field(_sd("frames"), ge=1, description="frames with people")
+    background_frames: Int = Field(_sd("background_frames"), ge=0, description="frames of the empty room")
+    people: Int = Field(_sd("people"), ge=0, description="people walking, or drones flying")
+    kind: Literal["people", "drones"] = Field(_sd("kind"), description="what is rendered")
+    area: Annotated[tuple[float, float, float, float], _numbers(4)] = Field(
+        _sd("area"), description="x_min, x_max, y_min, y_max where they move, metres")
+    altitude: Pair = Field(_sd("altitude"), description="drones' heights, metres")
+    obstacles: Int = Field(_sd("obstacles"), ge=0, description="free-standing cabinets")
+    room: Annotated[tuple[float, float, float, float, float], _numbers(5)] = Field(
+        _sd("room"), description="x_min, x_max, y_min, y_max, height of the walls, metres")
+    furniture: Int = Field(_sd("furniture"), ge=0, description="furniture pieces placed in the room")
+    step_m: Num = Field(_sd("step_m"), ge=0, description="walk per frame, metres")
+    pair_gap: Num = Field(_sd("pair_gap"), ge=0, description="> 0: people walk in pairs this far apart")
+    min_gap: Num = Field(_sd("min_gap"), gt=0, description="people keep this far apart, metres")
+    tables: Int = Field(_sd("tables"), ge=0, description="free-standing tables inside the area")
+    in_view: Literal["body", "head"] = Field(_sd("in_view"), description="what of a person must be in "
+                                             "the image: body (eye level) or head (ceiling cameras)")
+    motion: Literal["random", "paths"] = Field(_sd("motion"), description="random: a random walk in view; "
+                                               "paths: straight walks to waypoints with stops (tracking scenes)")
+    leave: Num = Field(_sd("leave"), ge=0, description="paths: waypoints up to this far outside the area "
+                                                       "(people leave the view and come back), metres")
+    noise: Pair = Field(_sd("noise"), description="depth noise a + b z^2, metres")
+    dropout: Num = Field(_sd("dropout"), ge=0, le=1, description="share of pixels with no reading")
+    edge_holes: Num = Field(_sd("edge_holes"), ge=0, le=1,
+                            description="probability of no reading at a depth edge")
+    range_m: Pair = Field(_sd("range_m"), description="near, far sensor range, metres")
