@@ -1,0 +1,359 @@
+"""The Warp inference engine: buffers allocated once per camera and grid, one call per frame
+(or per batch of frames). The class is put together from one part per step, each in its own
+file of this package: statics (the static arrays and buffers), backgrounds, lists (a frame's
+per-pixel lists), iterations (the mean field) and threshold (what the joint test needs)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import warp as wp
+
+from .. import kernels as K
+from ..geometry import Geometry, neighbour_lists
+from ..model import (
+    BAND_ALL,
+    MISSING_READ,
+    TOP_MIN_RHO,
+    AutoBackground,
+    ModelParams,
+)
+from ..resolution import Resolution
+from ..warp_setup import init_warp
+from .backgrounds import BackgroundMixin
+from .base import (
+    BEHIND_POINT_BYTES,
+    ENTRY_BYTES,
+    TABLE_BUDGET,
+    FrameResult,
+    MemoryBudgetError,
+    memory_estimate,
+    pixel_model,
+    tile_pairs,
+)
+from .iterations import IterationsMixin
+from .lists import ListsMixin
+from .statics import StaticsMixin
+from .threshold import ThresholdMixin
+
+INT32_MAX = 2**31 - 1  # list offsets are int32
+
+
+class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, ThresholdMixin):
+    """DPOM inference for one camera and grid on one Warp device.
+
+    Buffers (per-pixel lists, accumulators) are allocated up front; the list capacity grows
+    (and says so in `grown`) only when a frame needs more entries than it holds, up to
+    `max_entries` and to what `memory_gb` allows; a frame that needs more is refused with
+    ListOverflow, and an engine whose first buffers already exceed the budget is refused
+    with MemoryBudgetError, before anything is allocated.
+
+    With `batch` > 1, `infer_batch` runs up to `batch` frames through every launch (their
+    pixels and locations side by side); each frame stops at its own iteration, so every
+    frame's result is the one `infer` gives it alone. With `graph`, the iteration loop is
+    captured once as a graph (a CUDA graph on a GPU; Warp replays CPU graphs too) and replayed
+    for every frame or batch: max_iterations launches, no host sync, converged frames skipped.
+
+    Args:
+        geometry: silhouettes, facing planes and rays (geometry.build_geometry).
+        params: model and inference parameters.
+        device: Warp device name ('cpu', 'cuda:0').
+        entries_per_pixel: initial list capacity per pixel.
+        max_entries: hard cap on the list capacity (None: no cap).
+        memory_gb: memory budget of the engine's buffers, GiB (None: no budget).
+        tile: edge in pixels of the image tiles of the static mask index (kernels.masks).
+        table: the pixel table as the static mask index instead of the tiles (kernels.masks:
+            the same lists, built without the object depths, ~1.5x faster with a solid);
+            None: with a solid (a facing plane's depth costs little more than reading the
+            table), where its pairs (at most the silhouette rectangles' area) take at most
+            TABLE_BUDGET and fit memory_gb.
+        batch: frames per launch.
+        graph: capture the iteration loop as a graph (None: on CUDA devices only).
+        resolution: how full-resolution frames are reduced to this engine's pixels (kept for
+            the caller: the engine's own arrays are at the geometry's resolution).
+        background_auto: the run estimates its background (background.BackgroundEstimator at
+            this resolution): its state counts in the memory budget and memory_bytes.
+    """
+
+    def __init__(self, geometry: Geometry, params: ModelParams, device: str = "cpu",
+                 entries_per_pixel: float = 8.0, max_entries: int | None = None,
+                 memory_gb: float | None = None, tile: int = 8, batch: int = 1,
+                 graph: bool | None = None, resolution: Resolution | None = None,
+                 background_auto: AutoBackground | None = None, table: bool | None = None):
+        init_warp()
+        if min(params.sensor_noise) < 0:
+            raise ValueError(f"sensor_noise: expected [a, b] >= 0, found {list(params.sensor_noise)}")
+        if batch < 1 or tile < 1:
+            raise ValueError(f"batch and tile: expected integers >= 1, found {batch} and {tile}")
+        self.geometry, self.params, self.device = geometry, params, device
+        # results carry the joint test's lists of the locations whose rho* reaches this (None: none)
+        self.joint_threshold: float | None = None
+        self.resolution = resolution or Resolution()
+        self.height, self.width = geometry.rays.shape[:2]
+        self.n_pixels = self.height * self.width
+        self.n_locations = len(geometry.rect)
+        self.batch = batch
+        self.graph = wp.get_device(device).is_cuda if graph is None else graph
+        # the passes' scratch (kernels.evidence_pass): global on a GPU, on the stack on the CPU
+        self.local_scratch = 0 if wp.get_device(device).is_cuda else K.SIZED_STACK
+        self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
+        self._graph, self._graph_lists = None, None
+        self._last_rho = None  # the last frame's rho, for params.warm_start
+        # full-resolution frames are reduced on a GPU (kernels.frames), by NumPy on the CPU
+        self.reduce_on_device = wp.get_device(device).is_cuda
+        self._full = None  # their buffer, made at the first such frame
+        # the joint test's lists copied out in pixel order by count, scan and fill on a GPU
+        # (compact_once's atomics leave them in any order, which the host then sorted: with
+        # the per-frame work since batched, half a batched frame's time on an H200), in one
+        # pass on the CPU (in order there)
+        self.ordered_joint_lists = wp.get_device(device).is_cuda
+        # the top band counted a thread per row of each rectangle on a GPU (kernels.top_band_rows:
+        # a thread per location, walking its whole rectangle, was the threshold step's longest
+        # kernel there), a thread per location on the CPU (one thread: the rows' launch would be
+        # the tallest rectangle's rows times longer for nothing)
+        self.top_band_by_row = wp.get_device(device).is_cuda
+        self.n_live = None  # live locations gathered for the sparse updates (None: every one)
+        self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
+        self.sparse_on_lists = False  # the sparse passes walk the lists (nothing has died yet)
+        self.n_kept = None  # locations neither pruned nor idle, for the full passes' updates
+        self.n_listed = None  # pixels with entries after the pruning, for the passes over the lists
+        self.tile, tiles_x = tile, -(-self.width // tile)
+        self.n_tiles = tiles_x * -(-self.height // tile)
+        P, L = batch * self.n_pixels, batch * self.n_locations
+        # the optical axis: every ray's parameter is its z-depth, d . forward = 1
+        rays = geometry.rays.reshape(-1, 3)
+        self.forward = wp.vec3d(*(float(x) for x in np.linalg.lstsq(rays, np.ones(len(rays)), rcond=None)[0]))
+        self.extra_bytes = background_auto.state_bytes(self.n_pixels) if background_auto else 0
+        with wp.ScopedDevice(device):
+            self.geo = self._geometry_arrays(geometry)
+        self.pm = pixel_model(params)
+        behind_points = self._count_behind_points()  # counted first: the table is in the budget
+        self.behind_table = int(behind_points.sum())
+        self.extra_bytes += BEHIND_POINT_BYTES * self.behind_table + 4 * (self.n_locations + 1)  # and its starts
+        start, nbrs = neighbour_lists(geometry.locations, params.exclusion_radius if params.exclusion > 0 else 0.0)
+        self.extra_bytes += 4 * (len(start) + len(nbrs))  # model.exclusion's neighbour lists
+        most = int(geometry.rect_area.sum())  # the pixel table's pairs at most
+        table_bytes = memory_estimate(0, 0, 0, table_pairs=most, table_pixels=self.n_pixels)
+        if table is None:
+            table = geometry.solid[0] > 0 and table_bytes <= TABLE_BUDGET and (
+                memory_gb is None or memory_estimate(P, L, max(1024, int(entries_per_pixel * P)))
+                + self.extra_bytes + table_bytes <= memory_gb * 2**30)
+        self.use_table = bool(table)
+        pair_loc, pair_tile = (np.zeros(0, np.int32),) * 2 if table else tile_pairs(geometry.rect, tile, tiles_x)
+        index_bytes = table_bytes if table else memory_estimate(0, 0, 0, len(pair_loc))
+        cap = INT32_MAX if max_entries is None else min(max_entries, INT32_MAX)
+        if memory_gb is not None:
+            fixed = memory_estimate(P, L, 0) + index_bytes + self.extra_bytes
+            cap = min(cap, max(0, int((memory_gb * 2**30 - fixed) // ENTRY_BYTES)))
+            first = memory_estimate(P, L, max(1024, int(entries_per_pixel * P))) + index_bytes + self.extra_bytes
+            if first > memory_gb * 2**30:
+                raise MemoryBudgetError(
+                    f"the engine needs at least {first / 2**30:.2f} GiB for {self.n_locations} "
+                    f"locations and {self.width}x{self.height} pixels "
+                    f"({entries_per_pixel:g} list entries per pixel"
+                    f"{f', {batch} frames a batch' if batch > 1 else ''}), above the budget of "
+                    f"{memory_gb:g} GiB")
+        self.max_entries = cap
+        self.grown: list[int] = []
+        with wp.ScopedDevice(device):
+            self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
+            self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
+            self.centre = wp.vec3d(*(float(c) for c in geometry.centre))
+            self.depth = wp.zeros((batch, self.height, self.width), dtype=wp.float32)
+            self.counts = wp.zeros(P, dtype=wp.int32)
+            self.offsets = wp.zeros(P, dtype=wp.int32)
+            self.delta_bg = wp.zeros(P, dtype=wp.float64)
+            self.bg = wp.zeros((P, 4), dtype=wp.float64)
+            self.bg_logs = wp.zeros(P, dtype=wp.vec4d)  # its logarithms (kernels.background_delta)
+            self.bg_fresh = True  # bg changed since bg_logs were written
+            self.floor_pixels = wp.ones(self.n_pixels, dtype=wp.int32)  # floor-only model here
+            self.rho = wp.zeros(L, dtype=wp.float64)
+            self.upper = wp.zeros(L, dtype=wp.float64)  # the pruning bound (kernels.sparse)
+            self.evidence = wp.zeros(L, dtype=wp.float64)
+            self.visible = wp.zeros(L, dtype=wp.float64)
+            self.share = wp.zeros(L, dtype=wp.float64)
+            self.top_support = wp.zeros(L, dtype=wp.int32)
+            self.top_against = wp.zeros(L, dtype=wp.int32)
+            self.top_hidden = wp.zeros(L, dtype=wp.int32)
+            self.top_missing = wp.zeros(L, dtype=wp.int32)  # no reading where the object would be read
+            self.top_seen = wp.zeros(L, dtype=wp.int32)  # the band's pixels in the image (-1: not counted)
+            # a shorter solid's band (params.top_heights): its GeometryArrays and counts
+            self.shorter_top = [(h, self._geometry_arrays(geometry.shorter(h), self.geo)) for h in params.top_heights
+                                if geometry.height > 0]
+            self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(5 if self.shorter_top else 0)]
+            self.top_rows = int((geometry.rect[:, 3] - geometry.rect[:, 1]).max(initial=-1)) + 1  # (shared)
+            self.all_support = wp.zeros(L, dtype=wp.int32)  # the same counts, whole silhouette
+            self.all_against = wp.zeros(L, dtype=wp.int32)
+            self.all_hidden = wp.zeros(L, dtype=wp.int32)
+            self.all_missing = wp.zeros(L, dtype=wp.int32)
+            self.all_seen = wp.zeros(L, dtype=wp.int32)
+            self.rho_star = wp.zeros(L, dtype=wp.float64)
+            self.max_change = wp.zeros((batch, max(1, params.max_iterations)), dtype=wp.float64)
+            self.done = wp.zeros(batch, dtype=wp.int32)
+            self.iterations = wp.zeros(batch, dtype=wp.int32)
+            self.live = wp.ones(L, dtype=wp.int32)
+            self.streak = wp.zeros(L, dtype=wp.int32)  # per-location damping runs (update_rho)
+            self.n_behind = wp.zeros(L, dtype=wp.int32)  # silhouette pixels read behind (behind_count)
+            self.live_counts = wp.zeros(P, dtype=wp.int32)
+            self.live_offsets = wp.zeros(P, dtype=wp.int32)
+            self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
+            self.kept_index = wp.zeros(L, dtype=wp.int32)
+            self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.prune_lists
+            # each frame's entries, live, pruned and kept entries (kernels.sparse.frame_tally)
+            self.tallies = wp.zeros((4, batch), dtype=wp.int32)
+            self.listed = wp.zeros(P, dtype=wp.int32)  # pixels whose list keeps an entry (prune_lists)
+            self.n_listed_out = wp.zeros(1, dtype=wp.int32)
+            self.live_count = wp.zeros(3, dtype=wp.int32)  # live locations, compact entries, active pixels
+            self.active = wp.zeros(P, dtype=wp.int32)  # pixels with live entries (kernels.sparse.compact_once)
+            self.live_changed = wp.zeros(2, dtype=wp.int32)  # live set changed, a location revived
+            self.active_next = wp.zeros(P, dtype=wp.int32)  # kernels.sparse.compact_again's output
+            self.no_index = wp.zeros(0, dtype=wp.int32)
+            self.reserved = wp.zeros(2, dtype=wp.int32)  # kernels.masks.pixel_entries_once
+            self.no_reserved = wp.zeros(0, dtype=wp.int32)
+            self.candidate = wp.zeros(L, dtype=wp.int32)  # the joint test's locations (joint_lists)
+            self.candidate_behind = wp.zeros(L, dtype=wp.int32)  # and their readings behind
+            self.not_done = wp.zeros(batch, dtype=wp.int32)
+            self.neighbour_start = wp.array(start, dtype=wp.int32)
+            self.neighbours = wp.array(nbrs, dtype=wp.int32)
+        self._fill_behind_table(behind_points)
+        self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
+        self.table = self._pixel_table(self.use_table)
+        self._allocate_lists(int(entries_per_pixel * P))
+        self.set_floor_background()
+
+
+    # -- buffers -------------------------------------------------------------------------
+    @property
+    def graph(self) -> bool:
+        """Whether the iteration loop is captured once and replayed as a graph (engine.graph)."""
+        return self._graph_on
+
+    @graph.setter
+    def graph(self, on: bool):
+        # Engine._launch calls the CPU kernels' entry points itself, which a capture would not
+        # record: with a graph every launch is Warp's, and the launches recorded before are dropped
+        self._graph_on = bool(on)
+        self.direct_launch = not self._graph_on
+        self._recorded = {}
+
+    def infer(self, depth_m: np.ndarray, start: np.ndarray | None = None) -> FrameResult:
+        """Occupancy probabilities of one depth frame (metres, 0 = no reading); `start`:
+        the rho to start from (a previous frame's, for warm starts) instead of the prior."""
+        return self.infer_batch(np.asarray(depth_m)[None], start)[0]
+
+    def infer_batch(self, depths_m: np.ndarray, start: np.ndarray | None = None) -> list[FrameResult]:
+        """Occupancy of up to `batch` frames (n, H, W) at once; one result per frame, each
+        equal to what `infer` gives that frame alone. Timings are the batch's. `start`
+        (locations,): the rho every frame starts from instead of the prior."""
+        p, dev = self.params, self.device
+        n = len(depths_m)
+        t0 = time.perf_counter()
+        self.build_lists(depths_m)
+        self.tallies.zero_()  # (the entries counted now: the bound's pruning changes the counts)
+        self._launch(K.frame_tally, self.batch * self.n_pixels, [self.counts, self.n_pixels, K.TALLY_SUM, self.tallies, 0])
+        wp.synchronize_device(dev)
+        t1 = time.perf_counter()
+        if start is None and p.warm_start and self._last_rho is not None:
+            # capped at the prior: locations found empty start (nearly) empty, while occupied
+            # ones start afresh (starting them occupied holds moving people back, +3 cm)
+            start = np.minimum(self._last_rho, p.prior)
+        if start is None:
+            self.rho.fill_(p.prior)
+        else:
+            self.rho.assign(np.tile(np.asarray(start, dtype=np.float64), self.batch))
+        self.live.fill_(1)
+        self.streak.zero_()
+        self.evidence.zero_()
+        self.max_change.zero_()
+        self.iterations.zero_()
+        self.done.assign(np.arange(self.batch, dtype=np.int32) >= n)  # padding frames: done
+        logit_prior = math.log(p.prior) - math.log1p(-p.prior)
+        bound = p.sparse_epsilon > 0 and p.bound_rounds > 0
+        self.n_kept = self.n_listed = None
+        if p.sparse_epsilon > 0:  # the bound, then locations in no list stay where they start
+            self.prune(logit_prior)
+            if not self.graph:  # full passes update all but the pruned and idle ones, and the
+                # passes over the lists run over the pixels with entries (read after one sync)
+                self.n_kept = self._gather(self.kept_index)
+                self.n_listed = int(self.n_listed_out.numpy()[0])
+        if p.behind_cost > 0 and not bound:  # (with the bound, prune counted them first)
+            self._count_behind()
+        self._run_loop(logit_prior)
+        wp.synchronize_device(dev)
+        t2 = time.perf_counter()
+        self.visible.zero_()
+        self._launch(K.transparency_pass, self.batch * self.n_pixels,
+                     [self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
+        top = p.top_support if self.geometry.height > 0 else 0.0
+        unhidden = int(p.share_of == "unhidden")
+
+        def soft_threshold(top_share):
+            self._launch(K.soft_threshold, self.batch * self.n_locations,
+                         [p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support, self.top_against,
+                          self.top_hidden, self.top_missing, self.top_seen, p.top_hidden, p.top_missing,
+                          top_share, p.top_slope, p.top_min_pixels, p.top_unseen, p.top_unseen_share,
+                          p.top_unseen_part, unhidden, self.all_support, self.all_against, self.share,
+                          self.rho_star])
+
+        def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
+            args = [self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]), lo, hi,
+                    TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate]
+            # (a thread a row while the launch's thread indices fit Warp's 32-bit tid)
+            if self.top_band_by_row and self.batch * self.n_locations * self.top_rows < 2 ** 31:
+                self._launch(K.top_band_clear, self.batch * self.n_locations, [gate, TOP_MIN_RHO, *counts])
+                self._launch(K.top_band_rows, self.batch * self.n_locations * self.top_rows,
+                             [*args, self.top_rows, *counts, self.forward])
+            else:
+                self._launch(K.top_band, self.batch * self.n_locations, [*args, *counts, self.forward])
+
+        if unhidden:
+            top_band(-BAND_ALL, BAND_ALL, self.rho,
+                     (self.all_support, self.all_against, self.all_hidden, self.all_missing, self.all_seen))
+        if top > 0:
+            # counted only where rho* before the test (a factor <= 1) reaches TOP_MIN_RHO: the
+            # silhouette walk is the threshold's whole cost, and most locations are far below
+            if not unhidden:
+                soft_threshold(0.0)
+            h, gate = self.geometry.height, self.rho if unhidden else self.rho_star
+            counts = (self.top_support, self.top_against, self.top_hidden, self.top_missing, self.top_seen)
+            top_band(p.top_band * h, h, gate, counts, p.top_sigmas)
+            for short, geo in self.shorter_top:  # shorter people: the band whose factor is larger
+                top_band(p.top_band * short, short, gate, self.other_top, p.top_sigmas, geo)
+                self._launch(K.keep_better_top, self.batch * self.n_locations,
+                             [*counts, *self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
+                              p.top_min_pixels, p.top_unseen, self.area, p.top_unseen_part])
+        soft_threshold(top)
+        # each frame's live and pruned locations and the entries prune_lists kept, counted by
+        # location, tallied where they are (a GPU copies back a few integers, not the arrays)
+        dim = self.batch * self.n_locations
+        self._launch(K.frame_tally, dim, [self.live, self.n_locations, 1, self.tallies, 1])
+        self._launch(K.frame_tally, dim, [self.live, self.n_locations, K.PRUNED, self.tallies, 2])
+        if bound:
+            self._launch(K.frame_tally, dim, [self.per_location, self.n_locations, K.TALLY_SUM, self.tallies, 3])
+        entries, live, pruned, kept = self.tallies.numpy()
+        kept = kept if bound else [None] * self.batch
+        # the maps: a GPU's copies are the host's own (each frame's a row of them), the CPU's are
+        # views of the engine's arrays (copied, as the next call rewrites them)
+        rho, rho_star, share = (self._host(a).reshape(self.batch, self.n_locations)
+                                for a in (self.rho, self.rho_star, self.share))
+        iterations, max_change, done = self.iterations.numpy(), self.max_change.numpy(), self.done.numpy()
+        self._last_rho = rho[n - 1].copy()
+        tj = time.perf_counter()
+        joint = [None] * n if self.joint_threshold is None else self.joint_lists(rho_star[:n])
+        t3 = time.perf_counter()
+        # (joint_lists_s: the part of threshold_s that copies the joint test's lists out)
+        timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2, "joint_lists_s": t3 - tj,
+                   "total_s": t3 - t0}
+        if self.batch > 1:
+            timings["batch"] = n
+        return [FrameResult(rho=rho[f], rho_star=rho_star[f], evidence_share=share[f],
+                            iterations=int(iterations[f]), entries=int(entries[f]),
+                            max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
+                            live=int(live[f]), converged=bool(done[f]),
+                            kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]),
+                            joint=joint[f])
+                for f in range(n)]
+
+

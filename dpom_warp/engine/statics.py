@@ -1,0 +1,165 @@
+"""What an engine builds once for its camera and grid: the geometry's arrays, the static mask
+index (image tiles or the pixel table), the behind-cost lattice and the list buffers."""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .. import kernels as K
+from ..geometry import Geometry
+from ..model import (
+    BAND_ALL,
+)
+from .base import memory_estimate
+
+
+class StaticsMixin:
+    """Engine: the static arrays and the buffers (allocated up front)."""
+
+    @staticmethod
+    def _geometry_arrays(geometry: Geometry, first: K.GeometryArrays | None = None) -> K.GeometryArrays:
+        """The kernels' view of `geometry`; with `first`, the view of a geometry that differs
+        from it only in the solid (Geometry.shorter), sharing its arrays."""
+        g = K.GeometryArrays()
+        if first is None:
+            g.rays = wp.array(geometry.rays, dtype=wp.vec3d)
+            g.rect = wp.array(geometry.rect, dtype=wp.vec4i)
+            g.normal = wp.array(geometry.normal, dtype=wp.vec3d)
+            g.plane = wp.array(geometry.plane, dtype=wp.float64)
+            g.location = wp.array(geometry.locations, dtype=wp.vec3d)
+        else:
+            g.rays, g.rect, g.normal, g.plane, g.location = (first.rays, first.rect, first.normal, first.plane,
+                                                             first.location)
+        g.centre = wp.vec3d(*(float(c) for c in geometry.centre))
+        solid = [float(x) for x in geometry.solid]
+        g.solid = int(solid[0] > 0)
+        g.body_radius, g.head_radius, g.bottom, g.shoulder, g.top, g.height_spread = solid[1:7]
+        g.leg_radius, g.hip, g.depth_radius = solid[7:10]
+        return g
+
+    def _behind_band(self) -> tuple[float, float]:
+        """The heights between which model.behind_cost counts readings behind (ground grids)."""
+        p, h = self.params, self.geometry.height
+        return (p.behind_low * h, p.behind_high * h) if h > 0 else (-BAND_ALL, BAND_ALL)
+
+    def _behind_statics(self) -> list:
+        """behind_points' inputs that describe the core: geometry, band, side share, lattice."""
+        p = self.params
+        low, high = self._behind_band()
+        return [self.geo, self.pm, float(self.geometry.centre[2]), p.behind_side, low, high, p.behind_step,
+                self.forward]
+
+    def _count_behind_points(self) -> np.ndarray:
+        """How many lattice points of each location's silhouette core model.behind_cost counts
+        (kernels.mean_field.behind_points, fill 0); none without behind_cost."""
+        L = self.n_locations
+        if self.params.behind_cost <= 0 or L == 0:
+            return np.zeros(0, np.int64)
+        with wp.ScopedDevice(self.device):
+            counts = wp.zeros(L, dtype=wp.int32)
+            none_i, none_f = wp.zeros(0, dtype=wp.int32), wp.zeros(0, dtype=wp.float64)
+            wp.launch(K.behind_points, dim=L, inputs=self._behind_statics() + [0, none_i, counts, none_i, none_f,
+                                                                               none_f, none_f])
+        return counts.numpy().astype(np.int64)
+
+    def _fill_behind_table(self, counts: np.ndarray):
+        """The table of those points (`counts` from _count_behind_points): each one's pixel,
+        the object's depth, variance and the mask test's half-width there (behind_points, fill
+        1). Static, so built once here and only classified against each frame's readings
+        (behind_count)."""
+        with wp.ScopedDevice(self.device):
+            first = np.zeros(self.n_locations + 1, np.int32)  # all 0: no points (no behind_cost)
+            first[1:len(counts) + 1] = np.cumsum(counts)
+            self.behind_first = wp.array(first, dtype=wp.int32)
+            n = int(first[-1])
+            self.behind_pixel = wp.zeros(n, dtype=wp.int32)
+            self.behind_mu, self.behind_var, self.behind_half = (wp.zeros(n, dtype=wp.float64) for _ in range(3))
+            if n:
+                none_i = wp.zeros(0, dtype=wp.int32)
+                wp.launch(K.behind_points, dim=len(counts),
+                          inputs=self._behind_statics() + [1, self.behind_first, none_i, self.behind_pixel,
+                                                           self.behind_mu, self.behind_var, self.behind_half])
+
+    def _tile_index(self, pair_loc, pair_tile, tiles_x) -> K.TileIndex:
+        """Depth bounds of every (location, tile) pair, sorted by tile then lo (kernels.masks)."""
+        with wp.ScopedDevice(self.device):
+            lo = wp.zeros(len(pair_loc), dtype=wp.float64)
+            hi = wp.zeros(len(pair_loc), dtype=wp.float64)
+            if len(pair_loc):
+                wp.launch(K.pair_depth_bounds, dim=len(pair_loc),
+                          inputs=[self.geo, self.pm, self.tile, tiles_x, wp.array(pair_loc),
+                                  wp.array(pair_tile), lo, hi])
+            lo, hi = lo.numpy(), hi.numpy()
+            keep = hi >= lo
+            order = np.lexsort((lo[keep], pair_tile[keep]))
+            tile_of, lo, hi = pair_tile[keep][order], lo[keep][order], hi[keep][order]
+            span = np.zeros(self.n_tiles)
+            np.maximum.at(span, tile_of, hi - lo)
+            t = K.TileIndex()
+            t.size, t.tiles_x = self.tile, tiles_x
+            t.start = wp.array(np.searchsorted(tile_of, np.arange(self.n_tiles + 1)).astype(np.int32))
+            t.loc = wp.array(pair_loc[keep][order], dtype=wp.int32)
+            t.lo = wp.array(lo, dtype=wp.float64)
+            t.hi = wp.array(hi, dtype=wp.float64)
+            t.span = wp.array(span, dtype=wp.float64)
+        self.n_pairs = len(lo)
+        return t
+
+    def _pixel_table(self, use: bool) -> K.PixelTable:
+        """The pixel table (kernels.masks; empty unless `use`): each location's pairs written
+        by table_pairs into room for its rectangle's area, gathered, then sorted per pixel by
+        (float32 mu, location)."""
+        t = K.PixelTable()
+        t.use, t.width = int(use), self.width
+        n = 0
+        with wp.ScopedDevice(self.device):
+            if use and self.n_locations:
+                room = self.geometry.rect_area.astype(np.int64)  # at most a pair per pixel
+                first = np.concatenate([[0], np.cumsum(room)[:-1]])
+                counts = wp.zeros(self.n_locations, dtype=wp.int32)
+                out = [wp.zeros(int(room.sum()), dtype=d)
+                       for d in (wp.int32, wp.int32, wp.float64, wp.float64, wp.float64, wp.float32)]
+                wp.launch(K.table_pairs, dim=self.n_locations,
+                          inputs=[self.geo, self.pm, self.width, wp.array(first.astype(np.int32)), counts] + out)
+                c = counts.numpy()
+                n = int(c.sum())
+                written = np.repeat(first, c) + (np.arange(n) - np.repeat(np.cumsum(c) - c, c))
+                pixel, loc, mu, sigma, log_sigma, half = (a.numpy()[written] for a in out)
+                mu32 = mu.astype(np.float32)
+                # sorted by (pixel, mu32, loc): the pairs come location by location, so a stable
+                # sort on (pixel, mu32) keeps loc ascending among ties; a positive float32's bits
+                # sort as its value (mu > 0 here). np.lexsort of the three: ~2x slower
+                key = (pixel.astype(np.int64) << 32) | mu32.view(np.int32).astype(np.int64)
+                order = np.argsort(key, kind="stable")
+                start = np.searchsorted(pixel[order], np.arange(self.n_pixels + 1)).astype(np.int32)
+                pairs = np.empty(n, dtype=K.TablePair.numpy_dtype())
+                for name, a in (("mu", mu), ("sigma", sigma), ("log_sigma", log_sigma), ("loc", loc), ("half", half)):
+                    pairs[name] = a[order]
+                t.start, t.pair = wp.array(start), wp.array(pairs, dtype=K.TablePair)
+                t.key = wp.zeros(n, dtype=wp.vec2f)  # the walk's window (kernels.masks)
+                wp.launch(K.table_window, dim=self.n_pixels, inputs=[t.start, t.pair, t.key])
+            else:
+                t.start, t.key, t.pair = wp.zeros(1, dtype=wp.int32), wp.zeros(0, dtype=wp.vec2f), wp.zeros(
+                    0, dtype=K.TablePair)
+        self.n_table = n
+        return t
+
+    def _allocate_lists(self, capacity: int):
+        self._recorded = {}  # Engine._launch: the launches recorded with the old lists
+        capacity = min(max(1024, capacity), self.max_entries)
+        with wp.ScopedDevice(self.device):
+            self.entry_loc = wp.zeros(capacity, dtype=wp.int32)
+            self.entry_mu = wp.zeros(capacity, dtype=wp.float32)
+            self.entry_delta = wp.zeros(capacity, dtype=wp.float32)
+            self.behind = wp.zeros(capacity, dtype=wp.float64)
+            self.live_loc = wp.zeros(capacity, dtype=wp.int32)
+            self.live_delta = wp.zeros(capacity, dtype=wp.float32)
+        self.capacity = capacity
+
+    def memory_bytes(self) -> int:
+        """Bytes the engine's buffers hold now (memory_estimate of its sizes, with the auto
+        background's state)."""
+        return memory_estimate(self.batch * self.n_pixels, self.batch * self.n_locations,
+                               self.capacity, self.n_pairs, self.n_table,
+                               self.n_pixels if self.use_table else 0) + self.extra_bytes
