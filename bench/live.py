@@ -51,7 +51,8 @@ def track_quality(run_dir: Path, truth: list, fps: float, cfg) -> dict:
 
     from dpom_warp.geometry import build_geometry
     from dpom_warp.track_eval import track_scores
-    from dpom_warp.tracking import Cells, per_frame, read_tracks_csv, run_tracker
+    from dpom_warp.track_files import per_frame, read_tracks_csv
+    from dpom_warp.tracking import Cells, run_tracker
 
     summary = json.loads((run_dir / "summary.json").read_text())
     names = [p["frame"] for p in summary["per_frame"]]

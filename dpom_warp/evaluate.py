@@ -413,7 +413,7 @@ def run_track_scores(run_dir: Path, summary: dict, truth: dict, hidden_visibilit
     """Tracking scores of a run's tracks.csv, and of the naive linking of its detections.csv
     (the baseline), when the ground truth has identities."""
     from .track_eval import naive_tracks, track_scores
-    from .tracking import read_tracks_csv
+    from .track_files import read_tracks_csv
 
     frames = [p["frame"] for p in summary["per_frame"]]
     if not all("id" in o for f in frames for o in truth.get(f, [])):

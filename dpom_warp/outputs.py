@@ -145,7 +145,7 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
     left by an earlier drawing, are removed), and its Rerun log with output.rerun or --view
     (depth, boxes, map, tracks)."""
     from .detect import detect_map
-    from .tracking import per_frame
+    from .track_files import per_frame
 
     log = None
     if cfg.output.rerun or VIEW:
@@ -193,7 +193,7 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
 def track_table_files(out: Path, tracks, names: list[str], fps: float, times: list | None = None) -> None:
     """tracks.csv and track_table.csv of `tracks` over the frames `names` (`times`: their
     timestamps, None where unknown)."""
-    from .tracking import track_table, tracks_csv
+    from .track_files import track_table, tracks_csv
 
     write_text_atomic(out / "tracks.csv", tracks_csv(tracks, names))
     write_text_atomic(out / "track_table.csv", track_table(tracks, names, fps, times))

@@ -61,7 +61,7 @@ def test_api_gives_the_cli_detections_on_the_demo(demo_run):
         assert result.rho_star.shape == cfg.grid.shape and result.timings["total_s"] > 0
     assert rows == csv_rows(demo_run / "detections.csv")
     assert iterations == [p["iterations"] for p in summary["per_frame"]]  # the same work per frame
-    from dpom_warp.tracking import tracks_csv
+    from dpom_warp.track_files import tracks_csv
 
     tracks, report = det.track(results)  # the same tracks as tracks.csv
     assert report["method"] == "ksp" and len(tracks) >= 5
@@ -73,7 +73,7 @@ def test_api_gives_the_cli_detections_on_the_demo(demo_run):
     with pytest.raises(ValueError, match="one timestamp per result"):
         det.track(results, times=[0.0])
     # as frames come: each push commits the frame tracking.delay behind, with its final identity
-    from dpom_warp.tracking import per_frame
+    from dpom_warp.track_files import per_frame
 
     times, delay = [7.0 + k / fps for k in range(len(results))], cfg.tracking.delay
     online, shown = det.online_tracker(fps), []

@@ -82,7 +82,8 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     from dpom_warp.geometry import build_geometry
     from dpom_warp.io import units_to_metres
     from dpom_warp.outputs import ShownTracks, tracked_picture
-    from dpom_warp.tracking import Cells, per_frame, run_tracker, tracks_csv
+    from dpom_warp.track_files import per_frame, tracks_csv
+    from dpom_warp.tracking import Cells, run_tracker
 
     cfg = parse_config(summary["config"])
     geometry = build_geometry(cfg.camera, cfg.grid, cfg.obj)

@@ -204,7 +204,7 @@ def test_a_truncated_message_is_skipped_with_its_reason(tmp_path, scene, capsys)
     assert summary["tracking"]["frames_without_map"] == 1 and summary["tracking"]["fps"] == pytest.approx(10.0)
     from dpom_warp import Detector
     from dpom_warp.sources import open_source
-    from dpom_warp.tracking import tracks_csv
+    from dpom_warp.track_files import tracks_csv
 
     det = Detector.from_config(path)  # the Python API over the recording's frames: the run's results
     results, times, names = [], [], []

@@ -8,9 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from dpom_warp.tracking import (TABLE_HEADER, TRACKS_HEADER, Cells, TrackingOptions, link_naive,
-                                read_tracks_csv, run_tracker, track_offline, track_online,
-                                tracks_csv)
+from dpom_warp.track_files import TABLE_HEADER, TRACKS_HEADER, read_tracks_csv, tracks_csv
+from dpom_warp.tracking import Cells, TrackingOptions, link_naive, run_tracker, track_offline, track_online
 from paths import CONFIGS
 
 NX, NY, STEP = 40, 30, 0.1
@@ -190,7 +189,8 @@ def test_online_commits_show_the_final_identities():
     position, as the final tracks are, not in the flow's cell order (two people appearing at
     once at (3.0, 2.2) and (0.5, 2.8): the first has the lower cell index, the second the
     lower x)."""
-    from dpom_warp.tracking import OnlineTracker, per_frame
+    from dpom_warp.track_files import per_frame
+    from dpom_warp.tracking import OnlineTracker
 
     people = random_people(60, 2, seed=4) + [walk(3.0, 2.2, -0.1, 0.0, 20, t0=30), walk(0.5, 2.8, 0.1, 0.0, 20, t0=30)]
     maps = maps_of(people, 60)
@@ -247,7 +247,8 @@ def test_reach_follows_the_maps_times_where_frames_were_dropped(method):
 
 
 def test_frame_steps_count_the_camera_frames_between_maps():
-    from dpom_warp.tracking import frame_steps, frames_without_map, track_table
+    from dpom_warp.track_files import frame_steps, track_table
+    from dpom_warp.tracking import frames_without_map
 
     assert frame_steps([0.0, 0.1, None], 0.1) is None and frame_steps([0.0, 0.2, 0.1], 0.1) is None
     assert frame_steps([0.0, float("nan")], 0.1) is None and frame_steps([], 0.1) is None
@@ -287,7 +288,7 @@ def test_track_files(tmp_path):
     (tmp_path / "tracks.csv").write_text(text)
     rows = read_tracks_csv(tmp_path / "tracks.csv")
     assert list(rows) == names and rows["0003.png"][0][:3] == (1, 0.8, 0.5)
-    from dpom_warp.tracking import track_table
+    from dpom_warp.track_files import track_table
 
     table = track_table(tracks, names, 10.0).splitlines()
     assert table[0] == TABLE_HEADER
