@@ -205,7 +205,6 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     camera frames of dt (frame_steps; frames dropped or skipped lie between the maps): a
     move from map a to map b reaches max_speed (steps[b] - steps[a]) dt + jitter instead of
     max_speed (b - a) dt + jitter (the same where the steps are a, a + 1, ...)."""
-    from ortools.graph.python import min_cost_flow
     from scipy.spatial import cKDTree
 
     T = maps.shape[0]
@@ -273,6 +272,18 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     heads += [np.arange(n) * 2, np.full(n, snk), [snk]]
     supply = max(1, int(np.sum(cost < 0)) + (len(anchors) if anchors is not None else 0))
     costs += [enter, leave, [0.0]]
+    return _min_cost_paths(tails, heads, costs, supply, all_t, all_k, stats)
+
+
+def _min_cost_paths(tails: list, heads: list, costs: list, supply: int, all_t, all_k, stats: dict):
+    """The min-cost flow of `supply` units over the window's arcs (lists of arrays: tails, heads,
+    costs in cost units; the source and sink are the last two nodes), solved by OR-Tools; the
+    paths it takes as (t, location) lists, each from its start, and `stats` with the arcs and
+    the optimal cost."""
+    from ortools.graph.python import min_cost_flow
+
+    n = len(all_t)
+    src, snk = 2 * n, 2 * n + 1
     tails, heads = np.concatenate(tails).astype(np.int64), np.concatenate(heads).astype(np.int64)
     costs = np.round(np.concatenate(costs) * SCALE).astype(np.int64)
     caps = np.ones(len(tails), np.int64)
