@@ -335,7 +335,8 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
         return f"{text} (default: %(default)s)"
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
+    """The command line: each command with its arguments."""
     from . import __version__
 
     parser = argparse.ArgumentParser(prog="dpom-warp", description=__doc__, formatter_class=HelpFormatter)
@@ -350,32 +351,7 @@ def main(argv: list[str] | None = None) -> int:
                 "summary.json "
                 "(and scores with ground truth) in the output folder. Relative paths in a config are\n"
                 "relative to the config file's folder; paths given with --set, to this folder.")
-    p.add_argument("config", nargs="+", metavar="CONFIG", help="YAML run config (see README); several: one run each, "
-                                             "each to its own output")
-    p.add_argument("--output", metavar="DIR", help="output folder (default: the config's output.dir); with several "
-                                    "configs each run writes to OUTPUT/<config name>")
-    p.add_argument("--device", metavar="DEVICE", help="auto, cpu or cuda:N (default: the config's device)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
-                   help="override a config value (parsed as YAML), e.g. --set model.damping=0.2; "
-                        "repeatable")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--strict", action="store_true", help="a bad frame is fatal instead of skipped")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="infer frames in this many processes (Warp runs CPU kernels on one thread); "
-                        "with --ray, this many actors (default: 1; a live camera on the CPU: 3 where "
-                        "there are two CPUs or more; with --ray one actor per CPU, or GPU, of the cluster)")
-    p.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
-                   help="infer frames on Ray actors: of the cluster at ADDRESS (or $RAY_ADDRESS; "
-                        "'auto': the one `ray start` runs here), else of a new local Ray instance; "
-                        "needs the [ray] extra (default: no Ray)")
-    p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty output folder")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted run in its output folder, skipping finished frames")
-    p.add_argument("--view", action="store_true",
-                   help="show the run in a Rerun viewer, spawned (the [view] extra; output.rerun writes a .rrd)")
-    p.add_argument("--max-frames", type=int, metavar="N",
-                   help="the first N frames of input.frames (a recording's by its stream; default: all); a "
-                        "live camera (input.frames: realsense): stop after N frames (default: at Ctrl-C)")
+    _run_arguments(p)
     g = command("fit-ground", "find the floor and the camera pose from depth frames",
                 "Fit the floor plane in depth frames of one camera and print (or write) the pose to\n"
                 "paste under a config's camera.extrinsics.")
@@ -428,21 +404,46 @@ def main(argv: list[str] | None = None) -> int:
                 "Write the JSON Schema of run configs: point an editor's YAML support at it to\n"
                 "complete and check configs (configs/dpom-warp.schema.json is this output).")
     m.add_argument("--output", help="write it to this file (default: print it)")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _run_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", nargs="+", metavar="CONFIG", help="YAML run config (see README); several: one run each, "
+                                             "each to its own output")
+    p.add_argument("--output", metavar="DIR", help="output folder (default: the config's output.dir); with several "
+                                    "configs each run writes to OUTPUT/<config name>")
+    p.add_argument("--device", metavar="DEVICE", help="auto, cpu or cuda:N (default: the config's device)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a config value (parsed as YAML), e.g. --set model.damping=0.2; "
+                        "repeatable")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--strict", action="store_true", help="a bad frame is fatal instead of skipped")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="infer frames in this many processes (Warp runs CPU kernels on one thread); "
+                        "with --ray, this many actors (default: 1; a live camera on the CPU: 3 where "
+                        "there are two CPUs or more; with --ray one actor per CPU, or GPU, of the cluster)")
+    p.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                   help="infer frames on Ray actors: of the cluster at ADDRESS (or $RAY_ADDRESS; "
+                        "'auto': the one `ray start` runs here), else of a new local Ray instance; "
+                        "needs the [ray] extra (default: no Ray)")
+    p.add_argument("--overwrite", action="store_true", help="replace the results in a non-empty output folder")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run in its output folder, skipping finished frames")
+    p.add_argument("--view", action="store_true",
+                   help="show the run in a Rerun viewer, spawned (the [view] extra; output.rerun writes a .rrd)")
+    p.add_argument("--max-frames", type=int, metavar="N",
+                   help="the first N frames of input.frames (a recording's by its stream; default: all); a "
+                        "live camera (input.frames: realsense): stop after N frames (default: at Ctrl-C)")
+
+
+COMMANDS = {"run": _run, "fit-ground": _fit_ground, "eval": _eval, "schema": _schema, "track": _track, "info": _info}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
     signal.signal(signal.SIGTERM, _terminate)  # a kill unwinds like Ctrl-C: no partial files
     try:
-        if args.command == "run":
-            return _run(args)
-        if args.command == "fit-ground":
-            return _fit_ground(args)
-        if args.command == "eval":
-            return _eval(args)
-        if args.command == "schema":
-            return _schema(args)
-        if args.command == "track":
-            return _track(args)
-        if args.command == "info":
-            return _info(args)
+        return COMMANDS[args.command](args)
     except (ConfigError, InputError) as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 2
@@ -458,7 +459,6 @@ def main(argv: list[str] | None = None) -> int:
         print("dpom-warp: interrupted; finished frames are kept, continue with --resume",
               file=sys.stderr)
         return 130
-    return 1
 
 
 if __name__ == "__main__":
