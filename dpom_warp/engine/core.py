@@ -5,7 +5,6 @@ per-pixel lists), iterations (the mean field) and threshold (what the joint test
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -14,9 +13,6 @@ import warp as wp
 from .. import kernels as K
 from ..geometry import Geometry, neighbour_lists
 from ..model import (
-    BAND_ALL,
-    MISSING_READ,
-    TOP_MIN_RHO,
     AutoBackground,
     ModelParams,
 )
@@ -95,25 +91,7 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
         self.n_pixels = self.height * self.width
         self.n_locations = len(geometry.rect)
         self.batch = batch
-        self.graph = wp.get_device(device).is_cuda if graph is None else graph
-        # the passes' scratch (kernels.evidence_pass): global on a GPU, on the stack on the CPU
-        self.local_scratch = 0 if wp.get_device(device).is_cuda else K.SIZED_STACK
-        self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
-        self._graph, self._graph_lists = None, None
-        self._last_rho = None  # the last frame's rho, for params.warm_start
-        # full-resolution frames are reduced on a GPU (kernels.frames), by NumPy on the CPU
-        self.reduce_on_device = wp.get_device(device).is_cuda
-        self._full = None  # their buffer, made at the first such frame
-        # the joint test's lists copied out in pixel order by count, scan and fill on a GPU
-        # (compact_once's atomics leave them in any order, which the host then sorted: with
-        # the per-frame work since batched, half a batched frame's time on an H200), in one
-        # pass on the CPU (in order there)
-        self.ordered_joint_lists = wp.get_device(device).is_cuda
-        # the top band counted a thread per row of each rectangle on a GPU (kernels.top_band_rows:
-        # a thread per location, walking its whole rectangle, was the threshold step's longest
-        # kernel there), a thread per location on the CPU (one thread: the rows' launch would be
-        # the tallest rectangle's rows times longer for nothing)
-        self.top_band_by_row = wp.get_device(device).is_cuda
+        self._device_policy(device, graph)
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
         self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
         self.sparse_on_lists = False  # the sparse passes walk the lists (nothing has died yet)
@@ -134,6 +112,45 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
         self.extra_bytes += BEHIND_POINT_BYTES * self.behind_table + 4 * (self.n_locations + 1)  # and its starts
         start, nbrs = neighbour_lists(geometry.locations, params.exclusion_radius if params.exclusion > 0 else 0.0)
         self.extra_bytes += 4 * (len(start) + len(nbrs))  # model.exclusion's neighbour lists
+        pair_loc, pair_tile = self._index_and_capacity(geometry, table, memory_gb, entries_per_pixel,
+                                                       max_entries, P, L, tiles_x)
+        self.grown: list[int] = []
+        self._allocate_arrays(geometry, params, P, L, start, nbrs)
+        self._fill_behind_table(behind_points)
+        self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
+        self.table = self._pixel_table(self.use_table)
+        self._allocate_lists(int(entries_per_pixel * P))
+        self.set_floor_background()
+
+    def _device_policy(self, device: str, graph: bool | None) -> None:
+        """What differs between the CPU and a GPU: the captured graph, the passes' scratch, how
+        frames are reduced and how the joint test's lists and the top band are gathered."""
+        self.graph = wp.get_device(device).is_cuda if graph is None else graph
+        # the passes' scratch (kernels.evidence_pass): global on a GPU, on the stack on the CPU
+        self.local_scratch = 0 if wp.get_device(device).is_cuda else K.SIZED_STACK
+        self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
+        self._graph, self._graph_lists = None, None
+        self._last_rho = None  # the last frame's rho, for params.warm_start
+        # full-resolution frames are reduced on a GPU (kernels.frames), by NumPy on the CPU
+        self.reduce_on_device = wp.get_device(device).is_cuda
+        self._full = None  # their buffer, made at the first such frame
+        # the joint test's lists copied out in pixel order by count, scan and fill on a GPU
+        # (compact_once's atomics leave them in any order, which the host then sorted: with
+        # the per-frame work since batched, half a batched frame's time on an H200), in one
+        # pass on the CPU (in order there)
+        self.ordered_joint_lists = wp.get_device(device).is_cuda
+        # the top band counted a thread per row of each rectangle on a GPU (kernels.top_band_rows:
+        # a thread per location, walking its whole rectangle, was the threshold step's longest
+        # kernel there), a thread per location on the CPU (one thread: the rows' launch would be
+        # the tallest rectangle's rows times longer for nothing)
+        self.top_band_by_row = wp.get_device(device).is_cuda
+
+    def _index_and_capacity(self, geometry: Geometry, table: bool | None, memory_gb: float | None,
+                            entries_per_pixel: float, max_entries: int | None, P: int, L: int, tiles_x: int):
+        """The static mask index (the pixel table, or the tiles' (location, tile) pairs, returned)
+        and the lists' capacity cap within the memory budget; MemoryBudgetError where the first
+        buffers already exceed it."""
+        tile, batch = self.tile, self.batch
         most = int(geometry.rect_area.sum())  # the pixel table's pairs at most
         table_bytes = memory_estimate(0, 0, 0, table_pairs=most, table_pixels=self.n_pixels)
         if table is None:
@@ -156,8 +173,13 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
                     f"{f', {batch} frames a batch' if batch > 1 else ''}), above the budget of "
                     f"{memory_gb:g} GiB")
         self.max_entries = cap
-        self.grown: list[int] = []
-        with wp.ScopedDevice(device):
+        return pair_loc, pair_tile
+
+    def _allocate_arrays(self, geometry: Geometry, params: ModelParams, P: int, L: int, start, nbrs) -> None:
+        """Every per-pixel and per-location array of a batch, allocated once (the lists apart:
+        _allocate_lists)."""
+        batch = self.batch
+        with wp.ScopedDevice(self.device):
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
             self.centre = wp.vec3d(*(float(c) for c in geometry.centre))
@@ -217,12 +239,6 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
             self.not_done = wp.zeros(batch, dtype=wp.int32)
             self.neighbour_start = wp.array(start, dtype=wp.int32)
             self.neighbours = wp.array(nbrs, dtype=wp.int32)
-        self._fill_behind_table(behind_points)
-        self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
-        self.table = self._pixel_table(self.use_table)
-        self._allocate_lists(int(entries_per_pixel * P))
-        self.set_floor_background()
-
 
     # -- buffers -------------------------------------------------------------------------
     @property
@@ -247,7 +263,7 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
         """Occupancy of up to `batch` frames (n, H, W) at once; one result per frame, each
         equal to what `infer` gives that frame alone. Timings are the batch's. `start`
         (locations,): the rho every frame starts from instead of the prior."""
-        p, dev = self.params, self.device
+        dev = self.device
         n = len(depths_m)
         t0 = time.perf_counter()
         self.build_lists(depths_m)
@@ -255,76 +271,11 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
         self._launch(K.frame_tally, self.batch * self.n_pixels, [self.counts, self.n_pixels, K.TALLY_SUM, self.tallies, 0])
         wp.synchronize_device(dev)
         t1 = time.perf_counter()
-        if start is None and p.warm_start and self._last_rho is not None:
-            # capped at the prior: locations found empty start (nearly) empty, while occupied
-            # ones start afresh (starting them occupied holds moving people back, +3 cm)
-            start = np.minimum(self._last_rho, p.prior)
-        if start is None:
-            self.rho.fill_(p.prior)
-        else:
-            self.rho.assign(np.tile(np.asarray(start, dtype=np.float64), self.batch))
-        self.live.fill_(1)
-        self.streak.zero_()
-        self.evidence.zero_()
-        self.max_change.zero_()
-        self.iterations.zero_()
-        self.done.assign(np.arange(self.batch, dtype=np.int32) >= n)  # padding frames: done
-        logit_prior = math.log(p.prior) - math.log1p(-p.prior)
-        bound = p.sparse_epsilon > 0 and p.bound_rounds > 0
-        self.n_kept = self.n_listed = None
-        if p.sparse_epsilon > 0:  # the bound, then locations in no list stay where they start
-            self.prune(logit_prior)
-            if not self.graph:  # full passes update all but the pruned and idle ones, and the
-                # passes over the lists run over the pixels with entries (read after one sync)
-                self.n_kept = self._gather(self.kept_index)
-                self.n_listed = int(self.n_listed_out.numpy()[0])
-        if p.behind_cost > 0 and not bound:  # (with the bound, prune counted them first)
-            self._count_behind()
+        logit_prior, bound = self._start(n, start)
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()
-        self.visible.zero_()
-        self._launch(K.transparency_pass, self.batch * self.n_pixels,
-                     [self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
-        top = p.top_support if self.geometry.height > 0 else 0.0
-        unhidden = int(p.share_of == "unhidden")
-
-        def soft_threshold(top_share):
-            self._launch(K.soft_threshold, self.batch * self.n_locations,
-                         [p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support, self.top_against,
-                          self.top_hidden, self.top_missing, self.top_seen, p.top_hidden, p.top_missing,
-                          top_share, p.top_slope, p.top_min_pixels, p.top_unseen, p.top_unseen_share,
-                          p.top_unseen_part, unhidden, self.all_support, self.all_against, self.share,
-                          self.rho_star])
-
-        def top_band(lo, hi, gate, counts, sigmas=0.0, geo=None):
-            args = [self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]), lo, hi,
-                    TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate]
-            # (a thread a row while the launch's thread indices fit Warp's 32-bit tid)
-            if self.top_band_by_row and self.batch * self.n_locations * self.top_rows < 2 ** 31:
-                self._launch(K.top_band_clear, self.batch * self.n_locations, [gate, TOP_MIN_RHO, *counts])
-                self._launch(K.top_band_rows, self.batch * self.n_locations * self.top_rows,
-                             [*args, self.top_rows, *counts, self.forward])
-            else:
-                self._launch(K.top_band, self.batch * self.n_locations, [*args, *counts, self.forward])
-
-        if unhidden:
-            top_band(-BAND_ALL, BAND_ALL, self.rho,
-                     (self.all_support, self.all_against, self.all_hidden, self.all_missing, self.all_seen))
-        if top > 0:
-            # counted only where rho* before the test (a factor <= 1) reaches TOP_MIN_RHO: the
-            # silhouette walk is the threshold's whole cost, and most locations are far below
-            if not unhidden:
-                soft_threshold(0.0)
-            h, gate = self.geometry.height, self.rho if unhidden else self.rho_star
-            counts = (self.top_support, self.top_against, self.top_hidden, self.top_missing, self.top_seen)
-            top_band(p.top_band * h, h, gate, counts, p.top_sigmas)
-            for short, geo in self.shorter_top:  # shorter people: the band whose factor is larger
-                top_band(p.top_band * short, short, gate, self.other_top, p.top_sigmas, geo)
-                self._launch(K.keep_better_top, self.batch * self.n_locations,
-                             [*counts, *self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
-                              p.top_min_pixels, p.top_unseen, self.area, p.top_unseen_part])
-        soft_threshold(top)
+        self._threshold()
         # each frame's live and pruned locations and the entries prune_lists kept, counted by
         # location, tallied where they are (a GPU copies back a few integers, not the arrays)
         dim = self.batch * self.n_locations

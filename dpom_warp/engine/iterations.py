@@ -4,7 +4,9 @@ the convergence check, launched from Python or replayed as a captured graph."""
 from __future__ import annotations
 
 import ctypes
+import math
 
+import numpy as np
 import warp as wp
 
 from .. import kernels as K
@@ -154,3 +156,35 @@ class IterationsMixin:
                 self._iterate_all(logit_prior)
             self._graph, self._graph_lists = capture.graph, lists
         wp.capture_launch(self._graph)
+
+    def _start(self, n: int, start: np.ndarray | None) -> tuple[float, bool]:
+        """Every frame's rho at its start (the prior, `start`, or with warm_start the last frame's
+        capped at the prior), the loop's state cleared, padding frames done; then, with sparse
+        iterations, the pruning bound. Returns (logit of the prior, whether the bound ran)."""
+        p = self.params
+        if start is None and p.warm_start and self._last_rho is not None:
+            # capped at the prior: locations found empty start (nearly) empty, while occupied
+            # ones start afresh (starting them occupied holds moving people back, +3 cm)
+            start = np.minimum(self._last_rho, p.prior)
+        if start is None:
+            self.rho.fill_(p.prior)
+        else:
+            self.rho.assign(np.tile(np.asarray(start, dtype=np.float64), self.batch))
+        self.live.fill_(1)
+        self.streak.zero_()
+        self.evidence.zero_()
+        self.max_change.zero_()
+        self.iterations.zero_()
+        self.done.assign(np.arange(self.batch, dtype=np.int32) >= n)  # padding frames: done
+        logit_prior = math.log(p.prior) - math.log1p(-p.prior)
+        bound = p.sparse_epsilon > 0 and p.bound_rounds > 0
+        self.n_kept = self.n_listed = None
+        if p.sparse_epsilon > 0:  # the bound, then locations in no list stay where they start
+            self.prune(logit_prior)
+            if not self.graph:  # full passes update all but the pruned and idle ones, and the
+                # passes over the lists run over the pixels with entries (read after one sync)
+                self.n_kept = self._gather(self.kept_index)
+                self.n_listed = int(self.n_listed_out.numpy()[0])
+        if p.behind_cost > 0 and not bound:  # (with the bound, prune counted them first)
+            self._count_behind()
+        return logit_prior, bound

@@ -7,6 +7,7 @@ import warp as wp
 
 from .. import kernels as K
 from ..joint import JointLists
+from ..model import BAND_ALL, MISSING_READ, TOP_MIN_RHO
 
 
 class ThresholdMixin:
@@ -66,3 +67,53 @@ class ThresholdMixin:
             behind = np.zeros((self.batch, locations))
         return JointLists.of_batch(np.flatnonzero(marked[:n]), active, count, loc, delta, dbg, behind[:n],
                                    self.geometry.locations, p, locations, self.n_pixels)
+
+    def _threshold(self) -> None:
+        """After the iterations: what each location's pixels show of it (transparency pass), the
+        top-band counts (with shorter people's bands) and rho* (README, How it works)."""
+        p = self.params
+        self.visible.zero_()
+        self._launch(K.transparency_pass, self.batch * self.n_pixels,
+                     [self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
+        top = p.top_support if self.geometry.height > 0 else 0.0
+        unhidden = int(p.share_of == "unhidden")
+        if unhidden:
+            self._top_band(-BAND_ALL, BAND_ALL, self.rho,
+                           (self.all_support, self.all_against, self.all_hidden, self.all_missing, self.all_seen))
+        if top > 0:
+            # counted only where rho* before the test (a factor <= 1) reaches TOP_MIN_RHO: the
+            # silhouette walk is the threshold's whole cost, and most locations are far below
+            if not unhidden:
+                self._soft_threshold(0.0, unhidden)
+            h, gate = self.geometry.height, self.rho if unhidden else self.rho_star
+            counts = (self.top_support, self.top_against, self.top_hidden, self.top_missing, self.top_seen)
+            self._top_band(p.top_band * h, h, gate, counts, p.top_sigmas)
+            for short, geo in self.shorter_top:  # shorter people: the band whose factor is larger
+                self._top_band(p.top_band * short, short, gate, self.other_top, p.top_sigmas, geo)
+                self._launch(K.keep_better_top, self.batch * self.n_locations,
+                             [*counts, *self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
+                              p.top_min_pixels, p.top_unseen, self.area, p.top_unseen_part])
+        self._soft_threshold(top, unhidden)
+
+    def _soft_threshold(self, top_share: float, unhidden: int) -> None:
+        """rho* = sigmoid(alpha e + beta) rho, times the top-band factor (kernels.soft_threshold)."""
+        p = self.params
+        self._launch(K.soft_threshold, self.batch * self.n_locations,
+                     [p.alpha, p.beta, self.area, self.visible, self.rho, self.top_support, self.top_against,
+                      self.top_hidden, self.top_missing, self.top_seen, p.top_hidden, p.top_missing,
+                      top_share, p.top_slope, p.top_min_pixels, p.top_unseen, p.top_unseen_share,
+                      p.top_unseen_part, unhidden, self.all_support, self.all_against, self.share,
+                      self.rho_star])
+
+    def _top_band(self, lo, hi, gate, counts, sigmas=0.0, geo=None) -> None:
+        """The band's counts between heights lo and hi of the locations whose `gate` reaches
+        TOP_MIN_RHO: a thread a row of each rectangle on a GPU, a thread a location elsewhere."""
+        args = [self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]), lo, hi,
+                TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate]
+        # (a thread a row while the launch's thread indices fit Warp's 32-bit tid)
+        if self.top_band_by_row and self.batch * self.n_locations * self.top_rows < 2 ** 31:
+            self._launch(K.top_band_clear, self.batch * self.n_locations, [gate, TOP_MIN_RHO, *counts])
+            self._launch(K.top_band_rows, self.batch * self.n_locations * self.top_rows,
+                         [*args, self.top_rows, *counts, self.forward])
+        else:
+            self._launch(K.top_band, self.batch * self.n_locations, [*args, *counts, self.forward])
