@@ -178,14 +178,12 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     """Infer a live camera's frames until Ctrl-C or `max_frames`; returns the summary. With
     `workers` > 1, workers - 1 helper processes infer beside this one (Helpers); frames are
     written and tracked in the order they were taken. None: default_workers."""
-    from .detect import detect_map
-    from .io import write_bytes_atomic
-    from .outputs import ShownTracks, _jsonable, prepare_output, summarise, track_table_files, tracked_picture
-    from .session import set_up
-    from .sources.realsense import RealSenseLive
-    from .tracking import Cells, OnlineTracker, frames_without_map
-    from .worker import FrameItem, FrameWorker, failed_future, write_output
+    check_live(cfg, workers)
+    return LiveRun(cfg, output_dir, device, log, max_frames, overwrite, first_frame_timeout, workers).run()
 
+
+def check_live(cfg: RunConfig, workers: int | None) -> None:
+    """What a live run cannot do, said before the camera starts."""
     if cfg.inputs.auto_background:
         raise ConfigError("input.background: auto estimates the background from the run's frames; a live "
                           "run has none in advance; expected background frames or null")
@@ -196,325 +194,396 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     if workers is not None and workers > 1 and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers with it")
-    t_start = time.perf_counter()
-    source = RealSenseLive(cfg.inputs.frames)
-    info = source.info()
-    out = Path(output_dir or cfg.output.dir)
-    setup = set_up(cfg, [], device, log)  # the plain run's setup: device, engine, background frames
-    dev, camera, engine, background = setup.device, setup.spec.camera, setup.engine, setup.background
-    workers = workers or default_workers(cfg, dev)
-    worker = FrameWorker(setup.spec, engine=engine)
-    geometry = setup.geometry
-    cells = Cells.for_run(geometry, cfg)
-    method = cfg.tracking.method
-    tracking_on = method != "off"
-    if method == "ksp":
-        log("tracking.method ksp needs the whole run; a live run tracks online")
-    fps = info.rate_hz or cfg.inputs.fps
-    tracker = OnlineTracker(cells, cfg.grid.shape, cfg.tracking, 1.0 / fps, cfg.detection.threshold)
-    prepare_output(out, cfg.resolved, overwrite, resume=False)
-    log(f"live: {info.kind}, {info.width}x{info.height} at {fps:g} frames/s; device {dev}, "
-        f"{workers} process{'es' * (workers > 1)}; background: "
-        f"{background}; until Ctrl-C{f' or {max_frames} frames' if max_frames else ''}")
-    from .outputs import VIEW
 
-    view = None
-    if cfg.output.rerun or VIEW:
-        from .view import RerunLog
 
-        view = RerunLog(cfg.output.rerun, spawn=bool(VIEW))
-        view.camera(camera)
-    slot = NewestFrame()
-    records, names, latencies, infer_s, finished = {}, [], [], [], []  # finished: when each was written
-    # with tracks, a frame's picture and its tracks on the view wait for the online tracker to
-    # commit it (tracking.delay frames later): frame index -> (name, timestamp, map as saved,
-    # depth where a picture is due)
-    trails, awaiting = ShownTracks(geometry, cfg.tracking.trail), {}
-    done, taken, t_first, last_line, track_s = 0, 0, None, time.perf_counter(), 0.0
-    # [frame, depth, small, FrameResult, future or None (being inferred here), inference s,
-    # process], in the order the frames were taken
-    pending: deque = deque()
-    helpers = None
-    if workers > 1:
-        try:
-            helpers = Helpers(setup.spec, engine, workers - 1)
-        except BrokenProcessPool as e:  # as one dying later: the run goes on in this process
-            log(f"live: a helper process died starting ({e}); the run goes on in one process")
-    # the frames are taken one taker at a time (this loop, and the feeder thread that hands
-    # the helpers theirs), each put in `pending` before the next is taken: stream order
-    taking, state = threading.Lock(), threading.Condition()
-    stop_feeding = threading.Event()
-    # a finisher thread writes and tracks the frames in order, beside the inference; a helper's
-    # death it finds is left to the main loop (`adopt`), the one thread that runs this engine
-    closing, broken, abandon = threading.Event(), threading.Event(), threading.Event()
-    died: list = []  # the error a helper's death gave
-    failure: list = []  # an error writing or tracking a frame: raised by the main loop
+class Pending:
+    """A frame taken from the camera, until it is written: its depth (metres) and what the
+    engines take (`small`), then its result, the future of a helper inferring it (None: here
+    or done), the inference's seconds and the process that inferred it."""
 
-    def reserve() -> bool:
+    __slots__ = ("frame", "depth", "small", "result", "future", "infer_s", "process")
+
+    def __init__(self, frame, depth, small, future=None, process=None):
+        self.frame, self.depth, self.small, self.future, self.process = frame, depth, small, future, process
+        self.result, self.infer_s = None, None
+
+
+class LiveRun:
+    """One live run: the camera's newest frame inferred by this process (the main loop, `run`)
+    or by a helper (the feeder thread, `feed`), the frames written and tracked in the order
+    they were taken by the finisher thread (`finish`), the outputs of a plain run written at
+    the end (`summary`)."""
+
+    def __init__(self, cfg: RunConfig, output_dir, device, log, max_frames, overwrite, first_frame_timeout,
+                 workers):
+        from .outputs import VIEW, ShownTracks, prepare_output
+        from .session import set_up
+        from .sources.realsense import RealSenseLive
+        from .tracking import Cells, OnlineTracker
+        from .worker import FrameWorker
+
+        self.cfg, self.log, self.max_frames, self.first_frame_timeout = cfg, log, max_frames, first_frame_timeout
+        self.t_start = time.perf_counter()
+        self.source = RealSenseLive(cfg.inputs.frames)
+        self.info = info = self.source.info()
+        self.out = Path(output_dir or cfg.output.dir)
+        self.setup = setup = set_up(cfg, [], device, log)  # the plain run's: device, engine, background frames
+        self.engine, self.geometry = setup.engine, setup.geometry
+        self.workers = workers or default_workers(cfg, setup.device)
+        self.worker = FrameWorker(setup.spec, engine=self.engine)
+        self.tracking_on = cfg.tracking.method != "off"
+        if cfg.tracking.method == "ksp":
+            log("tracking.method ksp needs the whole run; a live run tracks online")
+        self.fps = info.rate_hz or cfg.inputs.fps
+        self.tracker = OnlineTracker(Cells.for_run(self.geometry, cfg), cfg.grid.shape, cfg.tracking, 1.0 / self.fps,
+                                     cfg.detection.threshold)
+        prepare_output(self.out, cfg.resolved, overwrite, resume=False)
+        log(f"live: {info.kind}, {info.width}x{info.height} at {self.fps:g} frames/s; device {setup.device}, "
+            f"{self.workers} process{'es' * (self.workers > 1)}; background: "
+            f"{setup.background}; until Ctrl-C{f' or {max_frames} frames' if max_frames else ''}")
+        self.view = None
+        if cfg.output.rerun or VIEW:
+            from .view import RerunLog
+
+            self.view = RerunLog(cfg.output.rerun, spawn=bool(VIEW))
+            self.view.camera(setup.spec.camera)
+        self.slot = NewestFrame()
+        self.records, self.names, self.latencies, self.infer_s = {}, [], [], []
+        self.finished = []  # when each frame was written
+        # with tracks, a frame's picture and its tracks on the view wait for the online tracker to
+        # commit it (tracking.delay frames later): frame index -> (name, timestamp, map as saved,
+        # depth where a picture is due)
+        self.trails, self.awaiting = ShownTracks(self.geometry, cfg.tracking.trail), {}
+        self.done, self.taken, self.t_first, self.last_line, self.track_s = 0, 0, None, time.perf_counter(), 0.0
+        self.pending: deque = deque()  # Pending frames, in the order they were taken
+        self.helpers = None
+        if self.workers > 1:
+            try:
+                self.helpers = Helpers(setup.spec, self.engine, self.workers - 1)
+            except BrokenProcessPool as e:  # as one dying later: the run goes on in this process
+                log(f"live: a helper process died starting ({e}); the run goes on in one process")
+        # the frames are taken one taker at a time (the main loop, and the feeder thread that
+        # hands the helpers theirs), each put in `pending` before the next is taken: stream order
+        self.taking, self.state = threading.Lock(), threading.Condition()
+        self.stop_feeding = threading.Event()
+        # the finisher thread writes and tracks the frames in order, beside the inference; a
+        # helper's death it finds is left to the main loop (`adopt`), the one thread that runs
+        # this engine
+        self.closing, self.broken, self.abandon = threading.Event(), threading.Event(), threading.Event()
+        self.died: list = []  # the error a helper's death gave
+        self.failure: list = []  # an error writing or tracking a frame: raised by the main loop
+        self.feeder = self.finisher = None
+
+    # -- taking frames ---------------------------------------------------------------------
+    def reserve(self) -> bool:
         """A place for one more frame under --max-frames (released by `unreserve`)."""
-        nonlocal taken
-        with state:
-            if max_frames is not None and taken >= max_frames:
+        with self.state:
+            if self.max_frames is not None and self.taken >= self.max_frames:
                 return False
-            taken += 1
+            self.taken += 1
             return True
 
-    def unreserve():
-        nonlocal taken
-        with state:
-            taken -= 1
+    def unreserve(self) -> None:
+        with self.state:
+            self.taken -= 1
 
-    def take(timeout: float, then):
+    def take(self, timeout: float, then):
         """The newest frame (None after `timeout`), with `then(frame, depth, small)` (its item
         in `pending`) done before any other frame is taken."""
-        with taking:
-            fr = slot.take(timeout)
+        with self.taking:
+            fr = self.slot.take(timeout)
             if fr is None:
                 return None
-            depth = units_to_metres(fr.depth, cfg.inputs.depth_scale)
+            depth = units_to_metres(fr.depth, self.cfg.inputs.depth_scale)
             # what the engines take: on a GPU the frame itself (the engine reduces it there)
-            small = depth if engine.reduce_on_device else engine.resolution.frames(depth)
+            small = depth if self.engine.reduce_on_device else self.engine.resolution.frames(depth)
             return then(fr, depth, small)
 
-    def feed():
+    def mine(self, fr, depth, small) -> Pending:
+        item = Pending(fr, depth, small, process=self.worker.name)
+        with self.state:
+            self.pending.append(item)
+        return item
+
+    # -- the helpers -------------------------------------------------------------------------
+    def feed(self) -> None:
         """While the main loop infers, hand each helper that is free the newest frame."""
-        while not (stop_feeding.is_set() or broken.is_set()):
-            with state:
-                h = helpers
+        while not (self.stop_feeding.is_set() or self.broken.is_set()):
+            with self.state:
+                h = self.helpers
             if h is None:
                 return
             busy = h.busy()
             if len(busy) >= h.n:
                 wait_futures(busy, timeout=0.05, return_when=FIRST_COMPLETED)
                 continue
-            if not reserve():
+            if not self.reserve():
                 return
-            got = take(0.05, lambda fr, depth, small: submit(fr, depth, small))
+            got = self.take(0.05, self.submit)
             if got is None:
-                unreserve()
-            elif got[4].done() and got[4].exception() is not None:
+                self.unreserve()
+            elif got.future.done() and got.future.exception() is not None:
                 return  # the helpers are gone: this frame is the main loop's to infer (adopt)
 
-    def submit(fr, depth, small):
-        with state:  # a helper that died meanwhile: a future holding the pool's error
-            fut = (helpers.submit(small) if helpers is not None
+    def submit(self, fr, depth, small) -> Pending:
+        from .worker import failed_future
+
+        with self.state:  # a helper that died meanwhile: a future holding the pool's error
+            fut = (self.helpers.submit(small) if self.helpers is not None
                    else failed_future(BrokenProcessPool("the helper processes are gone")))
-            item = [fr, depth, small, None, fut, None, None]
-            pending.append(item)
-        fut.add_done_callback(lambda _: notify())
+            item = Pending(fr, depth, small, future=fut)
+            self.pending.append(item)
+        fut.add_done_callback(lambda _: self.notify())
         return item
 
-    def notify():
-        with state:
-            state.notify_all()
+    def notify(self) -> None:
+        with self.state:
+            self.state.notify_all()
 
-    def infer_here(item):
-        """Infer a pending item with this process's engine (main loop only: the engine is not
+    def infer_here(self, item: Pending) -> None:
+        """Infer a pending frame with this process's engine (main loop only: the engine is not
         shared between threads) and hand its result to the finisher."""
         t0 = time.perf_counter()
-        res = engine.infer(item[2])
-        with state:
-            item[3], item[4], item[5], item[6] = res, None, time.perf_counter() - t0, worker.name
-            state.notify_all()
+        res = self.engine.infer(item.small)
+        with self.state:
+            item.result, item.future, item.infer_s, item.process = res, None, time.perf_counter() - t0, self.worker.name
+            self.state.notify_all()
 
-    def adopt():
+    def adopt(self) -> None:
         """After a helper's death: every frame the helpers held is inferred here, and the run
         goes on without them (main loop only: this engine is not shared between threads)."""
-        nonlocal helpers
-        broken.clear()
-        with state:
-            h, helpers = helpers, None
-            held = [other for other in pending if other[4] is not None]
+        self.broken.clear()
+        with self.state:
+            h, self.helpers = self.helpers, None
+            held = [other for other in self.pending if other.future is not None]
         if h is not None:
-            e = died[0] if died else None
-            log(f"live: a helper process died ({e or 'no reason given'}); its frames are inferred here, "
-                f"the run goes on in one process")
+            e = self.died[0] if self.died else None
+            self.log(f"live: a helper process died ({e or 'no reason given'}); its frames are inferred here, "
+                     f"the run goes on in one process")
             h.close()
         for other in held:
-            infer_here(other)
+            self.infer_here(other)
 
-    def next_ready():
-        """The first pending item once its result is in (None: closing and nothing left)."""
-        with state:
-            while not abandon.is_set():
-                item = pending[0] if pending else None
+    # -- writing and tracking, in order (the finisher thread) ---------------------------------
+    def next_ready(self) -> Pending | None:
+        """The first pending frame once its result is in (None: closing and nothing left)."""
+        with self.state:
+            while not self.abandon.is_set():
+                item = self.pending[0] if self.pending else None
                 if item is None:
-                    if closing.is_set():
+                    if self.closing.is_set():
                         return None
-                elif item[4] is None and item[3] is not None:
-                    return pending.popleft()
-                elif item[4] is not None and item[4].done():
+                elif item.future is None and item.result is not None:
+                    return self.pending.popleft()
+                elif item.future is not None and item.future.done():
                     try:
-                        item[3], item[5], item[6] = item[4].result()
-                        item[4] = None
+                        item.result, item.infer_s, item.process = item.future.result()
+                        item.future = None
                         continue
                     except BrokenProcessPool as e:
-                        died.append(e)
-                        broken.set()  # the main loop adopts its frames
-                state.wait(0.05)
+                        self.died.append(e)
+                        self.broken.set()  # the main loop adopts its frames
+                self.state.wait(0.05)
             return None  # the run failed: the frames after stay unwritten
 
-    def finishing():
+    def finishing(self) -> None:
         try:
-            while (item := next_ready()) is not None:
-                finish(item)
+            while (item := self.next_ready()) is not None:
+                self.finish(item)
         except BaseException as e:  # raised by the main loop; the frames after it stay unwritten
-            failure.append(e)
+            self.failure.append(e)
 
-    def finish(item):
-        nonlocal done, track_s
-        fr, depth, _, res, _, infer, process = item
-        due = cfg.output.images and done % cfg.output.images_every == 0
-        worker.pictures = due and not tracking_on  # with tracks: drawn once committed (publish)
+    def finish(self, item: Pending) -> None:
+        """A frame's map, record and picture written, shown and tracked (as a plain run's)."""
+        from .worker import FrameItem, write_output
+
+        cfg, fr, res = self.cfg, item.frame, item.result
+        due = cfg.output.images and self.done % cfg.output.images_every == 0
+        self.worker.pictures = due and not self.tracking_on  # with tracks: drawn once committed (publish)
         name = f"{fr.index:06d}"
-        _, output, _ = worker._finish(FrameItem(name), depth, res, 0.0, infer, [])
+        _, output, _ = self.worker._finish(FrameItem(name), item.depth, res, 0.0, item.infer_s, [])
         output.record["timestamp"] = output.record["stats"]["timestamp"] = fr.timestamp
-        output.record["stats"]["worker"] = process
-        records[name] = write_output(out, output)
-        names.append(name)
-        if view is not None:
-            rho_map, dets = worker.detections(res)
-            view.frame(done, fr.timestamp, depth, dets, rho_map)
-        if tracking_on and (view is not None or due):
-            awaiting[done] = (name, fr.timestamp, output.map, depth if due else None)
-        if tracking_on:
+        output.record["stats"]["worker"] = item.process
+        self.records[name] = write_output(self.out, output)
+        self.names.append(name)
+        if self.view is not None:
+            rho_map, dets = self.worker.detections(res)
+            self.view.frame(self.done, fr.timestamp, item.depth, dets, rho_map)
+        if self.tracking_on and (self.view is not None or due):
+            self.awaiting[self.done] = (name, fr.timestamp, output.map, item.depth if due else None)
+        if self.tracking_on:
             t1 = time.perf_counter()
-            tracker.push(output.map, fr.timestamp)  # frames dropped between: reach by the time apart
-            track_s += time.perf_counter() - t1
-            publish(tracker.take_committed())
-        finished.append(time.perf_counter())
-        latencies.append(finished[-1] - fr.arrived)
-        infer_s.append(infer)
-        done += 1
+            self.tracker.push(output.map, fr.timestamp)  # frames dropped between: reach by the time apart
+            self.track_s += time.perf_counter() - t1
+            self.publish(self.tracker.take_committed())
+        self.finished.append(time.perf_counter())
+        self.latencies.append(self.finished[-1] - fr.arrived)
+        self.infer_s.append(item.infer_s)
+        self.done += 1
 
-    def publish(committed):
+    def publish(self, committed) -> None:
         """Frames the online tracker has committed: their tracks (identities as in tracks.csv)
         on the view and, where a picture is due, the picture with the tracks and trails."""
+        from .detect import detect_map
+        from .io import write_bytes_atomic
+        from .outputs import tracked_picture
+
+        cfg = self.cfg
         for f, rows in committed:
-            shown = trails.at(f, rows)
-            got = awaiting.pop(f, None)
+            shown = self.trails.at(f, rows)
+            got = self.awaiting.pop(f, None)
             if got is None:
                 continue
             name, stamp, saved, depth = got
             # as a finished run draws them (frames_out): from the map as maps/ holds it
             rho_map = saved.reshape(cfg.grid.shape)
-            dets = detect_map(rho_map, geometry, cfg.detection)
-            if view is not None:
-                view.tracks(f, stamp, dets, shown)
+            dets = detect_map(rho_map, self.geometry, cfg.detection)
+            if self.view is not None:
+                self.view.tracks(f, stamp, dets, shown)
             if depth is not None:
-                write_bytes_atomic(out / "images" / f"{name}.png",
-                                   tracked_picture(cfg, geometry, depth, rho_map, dets, name, None, shown))
+                write_bytes_atomic(self.out / "images" / f"{name}.png",
+                                   tracked_picture(cfg, self.geometry, depth, rho_map, dets, name, None, shown))
 
-    def mine(fr, depth, small):
-        item = [fr, depth, small, None, None, None, worker.name]
-        with state:
-            pending.append(item)
-        return item
-
-    def close_finisher():
+    def close_finisher(self) -> None:
         """Every frame taken written and tracked (the helpers' dead ones inferred here first),
         then the finisher gone; its error, if it had one, raised here."""
-        closing.set()
-        notify()
-        while finisher.is_alive():
-            if broken.is_set():
-                adopt()
-            finisher.join(0.05)
-        if failure:
-            raise failure[0]
+        self.closing.set()
+        self.notify()
+        while self.finisher.is_alive():
+            if self.broken.is_set():
+                self.adopt()
+            self.finisher.join(0.05)
+        if self.failure:
+            raise self.failure[0]
 
-    source.start(slot.put)
-    feeder = threading.Thread(target=feed, daemon=True) if helpers is not None else None
-    finisher = threading.Thread(target=finishing, daemon=True)
-    finisher.start()
-    stopped_by, stop_error, clean = "max_frames", None, False
-    try:
-        while reserve():
-            first = t_first is None
-            item = take(first_frame_timeout if first else STALL_S, mine)
-            if item is None:
-                unreserve()
-                if first:
-                    raise ConfigError(f"input.frames: {cfg.inputs.frames}: no frame within "
-                                      f"{first_frame_timeout:g} s of starting the camera")
-                stopped_by = "camera stopped sending"
-                break
-            t_first = t_first or item[0].arrived
-            if feeder is not None and first:
-                feeder.start()  # the helpers' frames from now on, beside this loop's
-            infer_here(item)
-            if broken.is_set():
-                adopt()
-            if failure:
-                raise failure[0]
-            if latencies and time.perf_counter() - last_line >= 1.0:
-                last_line = time.perf_counter()
-                rate = done / max(1e-9, last_line - t_first)
-                log(f"live: {done} frames, {rate:.1f} frames/s, {slot.dropped} dropped, latency "
-                    f"{1000 * statistics.median(latencies[-30:]):.0f} ms")
-        stop_threads(feeder, stop_feeding)
-        close_finisher()
-        clean = True
-    except KeyboardInterrupt:
-        stopped_by = "Ctrl-C"
-        stop_threads(feeder, stop_feeding)
-        for item in list(pending):  # one being inferred here when Ctrl-C came: again
-            if item[3] is None and item[4] is None:
-                infer_here(item)
-        close_finisher()  # the frames taken are inferred and written: nothing is lost
-        clean = True
-    finally:
-        stop_threads(feeder, stop_feeding)
-        abandon.set()  # (the finisher is done here unless the run failed)
-        notify()
+    # -- the main loop -----------------------------------------------------------------------
+    def run(self) -> dict:
+        """Until Ctrl-C, --max-frames or the camera stopping; then the run's outputs."""
+        self.source.start(self.slot.put)
+        self.feeder = threading.Thread(target=self.feed, daemon=True) if self.helpers is not None else None
+        self.finisher = threading.Thread(target=self.finishing, daemon=True)
+        self.finisher.start()
+        stopped_by, stop_error, clean = "max_frames", None, False
         try:
-            source.stop()
+            stopped_by = self.loop()
+            stop_threads(self.feeder, self.stop_feeding)
+            self.close_finisher()
+            clean = True
+        except KeyboardInterrupt:
+            stopped_by = "Ctrl-C"
+            stop_threads(self.feeder, self.stop_feeding)
+            for item in list(self.pending):  # one being inferred here when Ctrl-C came: again
+                if item.result is None and item.future is None:
+                    self.infer_here(item)
+            self.close_finisher()  # the frames taken are inferred and written: nothing is lost
+            clean = True
+        finally:
+            stop_error = self.stop(clean)
+        return self.summary(stopped_by, stop_error)
+
+    def loop(self) -> str:
+        """Take and infer the newest frame until --max-frames or the camera stops sending;
+        returns what stopped it."""
+        while self.reserve():
+            first = self.t_first is None
+            item = self.take(self.first_frame_timeout if first else STALL_S, self.mine)
+            if item is None:
+                self.unreserve()
+                if first:
+                    raise ConfigError(f"input.frames: {self.cfg.inputs.frames}: no frame within "
+                                      f"{self.first_frame_timeout:g} s of starting the camera")
+                return "camera stopped sending"
+            self.t_first = self.t_first or item.frame.arrived
+            if self.feeder is not None and first:
+                self.feeder.start()  # the helpers' frames from now on, beside this loop's
+            self.infer_here(item)
+            if self.broken.is_set():
+                self.adopt()
+            if self.failure:
+                raise self.failure[0]
+            if self.latencies and time.perf_counter() - self.last_line >= 1.0:
+                self.last_line = time.perf_counter()
+                rate = self.done / max(1e-9, self.last_line - self.t_first)
+                self.log(f"live: {self.done} frames, {rate:.1f} frames/s, {self.slot.dropped} dropped, latency "
+                         f"{1000 * statistics.median(self.latencies[-30:]):.0f} ms")
+        return "max_frames"
+
+    def stop(self, clean: bool) -> str | None:
+        """The threads, the camera and the helpers stopped, whichever way the run ends; the
+        camera's error where it failed to stop (the frames are kept)."""
+        stop_error = None
+        stop_threads(self.feeder, self.stop_feeding)
+        self.abandon.set()  # (the finisher is done here unless the run failed)
+        self.notify()
+        try:
+            self.source.stop()
         except RuntimeError as e:  # an unplugged camera's SDK may fail to stop it: keep the frames
             stop_error = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-            log(f"live: the camera did not stop cleanly ({stop_error})")
-        if helpers is not None:
-            helpers.close()
-        if view is not None and not clean:  # else closed once the last frames' tracks are on it
-            view.close()
-    wall = time.perf_counter() - (t_first or time.perf_counter())
-    done_paths = [Path(n) for n in names]
-    summary = summarise(cfg, out, done_paths, records, [], None, geometry, dev, background, None, [])
-    if tracking_on and names:
+            self.log(f"live: the camera did not stop cleanly ({stop_error})")
+        if self.helpers is not None:
+            self.helpers.close()
+        if self.view is not None and not clean:  # else closed once the last frames' tracks are on it
+            self.view.close()
+        return stop_error
+
+    # -- the run's outputs -------------------------------------------------------------------
+    def summary(self, stopped_by: str, stop_error: str | None) -> dict:
+        """detections.csv, tracks.csv, track_table.csv and summary.json (with its `live` block),
+        as a plain run writes them; a camera that stopped sending is then an error."""
+        from .outputs import _jsonable, summarise
+
+        cfg, setup, done = self.cfg, self.setup, self.done
+        wall = time.perf_counter() - (self.t_first or time.perf_counter())
+        summary = summarise(cfg, self.out, [Path(n) for n in self.names], self.records, [], None, self.geometry,
+                            setup.device, setup.background, None, [])
+        summary["tracking"] = self.tracks()
+        if self.view is not None:
+            self.view.close()
+        summary["live"] = self.live_block(stopped_by, stop_error, wall)
+        summary["timings"]["total_s"] = time.perf_counter() - self.t_start
+        write_json_atomic(self.out / "summary.json", _jsonable(summary))
+        if stopped_by == "camera stopped sending":
+            raise WorkerError(f"input.frames: {cfg.inputs.frames}: the camera stopped sending (no frame for "
+                              f"{STALL_S:g} s after {done} frames: unplugged?); expected frames until Ctrl-C"
+                              f"{' or --max-frames' if self.max_frames else ''}; the {done} frames inferred are "
+                              f"written to {self.out}")
+        return summary
+
+    def tracks(self) -> dict:
+        """The online tracker's last frames committed, tracks.csv and track_table.csv; the
+        summary's `tracking` block."""
+        from .outputs import track_table_files
+        from .tracking import frames_without_map
+
+        names = self.names
+        if not (self.tracking_on and names):
+            return {"method": "off", "why": "tracking.method: off"}
         t1 = time.perf_counter()
-        tracks, report = tracker.finish()
-        track_s += time.perf_counter() - t1
-        publish(tracker.take_committed())  # the last tracking.delay frames
-        times = [records[n].get("timestamp") for n in names]
-        report = {"method": "online", "tracks": len(tracks), "time_s": track_s,
-                  "ms_per_frame": 1000 * track_s / len(names), "fps": fps, "fps_from": "camera", **report,
-                  "frames_without_map": frames_without_map(times, 1.0 / fps)}
-        track_table_files(out, tracks, names, fps, times)
-    else:
-        report = {"method": "off", "why": "tracking.method: off"}
-    if view is not None:
-        view.close()
-    summary["tracking"] = report
-    summary["live"] = {"source": info.kind, "frames": done, "received": slot.received,
-                       "dropped": slot.dropped, "dropped_share": slot.dropped / max(1, slot.received),
-                       "frames_per_s": done / wall if wall > 0 else None,
-                       # the output rate once running: frames written from when the first's
-                       # record would be at the run's pace (its arrival plus the median latency:
-                       # its own record, late with the first solve's costs, would count the
-                       # frames queued behind it as a burst) to the last's record (the
-                       # pipeline's start and the run's shutdown left out)
-                       # (t_first: the first frame taken, so the first written: frames are
-                       # written in the order taken)
-                       "frames_per_s_steady": steady_rate(done, t_first, latencies, finished),
-                       "processes": workers,
-                       "camera_fps": fps, "stopped_by": stopped_by, "stop_error": stop_error,
-                       "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
-                       "latency_ms_p95": 1000 * float(np.percentile(latencies, 95)) if latencies else None,
-                       "infer_ms_median": 1000 * statistics.median(infer_s) if infer_s else None}
-    summary["timings"]["total_s"] = time.perf_counter() - t_start
-    write_json_atomic(out / "summary.json", _jsonable(summary))
-    if stopped_by == "camera stopped sending":
-        raise WorkerError(f"input.frames: {cfg.inputs.frames}: the camera stopped sending (no frame for "
-                          f"{STALL_S:g} s after {done} frames: unplugged?); expected frames until Ctrl-C"
-                          f"{' or --max-frames' if max_frames else ''}; the {done} frames inferred are "
-                          f"written to {out}")
-    return summary
+        tracks, report = self.tracker.finish()
+        self.track_s += time.perf_counter() - t1
+        self.publish(self.tracker.take_committed())  # the last tracking.delay frames
+        times = [self.records[n].get("timestamp") for n in names]
+        report = {"method": "online", "tracks": len(tracks), "time_s": self.track_s,
+                  "ms_per_frame": 1000 * self.track_s / len(names), "fps": self.fps, "fps_from": "camera", **report,
+                  "frames_without_map": frames_without_map(times, 1.0 / self.fps)}
+        track_table_files(self.out, tracks, names, self.fps, times)
+        return report
+
+    def live_block(self, stopped_by: str, stop_error: str | None, wall: float) -> dict:
+        """summary.json's `live` block: frames, drops, rates and latencies."""
+        done, slot, latencies, infer_s = self.done, self.slot, self.latencies, self.infer_s
+        return {"source": self.info.kind, "frames": done, "received": slot.received,
+                "dropped": slot.dropped, "dropped_share": slot.dropped / max(1, slot.received),
+                "frames_per_s": done / wall if wall > 0 else None,
+                # the output rate once running: frames written from when the first's record
+                # would be at the run's pace (its arrival plus the median latency: its own
+                # record, late with the first solve's costs, would count the frames queued
+                # behind it as a burst) to the last's record (the pipeline's start and the
+                # run's shutdown left out) (t_first: the first frame taken, so the first
+                # written: frames are written in the order taken)
+                "frames_per_s_steady": steady_rate(done, self.t_first, latencies, self.finished),
+                "processes": self.workers,
+                "camera_fps": self.fps, "stopped_by": stopped_by, "stop_error": stop_error,
+                "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
+                "latency_ms_p95": 1000 * float(np.percentile(latencies, 95)) if latencies else None,
+                "infer_ms_median": 1000 * statistics.median(infer_s) if infer_s else None}
