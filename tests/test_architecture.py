@@ -88,3 +88,20 @@ def test_no_import_circle_through_any_module_the_package_included():
     assert _cycles(edges) == []
     edges.setdefault("dpom_warp.geometry", set()).add("dpom_warp.cli")  # the check can fail
     assert _cycles(edges)
+
+
+def test_files_and_functions_stay_readable():
+    """No file of dpom_warp/ over 600 lines, no function over 100 (split by job, not by size:
+    docs/architecture.md says which file does what)."""
+    import ast
+
+    long_files, long_functions = [], []
+    for path in sorted((ROOT / "dpom_warp").rglob("*.py")):
+        text = path.read_text()
+        if text.count("\n") > 600:
+            long_files.append(f"{path.relative_to(ROOT)} ({text.count(chr(10))} lines)")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno - node.lineno >= 100:
+                long_functions.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}")
+    assert not long_files, long_files
+    assert not long_functions, long_functions
