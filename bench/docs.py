@@ -1,10 +1,10 @@
-"""The README's measured figures, tables and pictures, from one command.
+"""The documentation's measured figures, tables and pictures, from one command.
 
     python -m bench.docs [--only NAME ...] [--jobs 2] [--output runs/docs]
 
-Reruns what each block of the README needs and writes the block in place, between its
-`<!-- docs:NAME -->` and `<!-- /docs:NAME -->` markers, stamped with the machine, the date and
-the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/. Blocks:
+Reruns what each block needs and writes the block in place, in the page that holds it (the
+README or a page under docs/), between its `<!-- docs:NAME -->` and `<!-- /docs:NAME -->`
+markers, stamped with the machine, the date and the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/. Blocks:
 
 - config: the config reference, from the config models (no run);
 - demo: the people demo on the fast and the exact path, with auto and floor-only backgrounds,
@@ -26,8 +26,8 @@ the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/
 - ground: the floor fit with `camera.ground.up: auto` and the image's up on every robustness
   scene's empty-room frames (`python -m bench.ground`).
 
-A test (tests/test_docs.py) holds the README to it: every table sits in a generated block and
-the config block is what the models say now.
+A test (tests/test_docs.py) holds the pages to it: every table of the README and of a page with
+blocks sits in a generated block, and the config block is what the models say now.
 """
 
 from __future__ import annotations
@@ -46,6 +46,19 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+
+
+def pages() -> list[Path]:
+    """The README and the pages under docs/: where the blocks may be."""
+    return [README, *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def page_of(name: str) -> Path:
+    """The page that holds block `name`."""
+    for page in pages():
+        if f"<!-- docs:{name} -->" in page.read_text():
+            return page
+    raise SystemExit(f"no page holds the block <!-- docs:{name} -->")
 DOCS = ROOT / "docs"
 
 
@@ -75,7 +88,7 @@ def replace_block(text: str, name: str, body: str) -> str:
     start, end = f"<!-- docs:{name} -->", f"<!-- /docs:{name} -->"
     pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.S)
     if not pattern.search(text):
-        raise SystemExit(f"README.md: no block {start} ... {end}")
+        raise SystemExit(f"no block {start} ... {end}")
     return pattern.sub(lambda _: f"{start}\n{body.strip()}\n{end}", text)
 
 
@@ -387,12 +400,12 @@ def main():
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)
     DOCS.mkdir(exist_ok=True)
-    text = README.read_text()
-    for name in a.only or [b for b in BUILDERS if b in blocks(text)]:
+    present = [b for page in pages() for b in blocks(page.read_text())]
+    for name in a.only or [b for b in BUILDERS if b in present]:
         print(f"== {name}", flush=True)
         body = BUILDERS[name](out, a.jobs)
-        text = replace_block(README.read_text(), name, body)
-        README.write_text(text)  # block by block: a later failure keeps the earlier ones
+        page = page_of(name)
+        page.write_text(replace_block(page.read_text(), name, body))  # block by block: a later failure keeps the earlier ones
         print(body, flush=True)
 
 

@@ -218,13 +218,13 @@ class LiveRun:
                  workers):
         from .outputs import VIEW, ShownTracks, prepare_output
         from .session import set_up
-        from .sources.realsense import RealSenseLive
+        from .sources import open_source
         from .tracking import Cells, OnlineTracker
         from .worker import FrameWorker
 
         self.cfg, self.log, self.max_frames, self.first_frame_timeout = cfg, log, max_frames, first_frame_timeout
         self.t_start = time.perf_counter()
-        self.source = RealSenseLive(cfg.inputs.frames)
+        self.source = open_source(cfg.inputs.frames)  # a live kind of names.READERS: start(on_frame), stop()
         self.info = info = self.source.info()
         self.out = Path(output_dir or cfg.output.dir)
         self.setup = setup = set_up(cfg, [], device, log)  # the plain run's: device, engine, background frames

@@ -8,12 +8,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-LIVE_PREFIX = "realsense"
 # every kind of source: what it is, and its reader (module in dpom_warp/sources/, class), imported
-# when used (the recordings' readers need the optional [sensors] extra); recordings by suffix.
+# when used (the readers of recordings and cameras need the optional [sensors] extra); live
+# cameras by the name input.frames gives them (`NAME` or `NAME:SERIAL`), recordings by suffix.
 # A new kind is its reader's file and one entry here.
 READERS = {
-    "live": ("a live RealSense camera", "realsense", "RealSenseLive"),
+    "realsense": ("a live RealSense camera", "realsense", "RealSenseLive"),
     "files": ("depth frame files", "files", "FileFrames"),
     ".bag": ("ROS 1 bag", "bags", "Bag"),
     ".db3": ("ROS 2 bag (sqlite)", "bags", "Bag"),
@@ -21,12 +21,18 @@ READERS = {
     ".mkv": ("Azure Kinect recording", "azure", "AzureKinect"),
 }
 RECORDING_SUFFIXES = {k: what for k, (what, _, _) in READERS.items() if k.startswith(".")}
+LIVE_KINDS = tuple(k for k in READERS if not k.startswith(".") and k != "files")
+
+
+def live_kind(spec) -> str | None:
+    """The kind of live camera input.frames names (`NAME` or `NAME:SERIAL`), else None."""
+    name = str(spec).split(":", 1)[0]
+    return name if name in LIVE_KINDS else None
 
 
 def is_live(spec) -> bool:
     """Whether input.frames names a live camera."""
-    s = str(spec)
-    return s == LIVE_PREFIX or s.startswith(LIVE_PREFIX + ":")
+    return live_kind(spec) is not None
 
 
 def is_recording(spec: str | os.PathLike) -> bool:

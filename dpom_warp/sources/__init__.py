@@ -26,7 +26,7 @@ import numpy as np
 
 from ..geometry import Camera
 from ..io import InputError, array_to_metres, atomic_path, write_json_atomic
-from ..names import READERS, is_live, is_recording
+from ..names import READERS, is_recording, live_kind
 from .base import INSTALL, Frame, Source, SourceInfo, gravity_direction, need  # noqa: F401 - the package's names
 
 CACHE_VERSION = 2  # 2: .npy frames
@@ -35,8 +35,8 @@ CACHE_VERSION = 2  # 2: .npy frames
 def open_source(spec: str | os.PathLike, topic: str | None = None, key: str = "input.frames") -> Source:
     """The source input.frames names: a live camera (`realsense[:SERIAL]`), a recording (their
     readers need the [sensors] extra) or a glob of frame files."""
-    if is_live(spec):
-        return _reader("live")(str(spec), key)
+    if live_kind(spec) is not None:
+        return _reader(live_kind(spec))(str(spec), key)
     p = Path(os.path.expanduser(str(spec)))
     if not is_recording(p):
         return _reader("files")(str(spec), key)

@@ -56,7 +56,9 @@ class Frame:
 
 
 class Source:
-    """A recording or a folder of frames."""
+    """A recording, a folder of frames or a live camera. A live camera also has
+    `start(on_frame)`, which calls on_frame(Frame) from its own thread for each frame as it
+    arrives (`Frame.arrived`: time.perf_counter() then), and `stop()`."""
 
     def info(self) -> SourceInfo:
         raise NotImplementedError

@@ -12,8 +12,9 @@ from typing import Callable
 import numpy as np
 
 from ..io import InputError
-from ..names import LIVE_PREFIX
 from .base import Frame, Source, SourceInfo, need
+
+LIVE_PREFIX = "realsense"  # input.frames: realsense[:SERIAL] (names.READERS)
 
 
 def devices() -> list:
