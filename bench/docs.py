@@ -4,7 +4,8 @@
 
 Reruns what each block needs and writes the block in place, in the page that holds it (the
 README or a page under docs/), between its `<!-- docs:NAME -->` and `<!-- /docs:NAME -->`
-markers, stamped with the machine, the date and the path (fast: the defaults; exact: `engine.exact: true`). Pictures go to docs/. Blocks:
+markers, stamped with the machine, the date and the path (fast: the defaults; exact:
+`engine.exact: true`). Pictures go to docs/. Blocks:
 
 - config: the config reference, from the config models (no run);
 - demo: the people demo on the fast and the exact path, with auto and floor-only backgrounds,
