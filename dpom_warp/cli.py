@@ -45,14 +45,12 @@ def _run(args) -> int:
         address = args.ray or os.environ.get("RAY_ADDRESS")
         if address and address not in ("auto", "local"):
             reachable(address)  # nothing there: say so at once
-    cfgs = [load_config(c, args.set) for c in args.config]
-    outputs = output_dirs(args.config, cfgs, args.output)
     if args.view:
-        from .outputs import VIEW
         from .view import _rerun
 
         _rerun()  # not installed: say so before any work
-        VIEW.append(True)
+    cfgs = [load_config(c, args.set + ["output.view=true"] * args.view) for c in args.config]
+    outputs = output_dirs(args.config, cfgs, args.output)
     many = len(cfgs) > 1
     if args.ray is None:
         for source, cfg, out in zip(args.config, cfgs, outputs):

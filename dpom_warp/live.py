@@ -216,7 +216,7 @@ class LiveRun:
 
     def __init__(self, cfg: RunConfig, output_dir, device, log, max_frames, overwrite, first_frame_timeout,
                  workers):
-        from .outputs import VIEW, ShownTracks, prepare_output
+        from .outputs import ShownTracks, prepare_output
         from .session import set_up
         from .sources import open_source
         from .tracking import Cells, OnlineTracker
@@ -242,10 +242,10 @@ class LiveRun:
             f"{self.workers} process{'es' * (self.workers > 1)}; background: "
             f"{setup.background}; until Ctrl-C{f' or {max_frames} frames' if max_frames else ''}")
         self.view = None
-        if cfg.output.rerun or VIEW:
+        if cfg.output.rerun or cfg.output.view:
             from .view import RerunLog
 
-            self.view = RerunLog(cfg.output.rerun, spawn=bool(VIEW))
+            self.view = RerunLog(cfg.output.rerun, spawn=cfg.output.view)
             self.view.camera(setup.spec.camera)
         self.slot = NewestFrame()
         self.records, self.names, self.latencies, self.infer_s = {}, [], [], []

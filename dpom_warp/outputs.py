@@ -103,9 +103,6 @@ def pictures_deferred(cfg: RunConfig, frames: int) -> bool:
     return cfg.output.images and (cfg.output.images_every > 1 or cfg.tracking.resolved_method(frames) != "off")
 
 
-VIEW: list = []  # --view: a Rerun viewer is spawned for the runs of this process
-
-
 class ShownTracks:
     """What a frame's picture and Rerun log show of the tracks, frame after frame (`at`, in
     order): each track's id, box (the silhouette of the cell nearest to it), bridged flag and
@@ -142,16 +139,16 @@ def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, trut
                pictures: bool, timestamps: dict | None = None, camera=None) -> None:
     """After the frames: each frame's picture (with `tracks`, their identities and trails)
     when `pictures` (of every output.images_every-th frame of `done`: the others' pictures,
-    left by an earlier drawing, are removed), and its Rerun log with output.rerun or --view
+    left by an earlier drawing, are removed), and its Rerun log with output.rerun or output.view
     (depth, boxes, map, tracks)."""
     from .detect import detect_map
     from .track_files import per_frame
 
     log = None
-    if cfg.output.rerun or VIEW:
+    if cfg.output.rerun or cfg.output.view:
         from .view import RerunLog
 
-        log = RerunLog(cfg.output.rerun, spawn=bool(VIEW))
+        log = RerunLog(cfg.output.rerun, spawn=cfg.output.view)
         log.camera(camera or cfg.camera)
     now = per_frame(tracks, len(done)) if tracks is not None else [[] for _ in done]
     trails = ShownTracks(geometry, cfg.tracking.trail)

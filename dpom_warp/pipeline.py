@@ -15,7 +15,7 @@ from .evaluate import load_ground_truth
 from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
 from .geometry import build_geometry
 from .io import InputError, write_json_atomic
-from .outputs import (RUN_STATE, TRACK_FILES, VIEW, _jsonable, fps_of, frames_out, pictures_deferred, prepare_output,
+from .outputs import (RUN_STATE, TRACK_FILES, _jsonable, fps_of, frames_out, pictures_deferred, prepare_output,
                       remove_temporaries, summarise, track_table_files)
 from .session import Setup, set_up
 from .sources import expand
@@ -293,7 +293,7 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
         for name in TRACK_FILES:
             (out / name).unlink(missing_ok=True)
         pictures = cfg.output.images and redraw  # the Rerun log is always drawn here
-        if cfg.output.rerun or VIEW or pictures:
+        if cfg.output.rerun or cfg.output.view or pictures:
             frames_out(cfg, out, done, geometry, maps, truth, None, pictures, timestamps, camera)
         why = ("tracking.method: off" if cfg.tracking.method == "off" else
                f"tracking.method {cfg.tracking.method} tracks 2 frames or more, found {len(done)}")
@@ -308,14 +308,14 @@ def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None,
     track_table_files(out, tracks, names, rate, times)
     log(f"{len(tracks)} tracks ({method}) in {report['time_s']:.2f} s "
         f"({report['ms_per_frame']:.1f} ms per frame)")
-    if cfg.output.images or cfg.output.rerun or VIEW:
+    if cfg.output.images or cfg.output.rerun or cfg.output.view:
         t = time.perf_counter()
         frames_out(cfg, out, done, geometry, maps, truth, tracks, cfg.output.images, timestamps, camera)
         report["pictures_s"] = time.perf_counter() - t
     return report
 
 
-RETRACK_KEYS = ("tracking.", "input.fps", "output.images", "output.rerun")
+RETRACK_KEYS = ("tracking.", "input.fps", "output.images", "output.rerun", "output.view")
 
 
 def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
@@ -334,7 +334,7 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     for o in overrides:
         key = o.split("=", 1)[0].strip()
         if not any(key.startswith(k) for k in RETRACK_KEYS):
-            raise ConfigError(f"--set {key}: expected a tracking.* key, input.fps, output.images or output.rerun "
+            raise ConfigError(f"--set {key}: expected a tracking.* key, input.fps, output.images, output.rerun or output.view "
                               f"(the rest of a run changes only by inferring again)")
     cfg = parse_config(apply_overrides(raw, overrides))
     camera = cfg.camera
@@ -344,7 +344,7 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     names = [p["frame"] for p in summary["per_frame"]]
     from .names import is_live
 
-    if is_live(cfg.inputs.frames) and (cfg.output.images or cfg.output.rerun):
+    if is_live(cfg.inputs.frames) and (cfg.output.images or cfg.output.rerun or cfg.output.view):
         raise InputError(f"{run_dir}: a live run keeps no frames (input.frames: {cfg.inputs.frames}), so its "
                          f"pictures and Rerun log cannot be drawn again; expected --set output.images=false "
                          f"--set output.rerun=null (tracks.csv, track_table.csv and the summary only)")

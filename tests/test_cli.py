@@ -198,3 +198,28 @@ def test_images_every_draws_every_nth_frame_with_or_without_tracks(tmp_path):
     assert main(["track", str(run), "--set", "tracking.method=off", "--set", "output.images_every=2"]) == 0
     assert {p.stem: p.read_bytes() for p in (run / "images").iterdir()} == {
         s: pictures["off", 1][s] for s in stems[::2]}
+
+
+def test_view_is_a_config_key_not_a_process_flag(tmp_path, monkeypatch):
+    """`--view` is `output.view: true` for that run alone: the run's resolved config says so,
+    its Rerun log is spawned, and a later run in the same process without it spawns nothing
+    (it was a module-level flag that stayed set for every later run)."""
+    from dpom_warp import view
+
+    spawned = []
+
+    class Recorder:
+        def __init__(self, path, spawn=False, name="dpom-warp"):
+            spawned.append(spawn)
+
+        def __getattr__(self, name):
+            return lambda *a, **k: None
+
+    monkeypatch.setattr(view, "RerunLog", Recorder)
+    path = small_config(tmp_path, frames=2)
+    assert main(["run", str(path), "--no-progress", "--view", "--set", "output.images=false"]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["config"]["output"]["view"] is True and spawned == [True]
+    assert main(["run", str(path), "--no-progress", "--overwrite", "--set", "output.images=false"]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["config"]["output"]["view"] is False and spawned == [True]

@@ -62,6 +62,7 @@ class Output:
     images_every: int = 1
     rerun: str | None = None
     ply: bool = False
+    view: bool = False
 
 
 @dataclass(frozen=True)

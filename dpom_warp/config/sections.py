@@ -202,6 +202,8 @@ class OutputSection(Node):
     rerun: FilePath | None = Field(None, description="also write a Rerun recording (.rrd) here: depth, "
                                                      "boxes, map and tracks per frame (the view extra)")
     ply: Bool = Field(False, description="the frame's points and the detected boxes as .ply files")
+    view: Bool = Field(False, description="show the run in a spawned Rerun viewer as it goes (--view; the view "
+                                          "extra)")
 
 
 class EngineSection(Node):
