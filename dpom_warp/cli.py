@@ -437,6 +437,22 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
 COMMANDS = {"run": _run, "fit-ground": _fit_ground, "eval": _eval, "schema": _schema, "track": _track, "info": _info}
 
 
+def _closed_pipe(command: str) -> int:
+    """Standard output closed by its reader: the commands that only print end quietly (exit 0);
+    a run, whose frames are written to files, says how to go on (exit 1)."""
+    import os
+
+    try:  # Python's own flush at exit would raise on the closed pipe again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except OSError:
+        pass
+    if command in ("info", "schema", "eval"):
+        return 0
+    print("dpom-warp: error: standard output was closed; finished frames are kept, continue with --resume",
+          file=sys.stderr)
+    return 1
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     signal.signal(signal.SIGTERM, _terminate)  # a kill unwinds like Ctrl-C: no partial files
@@ -448,6 +464,8 @@ def main(argv: list[str] | None = None) -> int:
     except WorkerError as e:
         print(f"dpom-warp: error: {e}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # a reader that stopped early (`dpom-warp info REC --json | head -1`)
+        return _closed_pipe(args.command)
     except OSError as e:  # a write that failed (disk full, permissions): finished frames are kept
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
         print(f"dpom-warp: error: {where}{e.strerror or e}; finished frames are kept, continue with --resume",

@@ -223,3 +223,18 @@ def test_view_is_a_config_key_not_a_process_flag(tmp_path, monkeypatch):
     assert main(["run", str(path), "--no-progress", "--overwrite", "--set", "output.images=false"]) == 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["config"]["output"]["view"] is False and spawned == [True]
+
+
+def test_info_into_a_pipe_closed_early_ends_quietly(tmp_path):
+    """`dpom-warp info SOURCE --json | head -1`: the reader stops early; info ends with exit 0
+    and nothing on stderr (it printed a run's "Broken pipe ... --resume" line). The reader here
+    (`true`) reads nothing and is gone before info prints: the closed pipe every time."""
+    import subprocess
+    import sys
+
+    from paths import REAL
+
+    bag = next(REAL.glob("**/*.bag"))
+    cmd = f'"{sys.executable}" -m dpom_warp.cli info "{bag}" --json | true'
+    done = subprocess.run(["bash", "-o", "pipefail", "-c", cmd], capture_output=True, text=True, timeout=120)
+    assert done.stderr == "" and done.returncode == 0, (done.returncode, done.stderr)
