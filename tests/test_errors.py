@@ -98,6 +98,11 @@ CONFIG_CASES = [
     ({"model__damping": "fast"}, "model.damping: expected a number, found 'fast'"),
     ({"model__iterations": 10}, "model.iterations: unknown key"),
     ({"camera__lens": "wide"}, "camera.lens: unknown key"),
+    # several unknown keys: every one named in the one line, with its closest known key
+    ({"model__prio": 0.1, "model__dampng": 0.2},
+     "model: unknown keys dampng (did you mean damping?), prio (did you mean prior?); expected keys among prior, "),
+    ({"model__prio": 0.1, "grid__stepp": 1}, "grid.stepp: unknown key (expected one of mode, x, y, z); "
+                                             "model.prio: unknown key (did you mean prior? expected one of prior,"),
     ({"model__sensor_noise": [0.01]}, "model.sensor_noise: expected a list of 2 numbers"),
     ({"model__sensor_noise": [-0.01, 0.001]}, "model.sensor_noise: expected [a, b] >= 0"),
     ({"model__damping": 0.5, "model__damping_max": 0.3}, "model.damping_max: expected at least model.damping"),

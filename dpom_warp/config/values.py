@@ -199,11 +199,17 @@ class Node(BaseModel):
         if not isinstance(raw, dict):
             raise _fail(f"expected a mapping, found {_fmt(raw)}")
         known = list(cls.model_fields)
-        for key in raw:
-            if key not in known:
-                close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
-                hint = f"did you mean {close[0]}? " if close else ""
-                raise _fail(f"unknown key ({hint}expected one of {', '.join(known)})", str(key))
+        unknown = [str(key) for key in raw if key not in known]
+        if len(unknown) == 1:
+            close = difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.6)
+            hint = f"did you mean {close[0]}? " if close else ""
+            raise _fail(f"unknown key ({hint}expected one of {', '.join(known)})", unknown[0])
+        if unknown:  # every one named, in one line
+            named = []
+            for key in unknown:
+                close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
+                named.append(f"{key} (did you mean {close[0]}?)" if close else key)
+            raise _fail(f"unknown keys {', '.join(named)}; expected keys among {', '.join(known)}")
         return raw
 
 
@@ -253,4 +259,6 @@ def _one_line(error: dict) -> str:
 def _first_error(e: ValidationError) -> str:
     errors = e.errors(include_url=False)
     unknown = [x for x in errors if x["type"] == "dpom" and x["msg"].startswith("unknown key")]
+    if len(unknown) > 1:  # in several sections: each named, in the one line
+        return "; ".join(_one_line(x) for x in unknown)
     return _one_line((unknown or errors)[0])
