@@ -63,6 +63,10 @@ def _run(args) -> int:
         return 0
     from .cluster import run_on_ray
 
+    from .outputs import check_output
+
+    for cfg, out in zip(cfgs, outputs):  # every output folder, before any setup
+        check_output(Path(out), cfg.resolved, args.overwrite, args.resume)
     plans = []
     for source, cfg, out in zip(args.config, cfgs, outputs):
         if many:

@@ -30,41 +30,47 @@ OUTPUTS = ("maps", "images", "frames", "plots", "ply", "detections.csv", "summar
            *TRACK_FILES, RUN_STATE)
 
 
-def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> None:
-    """Make `out` ready: refuse a non-empty folder unless overwriting or resuming a run of
-    the same config; remove what an interrupted write left behind."""
-    state = {"config": _jsonable(resolved)}
+def check_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> None:
+    """Refuse, before any work, an output folder that is a file, or not empty unless
+    overwriting or resuming a run of the same config (`resolved`); changes nothing."""
     if out.exists() and not out.is_dir():
         raise ConfigError(f"output.dir: {out} is a file; expected an empty or new folder")
-    if out.exists() and any(out.iterdir()):
-        if resume:
-            path = out / RUN_STATE
-            try:
-                before = json.loads(path.read_text())
-            except (OSError, json.JSONDecodeError):
-                raise ConfigError(f"--resume: {out} holds no resumable run ({RUN_STATE} missing "
-                                  f"or unreadable)") from None
-            if before != json.loads(json.dumps(state)):
-                diff = _first_difference(before.get("config", {}), state["config"])
-                raise ConfigError(f"--resume: {out} holds a run of another config ({diff}); "
-                                  f"expected the same config, or use --overwrite")
-        elif overwrite:
-            for name in OUTPUTS:
-                target = out / name
-                if target.is_dir():
-                    shutil.rmtree(target)
-                elif target.exists():
-                    target.unlink()
-        else:
-            raise ConfigError(f"output.dir: {out} is not empty; expected an empty or new folder "
-                              f"(use --overwrite to replace its results or --resume to continue)")
+    if not (out.exists() and any(out.iterdir())) or (overwrite and not resume):
+        return
+    if not resume:
+        raise ConfigError(f"output.dir: {out} is not empty; expected an empty or new folder "
+                          f"(use --overwrite to replace its results or --resume to continue)")
+    path = out / RUN_STATE
+    try:
+        before = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        raise ConfigError(f"--resume: {out} holds no resumable run ({RUN_STATE} missing "
+                          f"or unreadable)") from None
+    state = {"config": _jsonable(resolved)}
+    if before != json.loads(json.dumps(state)):
+        diff = _first_difference(before.get("config", {}), state["config"])
+        raise ConfigError(f"--resume: {out} holds a run of another config ({diff}); "
+                          f"expected the same config, or use --overwrite")
+
+
+def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> None:
+    """Make `out` ready: refuse a non-empty folder unless overwriting or resuming a run of
+    the same config (check_output); remove what an interrupted write left behind."""
+    check_output(out, resolved, overwrite, resume)
+    if out.exists() and any(out.iterdir()) and overwrite and not resume:
+        for name in OUTPUTS:
+            target = out / name
+            if target.is_dir():
+                shutil.rmtree(target)
+            elif target.exists():
+                target.unlink()
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:  # a file where a folder above it should be, no permission
         raise ConfigError(f"output.dir: {out}: cannot make the folder ({e.strerror or e}); expected a "
                           f"path where a new folder can be made") from None
     remove_temporaries(out)  # of a killed run
-    write_json_atomic(out / RUN_STATE, state)
+    write_json_atomic(out / RUN_STATE, {"config": _jsonable(resolved)})
 
 
 def remove_temporaries(out: Path) -> None:

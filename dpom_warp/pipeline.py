@@ -15,7 +15,7 @@ from .evaluate import load_ground_truth
 from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
 from .geometry import build_geometry
 from .io import InputError, write_json_atomic
-from .outputs import (RUN_STATE, TRACK_FILES, _jsonable, fps_of, frames_out, pictures_deferred, prepare_output,
+from .outputs import (RUN_STATE, TRACK_FILES, _jsonable, check_output, fps_of, frames_out, pictures_deferred, prepare_output,
                       remove_temporaries, summarise, track_table_files)
 from .session import Setup, set_up
 from .sources import expand
@@ -68,7 +68,9 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     if cfg.inputs.frames is not None and is_live(cfg.inputs.frames):
         from .live import run_live
 
+        check_output(Path(output_dir or cfg.output.dir), cfg.resolved, overwrite, False)
         return run_live(cfg, output_dir, device, log, max_frames, overwrite, workers=workers)
+    check_output(Path(output_dir or cfg.output.dir), cfg.resolved, overwrite, resume)  # before any setup
     workers = workers or 1
     plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1, keep_engine=workers > 1,
                     max_frames=max_frames)

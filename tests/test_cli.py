@@ -238,3 +238,18 @@ def test_info_into_a_pipe_closed_early_ends_quietly(tmp_path):
     cmd = f'"{sys.executable}" -m dpom_warp.cli info "{bag}" --json | true'
     done = subprocess.run(["bash", "-o", "pipefail", "-c", cmd], capture_output=True, text=True, timeout=120)
     assert done.stderr == "" and done.returncode == 0, (done.returncode, done.stderr)
+
+
+def test_a_full_output_folder_is_refused_before_any_setup(tmp_path, capsys):
+    """The "not empty" error comes first: nothing is rendered, fitted or set up, nothing
+    printed on stdout before it (it came after the scene check and the engine's setup)."""
+    path = small_config(tmp_path, frames=2)
+    assert main(["run", str(path), "--no-progress", "--set", "output.images=false"]) == 0
+    capsys.readouterr()
+    assert main(["run", str(path), "--no-progress"]) == 2
+    got = capsys.readouterr()
+    assert got.out == ""
+    assert got.err.startswith("dpom-warp: error: output.dir: ") and "is not empty" in got.err
+    assert main(["run", str(path), "--no-progress", "--resume", "--set", "model.prior=0.02"]) == 2
+    got = capsys.readouterr()
+    assert got.out == "" and "holds a run of another config (model.prior: 0.01 then, 0.02 now)" in got.err
