@@ -322,9 +322,10 @@ RETRACK_KEYS = ("tracking.", "input.fps", "output.images", "output.rerun", "outp
 
 def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     """`dpom-warp track RUN_DIR`: the tracks of a finished run again from its maps, with
-    `overrides` (tracking.*, input.fps, output.images) applied to its config; tracks.csv,
-    track_table.csv, the pictures, summary.json's `tracking` and eval.json are rewritten.
-    Returns the new tracking block."""
+    `overrides` (tracking.*, input.fps, output.images, output.rerun, output.view) applied to its
+    config; tracks.csv, track_table.csv, the pictures, summary.json's `tracking` (with the
+    settings used: `settings`) and eval.json are rewritten; run.json and summary.json's config
+    stay as the run made them. Returns the new tracking block."""
     from .config import apply_overrides, parse_config
 
     run_dir = Path(run_dir)
@@ -368,9 +369,12 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     report = track_run(cfg, run_dir, done, geometry, truth, log,
                        fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]), camera=camera,
                        timestamps={p["frame"]: p.get("timestamp") for p in summary["per_frame"]})
-    summary["config"], summary["tracking"] = cfg.resolved, report
+    # the run's config stays as made (summary.json's config, run.json): a later plain `track`
+    # tracks as the run did; what this one used is in its tracking block
+    report["settings"] = {"set": list(overrides), "tracking": cfg.resolved["tracking"], "input_fps": cfg.inputs.fps,
+                          "output": {k: cfg.resolved["output"][k] for k in ("images", "images_every", "rerun", "view")}}
+    summary["tracking"] = report
     write_json_atomic(run_dir / "summary.json", _jsonable(summary))
-    write_json_atomic(run_dir / RUN_STATE, {"config": _jsonable(cfg.resolved)})
     if truth is not None:
         from .evaluate import evaluate_runs
 

@@ -406,11 +406,19 @@ def test_track_command_retracks_without_inferring(tracked_run, tmp_path, capsys)
     run = tmp_path / "run"
     shutil.copytree(tracked_run[0], run)
     maps_before = {p.name: p.read_bytes() for p in (run / "maps").iterdir()}
+    made = (run / "run.json").read_bytes()
+    config_made = json.loads((run / "summary.json").read_text())["config"]
     assert main(["track", str(run), "--set", "tracking.method=online", "--set", "tracking.delay=3"]) == 0
     summary = json.loads((run / "summary.json").read_text())
     assert summary["tracking"]["method"] == "online" and summary["tracking"]["delay_frames"] == 3
-    assert summary["config"]["tracking"]["delay"] == 3
+    settings = summary["tracking"]["settings"]  # what this track used; the run's config as made
+    assert settings["set"] == ["tracking.method=online", "tracking.delay=3"]
+    assert settings["tracking"]["method"] == "online" and settings["tracking"]["delay"] == 3
+    assert summary["config"] == config_made and (run / "run.json").read_bytes() == made
     assert {p.name: p.read_bytes() for p in (run / "maps").iterdir()} == maps_before
+    assert main(["track", str(run)]) == 0  # a plain track: as the run did (ksp), not the last override
+    assert json.loads((run / "summary.json").read_text())["tracking"]["method"] == "ksp"
+    assert (run / "tracks.csv").read_bytes() == (tracked_run[0] / "tracks.csv").read_bytes()
     assert main(["track", str(run), "--set", "tracking.method=ksp"]) == 0
     assert (run / "tracks.csv").read_bytes() == (tracked_run[0] / "tracks.csv").read_bytes()
     for p in (tracked_run[0] / "images").iterdir():  # the pictures are drawn again, the same
@@ -420,8 +428,9 @@ def test_track_command_retracks_without_inferring(tracked_run, tmp_path, capsys)
     assert not (run / "tracks.csv").exists() and not (run / "track_table.csv").exists()
     assert capsys.readouterr().out.strip().endswith(  # says why, and how to track anyway
         "no tracks in " + str(run) + ": tracking.method: off (--set tracking.method=ksp|online tracks any run)")
-    assert json.loads((run / "summary.json").read_text())["tracking"] == {"method": "off",
-                                                                           "why": "tracking.method: off"}
+    off = json.loads((run / "summary.json").read_text())["tracking"]
+    assert (off["method"], off["why"], off["settings"]["set"]) == ("off", "tracking.method: off", ["tracking.method=off"])
+    assert (run / "run.json").read_bytes() == made
     assert main(["track", str(run), "--set", "model.alpha=1"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("dpom-warp: error: --set model.alpha: expected a tracking.* key") and "\n" not in err
