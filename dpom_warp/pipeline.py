@@ -124,7 +124,7 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
 
 def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None:
     """Make the output folder ready (prepare_output) and find the frames left to do: with
-    `resume`, the frames whose record exists are done."""
+    `resume`, the frames whose record and map exist are done."""
     cfg, out, i = plan.cfg, plan.out, plan.inference
     prepare_output(out, cfg.resolved, overwrite, resume)
     log(f"device {plan.device}; {plan.geometry.locations.shape[0]} locations {cfg.grid.shape}; "
@@ -133,14 +133,31 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
         f"{i['image'][1]} pixels (stride {i['stride']}{', ' + i['reduce'] if i['stride'] > 1 else ''}"
         f"{', exact path' if cfg.engine.exact else ''}"
         f"{f', {cfg.engine.batch} frames an engine call' if cfg.engine.batch > 1 else ''})")
+    again = []
     for f in plan.frames:
-        record = out / "frames" / f"{f.stem}.json"
-        if resume and record.exists():
-            plan.records[f.name] = json.loads(record.read_text())
+        record = _finished_record(out, f) if resume else None
+        if record is not None:
+            plan.records[f.name] = record
         else:
             plan.todo.append(f)
+            if resume and (out / "frames" / f"{f.stem}.json").exists():
+                again.append(f.name)
     if resume:
-        log(f"resuming: {len(plan.records)} frames already done, {len(plan.todo)} to go")
+        log(f"resuming: {len(plan.records)} frames already done, {len(plan.todo)} to go"
+            + (f" ({len(again)} of them again, their map or record missing or unreadable: "
+               f"{', '.join(again[:5])}{', ...' if len(again) > 5 else ''})" if again else ""))
+
+
+def _finished_record(out: Path, frame: Path) -> dict | None:
+    """A frame's record where the frame is finished: the record readable and its map there (a
+    record is written last, so a missing map was removed since, and the frame is done again)."""
+    record, map_file = out / "frames" / f"{frame.stem}.json", out / "maps" / f"{frame.stem}.npy"
+    if not (record.is_file() and map_file.is_file()):
+        return None
+    try:
+        return json.loads(record.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
 
 
 def _outcomes_here(plan: RunPlan):

@@ -253,3 +253,24 @@ def test_a_full_output_folder_is_refused_before_any_setup(tmp_path, capsys):
     assert main(["run", str(path), "--no-progress", "--resume", "--set", "model.prior=0.02"]) == 2
     got = capsys.readouterr()
     assert got.out == "" and "holds a run of another config (model.prior: 0.01 then, 0.02 now)" in got.err
+
+
+def test_resume_redoes_a_frame_whose_map_was_removed(tmp_path, capsys):
+    """--resume on a finished run whose maps/0001.npy was deleted infers that frame again and
+    ends with the plain run's files (it stopped with "maps/0001.npy: No such file ... continue
+    with --resume"); an unreadable record is done again the same way."""
+    path = small_config(tmp_path, frames=3)
+    plain, again = tmp_path / "plain", tmp_path / "again"
+    for out in (plain, again):
+        assert main(["run", str(path), "--no-progress", "--output", str(out), "--set", "output.images=false"]) == 0
+    (again / "maps" / "0001.npy").unlink()
+    (again / "frames" / "0002.json").write_text("{truncated")
+    capsys.readouterr()
+    assert main(["run", str(path), "--no-progress", "--output", str(again), "--resume",
+                 "--set", "output.images=false"]) == 0
+    assert "1 frames already done, 2 to go (2 of them again" in capsys.readouterr().out
+    for name in ("detections.csv", "tracks.csv", "maps/0000.npy", "maps/0001.npy", "maps/0002.npy"):
+        assert (again / name).read_bytes() == (plain / name).read_bytes(), name
+    for n in ("0001", "0002"):
+        assert json.loads((again / "frames" / f"{n}.json").read_text())["rows"] == \
+            json.loads((plain / "frames" / f"{n}.json").read_text())["rows"]
