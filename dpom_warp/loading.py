@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .config import ConfigError, RunConfig, apply_overrides, camera_from_file, camera_shorthand, parse_config, read_config
 from .io import InputError
-from .names import is_live, is_recording
+from .names import is_live, is_recording, unknown_format
 from .sources import open_source
 
 
@@ -20,6 +20,8 @@ def camera_from_recording(raw: dict) -> dict:
     auto camera.ground.up from its accelerometer) taken from the recording (the keys it gives
     win: the run says where they differ)."""
     inp, cam = raw.get("input"), raw.get("camera", {})
+    if isinstance(inp, dict) and isinstance(inp.get("frames"), str) and unknown_format(inp["frames"]):
+        raise ConfigError(f"input.frames: {unknown_format(inp['frames'])}")  # before the camera keys it lacks
     if (not isinstance(inp, dict) or not isinstance(inp.get("frames"), str) or not isinstance(cam, dict)
             or not (is_recording(inp["frames"]) or is_live(inp["frames"]))):
         return raw

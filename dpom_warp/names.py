@@ -20,6 +20,7 @@ READERS = {
     ".mcap": ("ROS 2 bag (MCAP)", "bags", "Bag"),
     ".mkv": ("Azure Kinect recording", "azure", "AzureKinect"),
 }
+FRAME_SUFFIXES = (".png", ".npy")  # frame files (16-bit PNG or .npy, in depth units)
 RECORDING_SUFFIXES = {k: what for k, (what, _, _) in READERS.items() if k.startswith(".")}
 LIVE_KINDS = tuple(k for k in READERS if not k.startswith(".") and k != "files")
 
@@ -39,3 +40,17 @@ def is_recording(spec: str | os.PathLike) -> bool:
     """Whether input.frames names a recording (by its suffix, or a ROS 2 bag's folder)."""
     p = Path(os.path.expanduser(str(spec)))
     return p.suffix.lower() in RECORDING_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
+
+
+def unknown_format(spec) -> str | None:
+    """Where input.frames names one file (no glob, not a folder, not a camera) of a kind no
+    reader takes: the one-line reason, naming the file and the formats known; else None."""
+    text = os.path.expanduser(str(spec))
+    p = Path(text)
+    if is_live(spec) or any(c in text for c in "*?[") or p.is_dir() or not p.suffix:
+        return None
+    if p.suffix.lower() in FRAME_SUFFIXES or p.suffix.lower() in RECORDING_SUFFIXES:
+        return None
+    return (f"{spec}: unknown format {p.suffix!r}; expected a folder or glob of 16-bit PNG or .npy frames, "
+            f"a recording ({', '.join(RECORDING_SUFFIXES)}, a ROS 2 bag's folder) or a live camera "
+            f"({', '.join(f'{k}[:SERIAL]' for k in LIVE_KINDS)})")

@@ -274,3 +274,18 @@ def test_resume_redoes_a_frame_whose_map_was_removed(tmp_path, capsys):
     for n in ("0001", "0002"):
         assert json.loads((again / "frames" / f"{n}.json").read_text())["rows"] == \
             json.loads((plain / "frames" / f"{n}.json").read_text())["rows"]
+
+
+def test_frames_of_an_unknown_format_without_camera_keys_name_the_file(tmp_path, capsys):
+    """`input.frames: frames.xyz` and no camera keys: the file and the formats known, not
+    "camera.width: required key is missing" (what the missing keys made of it)."""
+    (tmp_path / "frames.xyz").write_bytes(b"\0" * 16)
+    path = tmp_path / "mine.yaml"
+    path.write_text(yaml.safe_dump({"input": {"frames": "frames.xyz"}, "grid": {"x": [-2, 2, 0.1], "y": [1, 6, 0.1]},
+                                    "output": {"dir": str(tmp_path / "out")}}))
+    assert main(["run", str(path), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"dpom-warp: error: {path}: input.frames: {tmp_path / 'frames.xyz'}: unknown format '.xyz'; "
+                   f"expected a folder or glob of 16-bit PNG or .npy frames, a recording (.bag, .db3, .mcap, .mkv, "
+                   f"a ROS 2 bag's folder) or a live camera (realsense[:SERIAL])")
+    assert not (tmp_path / "out").exists()

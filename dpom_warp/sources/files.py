@@ -11,9 +11,7 @@ import numpy as np
 
 from ..io import InputError
 from .base import Frame, Source, SourceInfo
-
-
-FRAME_SUFFIXES = (".png", ".npy")
+from ..names import FRAME_SUFFIXES, unknown_format
 
 
 class FileFrames(Source):
@@ -33,13 +31,8 @@ class FileFrames(Source):
             where = os.path.abspath(os.path.expanduser(pattern))
             raise InputError(f"{key}: no files match {pattern!r} (looked for {where}; relative paths in a "
                              f"config file are relative to its folder)")
-        first = self.files[0]
-        if len(self.files) == 1 and first.suffix and first.suffix.lower() not in FRAME_SUFFIXES:
-            from ..names import RECORDING_SUFFIXES
-
-            raise InputError(f"{key}: {first}: unknown format {first.suffix!r}; expected a glob of 16-bit "
-                             f"PNG or .npy frames, or a recording ({', '.join(RECORDING_SUFFIXES)}, a ROS 2 "
-                             f"bag's folder)")
+        if len(self.files) == 1 and unknown_format(self.files[0]):
+            raise InputError(f"{key}: {unknown_format(self.files[0])}")
 
     def _raw(self, f: Path) -> np.ndarray:
         from ..io import read_depth
