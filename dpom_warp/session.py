@@ -65,7 +65,8 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
     names = [f"{source} (frame {f.name})" for f in files] if source and is_recording(source) else None
     fit = fit_ground_files(files, cfg.camera, cfg.inputs.depth_scale, cfg.ground, names)
     refuse_low_view_from_above(cfg, fit, frames_named(files, names))
-    return posed(cfg, fit, f"{len(files)} {kind}{'s' if len(files) > 1 else ''}", [str(f) for f in files], t, log)
+    return posed(cfg, fit, f"{len(files)} {kind}{'s' if len(files) > 1 else ''}", names or [str(f) for f in files],
+                 t, log)  # a recording's frames by the recording and frame, not the cache's files
 
 
 @dataclasses.dataclass

@@ -530,3 +530,22 @@ def test_realsense_sdk_db3_gives_the_png_run(tmp_path, scene):
     same_as_png(tmp_path, scene, tmp_path / "out")
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["config"]["camera"]["intrinsics"] == pytest.approx(camera_of(cfg))
+
+
+def test_the_cache_folder_is_dpom_warp_cache_itself_and_the_fit_names_the_recording(tmp_path, scene):
+    """$DPOM_WARP_CACHE is the folder recordings are read into, as the README says (it was the
+    parent of a `recordings` folder in it); a floor fitted on a recording's frames is reported in
+    summary.json by the recording and frame, not by the cache's files."""
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))
+    bag = write_bag(tmp_path / "walk.bag", "ros1", messages(typestore(True), frames, "16UC1", camera_of(cfg)))
+    c = json.loads(json.dumps(cfg))
+    c["camera"]["extrinsics"] = "auto"
+    c["camera"]["ground"] = {"frames": 2}
+    path = recording_config(tmp_path, c, bag)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    cache = tmp_path / "recordings-cache"
+    read = [p.parent for p in cache.glob("*/source.json")]
+    assert len(read) == 1 and read[0].name.startswith("walk-"), sorted(cache.iterdir())
+    fit = json.loads((tmp_path / "out" / "summary.json").read_text())["ground_fit"]
+    assert fit["frames"] == [f"{bag} (frame 000000)", f"{bag} (frame 000001)"]

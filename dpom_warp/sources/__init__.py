@@ -55,16 +55,17 @@ def _reader(kind: str) -> type:
 
 # -- the cache a run reads a recording from ---------------------------------------------------
 def cache_root() -> Path:
-    """$DPOM_WARP_CACHE, else $XDG_CACHE_HOME/dpom-warp, else ~/.cache/dpom-warp."""
+    """The folder recordings are read into: $DPOM_WARP_CACHE itself, else
+    $XDG_CACHE_HOME/dpom-warp/recordings, else ~/.cache/dpom-warp/recordings."""
     if os.environ.get("DPOM_WARP_CACHE"):
         return Path(os.environ["DPOM_WARP_CACHE"])
-    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "dpom-warp"
+    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "dpom-warp" / "recordings"
 
 
 def cache_dir(path: Path, topic: str | None) -> Path:
     st = path.stat() if path.is_file() else max((f.stat() for f in path.iterdir()), key=lambda s: s.st_mtime_ns)
     key = json.dumps([str(path.resolve()), st.st_size, st.st_mtime_ns, topic, CACHE_VERSION])
-    return cache_root() / "recordings" / f"{path.stem}-{hashlib.sha1(key.encode()).hexdigest()[:12]}"
+    return cache_root() / f"{path.stem}-{hashlib.sha1(key.encode()).hexdigest()[:12]}"
 
 
 def materialise(spec: str, topic: str | None = None, key: str = "input.frames", log=print) -> dict:
