@@ -8,7 +8,8 @@ from __future__ import annotations
 import copy
 from pathlib import Path
 
-from .config import ConfigError, RunConfig, apply_overrides, camera_from_file, camera_shorthand, parse_config, read_config
+from .config import (ConfigError, RunConfig, apply_overrides, camera_from_file, camera_shorthand, config_key, parse_config,
+                     read_config, source_of)
 from .io import InputError
 from .names import is_live, is_recording, unknown_format
 from .sources import open_source
@@ -69,6 +70,9 @@ def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConf
     to its folder; those in `overrides` to the current folder."""
     raw = read_config(path)
     try:
-        return config_from_mapping(apply_overrides(raw, overrides or []))
-    except ConfigError as e:
-        raise ConfigError(f"{path}: {e}") from None
+        cfg = config_from_mapping(apply_overrides(raw, overrides or []))
+    except ConfigError as e:  # said with where the value came from: the file, or --set
+        key = config_key(str(e))
+        raise ConfigError(f"{source_of(key, overrides or [], str(path)) if key else path}: {e}") from None
+    cfg.origin = {"file": str(path), "set": list(overrides or [])}
+    return cfg

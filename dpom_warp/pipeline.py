@@ -108,14 +108,20 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     frames of input.frames."""
     t_start = time.perf_counter()
     out = Path(output_dir or cfg.output.dir)
-    source = run_frames(cfg, strict, log, max_frames)  # every frame read and checked once
+    try:
+        source = run_frames(cfg, strict, log, max_frames)  # every frame read and checked once
+    except (InputError, ConfigError) as e:  # a frames path that matches nothing: from the file, or --set
+        raise type(e)(cfg.blame(str(e))) from None
     frames, skipped, timestamps = source.frames, source.skipped, source.timestamps
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
     if truth is not None:
         missing = [f.name for f in frames if f.name not in truth]
         if missing:
             raise InputError(f"{cfg.evaluation.ground_truth}: no ground truth for frame {missing[0]}")
-    s = set_up(cfg, frames, device, log, parallel, keep_engine, recorded=True)
+    try:
+        s = set_up(cfg, frames, device, log, parallel, keep_engine, recorded=True)
+    except (InputError, ConfigError) as e:  # background frames that match nothing, ...
+        raise type(e)(cfg.blame(str(e))) from None
     s.spec.pictures = cfg.output.images and not pictures_deferred(cfg, len(frames))
     return RunPlan(**{f.name: getattr(s, f.name) for f in dataclasses.fields(Setup)}, cfg=s.spec.cfg,
                    out=out, frames=frames, skipped=skipped, truth=truth, t_start=t_start,

@@ -289,3 +289,35 @@ def test_frames_of_an_unknown_format_without_camera_keys_name_the_file(tmp_path,
                    f"expected a folder or glob of 16-bit PNG or .npy frames, a recording (.bag, .db3, .mcap, .mkv, "
                    f"a ROS 2 bag's folder) or a live camera (realsense[:SERIAL])")
     assert not (tmp_path / "out").exists()
+
+
+def test_config_errors_say_where_the_value_came_from(tmp_path, capsys):
+    """A `--set` error is blamed on the --set, not the config file; a frames path that matches
+    nothing, or an empty folder, names the config file (or the --set) as well as the key."""
+    path = small_config(tmp_path, frames=2)
+
+    def error(*args):
+        assert main(["run", str(path), "--no-progress", *args]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err
+        return err.removeprefix("dpom-warp: error: ")
+
+    assert error("--set", "model.prio=1").startswith("--set model.prio=1: model.prio: unknown key (did you mean prior?")
+    assert error("--set", "grid.y=[1, 6, 0]").startswith("--set grid.y=[1, 6, 0]: grid.y: expected a step > 0 in [min")
+    assert error("--set", "model.prior=2").startswith("--set model.prior=2: model.prior: expected a value < 1")
+    raw = yaml.safe_load(path.read_text())
+    raw["model"]["prio"] = 1
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(raw))
+    assert main(["run", str(bad), "--no-progress", "--set", "model.prior=0.02"]) == 2
+    assert capsys.readouterr().err.startswith(f"dpom-warp: error: {bad}: model.prio: unknown key")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    raw = yaml.safe_load(path.read_text())
+    del raw["synthetic"]
+    raw["input"]["frames"] = str(empty)
+    path.write_text(yaml.safe_dump(raw))
+    assert error().startswith(f"{path}: input.frames: {empty}: a folder with no frames in it")
+    assert error("--set", f"input.frames={tmp_path}/none/*.png").startswith(
+        f"--set input.frames={tmp_path}/none/*.png: input.frames: no files match")
+    assert not (tmp_path / "out").exists()

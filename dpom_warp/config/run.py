@@ -4,7 +4,8 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, fields
+import re
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -101,6 +102,35 @@ class RunConfig:
     ground: GroundOptions = GroundOptions()
     ground_frames: int = 5
     tracking: TrackingOptions = TrackingOptions()
+    # where the values came from (loading.load_config): the config file, and the --set items
+    origin: dict = field(default_factory=dict)
+
+    def source_of(self, key: str) -> str:
+        """Where the value of `key` came from: `--set KEY=VALUE`, else the config file."""
+        return source_of(key, self.origin.get("set", ()), self.origin.get("file") or "config")
+
+    def blame(self, message: str) -> str:
+        """An error about a config key (`KEY: ...`) said with where its value came from."""
+        key = config_key(message)
+        return f"{self.source_of(key)}: {message}" if key else message
+
+
+KEY_AT_START = re.compile(r"^([a-z_]+(?:\.[a-z_]+)*): ")
+
+
+def config_key(message: str) -> str | None:
+    """The config key an error message starts with (`input.frames: ...`), else None."""
+    m = KEY_AT_START.match(message)
+    return m.group(1) if m else None
+
+
+def source_of(key: str, overrides, file: str) -> str:
+    """`--set ITEM` where an override set `key` (or a section above it, or a key inside it), else `file`."""
+    for item in overrides:
+        k = item.split("=", 1)[0].strip()
+        if key == k or key.startswith(k + ".") or k.startswith(key + "."):
+            return f"--set {item}"
+    return file
 
 
 def _fill(cls, section: BaseModel, **changes):
