@@ -149,7 +149,8 @@ def test_bad_config_is_one_line_exit_2(tmp_path, capsys, override, message):
         override = "camera.width=640"
         capsys.readouterr()
         args = ["run", str(path), "--no-progress", "--set", override, "--set", "synthetic=null",
-                "--set", "camera.intrinsics.cx=319.5"]
+                "--set", "camera.intrinsics.cx=319.5", "--output", str(tmp_path / "other")]  # (the output
+        # folder is checked first: the render's run filled out/)
     else:
         args = ["run", str(path), "--no-progress", "--set", override]
     assert main(args) == 2
