@@ -188,7 +188,7 @@ def test_config_stride_reduce_and_exact(tmp_path):
                           (["model.sparse_epsilon=-1"], "model.sparse_epsilon: expected a value >= 0, found -1")]:
         with pytest.raises(ConfigError) as e:
             load_config(str(DEMO), sets)
-        assert str(e.value) == f"{DEMO}: {message}"
+        assert str(e.value) == f"--set {sets[0]}: {message}"  # blamed on the --set, not the file
 
 
 def check_bound_against_reference(device, seed, shape, step=0.3, behind_cost=0.0):
