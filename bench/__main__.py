@@ -67,19 +67,24 @@ def median_time(fn, repeats):
     return statistics.median(times)
 
 
+def scene_sets(name) -> tuple[str, list[str]]:
+    """(config path, --set overrides) of a standard scene: 2 frames rendered into .cache/bench/<name>."""
+    path, sets = SCENES[name]
+    cache = f".cache/bench/{name}"
+    return path, list(sets) + [f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
+                               f"input.background={cache}/background/*.png", "synthetic.frames=2",
+                               "synthetic.background_frames=5"]
+
+
 def load_scene(name, extra=()):
     """(config, first frame, background frames) of a standard scene, rendered if needed."""
-    from dpom_warp.loading import load_config
     from dpom_warp.io import read_depth
+    from dpom_warp.loading import load_config
     from dpom_warp.sources import expand
     from dpom_warp.synthetic import generate
 
-    path, sets = SCENES[name]
-    cache = f".cache/bench/{name}"
-    sets = list(sets) + [f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
-                         f"input.background={cache}/background/*.png", "synthetic.frames=2",
-                         "synthetic.background_frames=5"] + list(extra)
-    cfg = load_config(path, sets)
+    path, sets = scene_sets(name)
+    cfg = load_config(path, sets + list(extra))
     generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
     scale, shape = cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width)
     depth = read_depth(expand(cfg.inputs.frames, "input.frames")[0], scale, shape)

@@ -26,16 +26,10 @@ COUNTS = ("frame", "detections", "iterations", "converged", "live", "entries", "
 def _bench_sets(name: str, exact: bool) -> tuple[str, list[str]]:
     """The bench scene's config and overrides as bench.load_scene makes them (2 frames)."""
     sys.path.insert(0, str(ROOT))
-    from bench.__main__ import SCENES
+    from bench.__main__ import scene_sets
 
-    path, sets = SCENES[name]
-    cache = f".cache/bench/{name}"
-    sets = list(sets) + [f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
-                         f"input.background={cache}/background/*.png", "synthetic.frames=2",
-                         "synthetic.background_frames=5"]
-    if exact:
-        sets.append("engine.exact=true")
-    return path, sets
+    path, sets = scene_sets(name)
+    return path, sets + ["engine.exact=true"] * exact
 
 
 def scenarios() -> dict[str, tuple[str, list[str]]]:
