@@ -72,7 +72,8 @@ def scene_sets(name) -> tuple[str, list[str]]:
     path, sets = SCENES[name]
     cache = f".cache/bench/{name}"
     return path, list(sets) + [f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
-                               f"input.background={cache}/background/*.png", "synthetic.frames=2",
+                               f"input.background={cache}/background/*.png",
+                               f"evaluation.ground_truth={cache}/ground_truth.json", "synthetic.frames=2",
                                "synthetic.background_frames=5"]
 
 
@@ -102,7 +103,8 @@ def scene_frames(name, n, with_truth=False):
 
     cache = f".cache/bench/{name}_seq"
     cfg, _, bg = load_scene(name, [f"synthetic.cache={cache}", f"input.frames={cache}/frames/*.png",
-                                   f"input.background={cache}/background/*.png", f"synthetic.frames={n}"])
+                                   f"input.background={cache}/background/*.png",
+                                   f"evaluation.ground_truth={cache}/ground_truth.json", f"synthetic.frames={n}"])
     shape = (cfg.camera.height, cfg.camera.width)
     files = expand(cfg.inputs.frames, "input.frames")[:n]
     frames = np.stack([read_depth(f, cfg.inputs.depth_scale, shape) for f in files])
