@@ -280,6 +280,10 @@ def _info(args) -> int:
                  if info.get("gravity_up") else "")]
     if len(info["streams"]) > 1:
         lines.append(stream_lines(info["streams"]))
+    bad = info["unreadable"]
+    if bad:  # a folder's files a run skips, each with its reason
+        lines.append(f"  not readable: {len(bad)} of {len(bad) + info['frames']} files (a run skips them):")
+        lines += [f"    {b['reason']}" for b in bad[:10]] + ([f"    ... and {len(bad) - 10} more"] if len(bad) > 10 else [])
     print("\n".join(lines))
     return 0
 

@@ -322,3 +322,34 @@ def test_config_errors_say_where_the_value_came_from(tmp_path, capsys):
     assert error("--set", f"input.frames={tmp_path}/none/*.png").startswith(
         f"--set input.frames={tmp_path}/none/*.png: input.frames: no files match")
     assert not (tmp_path / "out").exists()
+
+
+def test_info_on_a_folder_counts_the_frames_a_run_reads(tmp_path, capsys):
+    """`info` on a folder of three good frames, a truncated PNG and an 8-bit PNG says 3 frames
+    (it said 5, the files) and names the two others with their reasons: the same two a run
+    of that folder skips."""
+    from PIL import Image
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    depth = np.full((6, 8), 2000, np.uint16)
+    for i in range(3):
+        Image.fromarray(depth + i).save(folder / f"{i:04d}.png")
+    (folder / "0003.png").write_bytes((folder / "0000.png").read_bytes()[:40])  # truncated
+    Image.fromarray(np.full((6, 8), 200, np.uint8)).save(folder / "0004.png")  # 8-bit
+    assert main(["info", str(folder), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert (info["frames"], info["width"], info["height"]) == (3, 8, 6)
+    assert [b["file"] for b in info["unreadable"]] == ["0003.png", "0004.png"]
+    assert "not a readable image" in info["unreadable"][0]["reason"]
+    assert "found mode L" in info["unreadable"][1]["reason"]
+    assert main(["info", str(folder)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "3 frames of 8x6" in lines[1]
+    assert "  not readable: 2 of 5 files (a run skips them):" in lines
+    assert lines[-1].strip() == info["unreadable"][1]["reason"]
+    from dpom_warp.frames import check_frames
+
+    good, skipped = check_frames(sorted(folder.iterdir()), 0.001, (6, 8), strict=False)
+    assert [f.name for f in good] == ["0000.png", "0001.png", "0002.png"]
+    assert [s["frame"] for s in skipped] == ["0003.png", "0004.png"]

@@ -21,7 +21,8 @@ class SourceInfo:
     information); `distortion`: OpenCV's k1, k2, p1, p2, k3 (and k4, k5, k6 for the rational
     model), or None; `gravity_up`: the accelerometer's mean reading at rest (it measures +g
     upwards) turned into the depth camera's frame (OpenCV: x right, y down, z forward), when
-    the source has one and says how it sits relative to the depth camera."""
+    the source has one and says how it sits relative to the depth camera. `frames` counts the
+    frames a run reads; for files, `unreadable` names each other one and why."""
 
     kind: str
     path: str
@@ -38,6 +39,7 @@ class SourceInfo:
     rate_hz: float | None = None
     imu: bool = False
     gravity_up: list | None = None  # unit "up" in the depth camera's frame, from the accelerometer
+    unreadable: list = dataclasses.field(default_factory=list)  # files a run would skip: {file, reason}
 
     def as_json(self) -> dict:
         return dataclasses.asdict(self)

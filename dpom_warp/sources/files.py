@@ -40,11 +40,30 @@ class FileFrames(Source):
         return read_depth(f, 1.0)  # the file's own units
 
     def info(self) -> SourceInfo:
-        first = self._raw(self.files[0])
-        return SourceInfo(kind="depth frame files", path=self.pattern, frames=len(self.files),
-                          width=int(first.shape[1]), height=int(first.shape[0]),
-                          encoding="16-bit PNG" if self.files[0].suffix.lower() != ".npy" else ".npy",
-                          streams=[{"topic": self.pattern, "type": "files", "messages": len(self.files)}])
+        """Every file read once: `frames` counts those a run reads (the size of the first
+        readable one, with some depth); `unreadable` says why each other one is not."""
+        shape, readable, unreadable = None, [], []
+        for f in self.files:
+            try:
+                raw = self._raw(f)
+                if shape is not None and raw.shape != shape:
+                    raise InputError(f"{f}: expected {shape[1]}x{shape[0]} pixels (the size of {readable[0].name}), "
+                                     f"found {raw.shape[1]}x{raw.shape[0]}")
+                if not np.any(raw > 0):
+                    raise InputError(f"{f}: no depth readings (every pixel is 0)")
+            except InputError as e:
+                unreadable.append({"file": f.name, "reason": str(e)})
+                continue
+            shape = shape or raw.shape
+            readable.append(f)
+        if not readable:
+            raise InputError(f"{self.pattern}: none of the {len(self.files)} files is a readable depth frame "
+                             f"({unreadable[0]['reason']})")
+        return SourceInfo(kind="depth frame files", path=self.pattern, frames=len(readable),
+                          width=int(shape[1]), height=int(shape[0]),
+                          encoding="16-bit PNG" if readable[0].suffix.lower() != ".npy" else ".npy",
+                          streams=[{"topic": self.pattern, "type": "files", "messages": len(self.files)}],
+                          unreadable=unreadable)
 
     def frames(self) -> Iterator[Frame]:
         for i, f in enumerate(self.files):
