@@ -133,6 +133,32 @@ def test_api_warns_once_of_frames_in_the_wrong_units(tmp_path):
         det.detect(raw)
 
 
+def test_api_checks_every_frame_s_units_and_names_the_frame(tmp_path):
+    """Not only the first frame: a frame in the wrong units after right ones is named by its
+    place among the frames the Detector was given (across detect and detect_batch calls);
+    a run of wrong frames warns at its first, and again after right frames came between."""
+    import warnings
+
+    path = small_config(tmp_path)
+    assert main(["run", str(path), "--no-progress"]) == 0
+    raw = np.asarray(Image.open(sorted((tmp_path / "scene" / "frames").glob("*.png"))[0]))
+    wrong, right = raw.astype(np.float32), raw * np.float32(0.001)  # millimetres as floats; metres
+    det = Detector.from_config(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        det.detect(right)
+        det.detect_batch([raw, right])  # frames 0, 1, 2: right
+    with pytest.warns(UserWarning, match=r"^depth \(frame 4\): a float array is read as metres") as got:
+        det.detect_batch([right, wrong, wrong])  # frames 3, 4, 5: the warning at 4, once
+    assert len(got) == 1
+    with pytest.warns(UserWarning, match=r"^depth \(frame 7\): ") as got:
+        det.detect(right)  # 6
+        det.detect(wrong)  # 7: wrong again after a right frame
+    assert len(got) == 1 and det.frames_given == 8
+    with pytest.raises(InputError, match=r"^depth \(frame 8\): expected an array of shape"):
+        det.detect(raw[:, 1:])
+
+
 def test_api_errors(tmp_path):
     path = small_config(tmp_path)
     det = Detector.from_config(path)
@@ -368,11 +394,12 @@ def test_readme_api_examples_run(monkeypatch, demo_run):
     assert len(blocks) >= 2
     frames = sorted((ROOT / ".cache" / "demo_people" / "frames").glob("*.png"))[:2]
     background = sorted((ROOT / ".cache" / "demo_people" / "background").glob("*.png"))[:3]
-    depths = np.stack([np.asarray(Image.open(f)) for f in frames])
-    first = {"depth": depths[0], "depths": depths, "print": lambda *a: None}
-    exec(blocks[0], first)
-    assert first["result"].detections and len(first["results"]) == 2
-    assert first["tracks"] and first["online"].tracks is not None  # the two frames tracked both ways
+    first = {"print": lambda *a: None}
+    exec(blocks[0], first)  # reads the demo's frames itself
+    assert first["result"].detections and len(first["results"]) == 4
+    assert first["tracks"] and first["online"].tracks is not None  # the four frames tracked both ways
+    named = re.search(r"result\.timings  # seconds: (.*)", blocks[0]).group(1)
+    assert set(re.findall(r"\w+_s\b", named)) == set(first["result"].timings)  # the comment names the keys
     second = {"depth_m": read_depth(frames[0], 0.001),
               "background_m": np.stack([read_depth(f, 0.001) for f in background])}
     exec(next(b for b in blocks if "Engine(" in b), second)
