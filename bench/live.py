@@ -15,8 +15,11 @@ beside the same maps tracked by KSP, and every SPARSE-th map alone (what a machi
 fifth of the frames would have) tracked online with the maps' timestamps and without them (one
 camera frame between two maps, as the live tracker did before it used them).
 
+With --busy N, N other processes keep a core each busy (a Python loop) through every run: the
+machine a live run shares with other work.
+
     python -m bench.live [--fps 30] [--frames 300] [--every 30] [--repeats 3] [--workers 1 2 3]
-                         [--stream-frames 900] [--output runs/live]
+                         [--stream-frames 900] [--busy N] [--output runs/live]
 """
 
 from __future__ import annotations
@@ -80,6 +83,31 @@ def track_quality(run_dir: Path, truth: list, fps: float, cfg) -> dict:
     return out
 
 
+def spin() -> None:
+    while True:
+        pass
+
+
+class Busy:
+    """`n` processes each keeping a core busy while in the `with` block."""
+
+    def __init__(self, n: int):
+        self.n, self.procs = n, []
+
+    def __enter__(self):
+        import multiprocessing
+
+        self.procs = [multiprocessing.get_context("spawn").Process(target=spin, daemon=True) for _ in range(self.n)]
+        for p in self.procs:
+            p.start()
+        return self
+
+    def __exit__(self, *exc):
+        for p in self.procs:
+            p.terminate()
+            p.join()
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--fps", type=float, default=30.0)
@@ -90,6 +118,7 @@ def main():
                     help="processes of the live run, each measured (1: the main process alone)")
     ap.add_argument("--stream-frames", type=int, default=900,
                     help="frames of the rendered stream (the camera loops it; 900: 30 s at 30 fps)")
+    ap.add_argument("--busy", type=int, default=0, help="other processes keeping a core busy each during the runs")
     ap.add_argument("--output", default="runs/live")
     a = ap.parse_args()
     os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
@@ -116,8 +145,9 @@ def main():
             live_cfg = load_config(demo, sets)
             cam.start()
             try:
-                s = run(live_cfg, str(Path(a.output) / f"run{i}_x{w}"), "cpu", progress=False,
-                        log=lambda *_: None, overwrite=True, max_frames=a.frames, workers=w)
+                with Busy(a.busy):
+                    s = run(live_cfg, str(Path(a.output) / f"run{i}_x{w}"), "cpu", progress=False,
+                            log=lambda *_: None, overwrite=True, max_frames=a.frames, workers=w)
             finally:
                 cam.stop()
             runs[w].append(s["live"] | {"infer_ms": 1000 * s["timings"]["median_infer_s"],
@@ -132,6 +162,7 @@ def main():
     def q(w, who, k):
         return statistics.median(r["quality"][who][k] for r in runs[w])
 
+    busy = f"; {a.busy} other process{'es' * (a.busy > 1)} keeping a core busy" if a.busy else ""
     lines = []
     for w in a.workers:
         who = "one process" if w == 1 else (f"`--workers {w}` (the main process and {w - 1} helper{'s' * (w > 2)}"
@@ -142,7 +173,7 @@ def main():
                     ("sparse_no_times", "the same without the timestamps (one camera frame between maps)"))
         lines.append(
             f"Live on the demo's room rendered at {a.fps:g} frames/s (512x424, five people walking {WALK:g} m/s; "
-            f"{a.frames} frames, a picture every {a.every}), {who}: **{med(w, 'frames_per_s_steady'):.1f} frames/s** processed once running "
+            f"{a.frames} frames, a picture every {a.every}{busy}), {who}: **{med(w, 'frames_per_s_steady'):.1f} frames/s** processed once running "
             f"({med(w, 'frames_per_s'):.1f} over the whole run, start-up and shutdown included), "
             f"{100 * med(w, 'dropped_share'):.0f} % of the frames dropped (the newest is always taken), latency "
             f"from a frame's arrival to its record median {med(w, 'latency_ms_median'):.0f} ms (95th percentile "

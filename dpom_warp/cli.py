@@ -2,7 +2,7 @@
 
 commands:
   dpom-warp run CONFIG... [--output DIR] [--device D] [--set KEY.PATH=VALUE ...]
-                [--workers N] [--ray [ADDRESS]] [--resume | --overwrite] [--max-frames N]
+                [--workers N] [--ray [ADDRESS]] [--resume | --overwrite] [--max-frames N] [--play]
   dpom-warp fit-ground DEPTH... --camera CAMERA.yaml | RECORDING [--output POSE.yaml]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
   dpom-warp track RUN_DIR [--set tracking.KEY=VALUE ...]
@@ -31,6 +31,9 @@ def _run(args) -> int:
 
     if args.overwrite and args.resume:
         raise ConfigError("--overwrite and --resume: expected at most one of them")
+    if args.play and (args.ray is not None or args.resume):
+        raise ConfigError(f"--play: frames sent as a live camera's are inferred in this process and its "
+                          f"helpers, and a live run starts afresh; expected no {'--ray' if args.ray is not None else '--resume'}")
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers: expected a number >= 1, found {args.workers}")
     if args.max_frames is not None and args.max_frames < 1:
@@ -49,7 +52,8 @@ def _run(args) -> int:
         from .view import _rerun
 
         _rerun()  # not installed: say so before any work
-    cfgs = [load_config(c, args.set + ["output.view=true"] * args.view) for c in args.config]
+    sets = args.set + ["output.view=true"] * args.view + ["input.play=true"] * args.play
+    cfgs = [load_config(c, sets) for c in args.config]
     outputs = output_dirs(args.config, cfgs, args.output)
     many = len(cfgs) > 1
     if args.ray is None:
@@ -437,6 +441,10 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                    help="continue an interrupted run in its output folder, skipping finished frames")
     p.add_argument("--view", action="store_true",
                    help="show the run in a Rerun viewer, spawned (the [view] extra; output.rerun writes a .rrd)")
+    p.add_argument("--play", action="store_true",
+                   help="send input.frames (files at input.fps, a recording at its timestamps) as a live camera "
+                        "would: the newest frame inferred, the others dropped; live mode without a camera "
+                        "(input.play)")
     p.add_argument("--max-frames", type=int, metavar="N",
                    help="the first N frames of input.frames (a recording's by its stream; default: all); a "
                         "live camera (input.frames: realsense): stop after N frames (default: at Ctrl-C)")

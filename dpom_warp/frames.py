@@ -111,3 +111,17 @@ def check_frames(frames: list[Path], scale: float, shape, strict: bool) -> tuple
     return good, skipped
 
 
+def played_source(cfg: RunConfig, log, max_frames: int | None):
+    """(PlayedFrames, the frames) of input.play: the frames a plain run reads (rendered,
+    read from a recording, checked: a bad one skipped), at a recording's timestamps or at
+    input.fps."""
+    from .sources.played import PlayedFrames
+
+    try:
+        got = run_frames(cfg, False, log, max_frames)
+    except (InputError, ConfigError) as e:
+        raise type(e)(cfg.blame(str(e))) from None
+    names = [f.name for f in got.frames]
+    stamps = [got.timestamps[n] for n in names] if got.timestamps and all(n in got.timestamps for n in names) else None
+    return PlayedFrames(got.frames, cfg.camera.width, cfg.camera.height, cfg.inputs.fps, stamps,
+                        str(cfg.inputs.frames)), got.frames

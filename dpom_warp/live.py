@@ -1,4 +1,5 @@
-"""A run on a live camera (`input.frames: realsense[:SERIAL]`): it goes on until Ctrl-C or
+"""A run on a live camera (`input.frames: realsense[:SERIAL]`), or on frames played as one
+(`input.play`: sources.played, ending with them): it goes on until Ctrl-C or
 `--max-frames N`, always infers the newest frame and drops those it cannot keep up with
 (counted), tracks online, writes the usual outputs (a picture of every
 `output.images_every`-th frame: with tracks, drawn with them once the online tracker commits
@@ -21,7 +22,6 @@ code 1; its SDK failing to stop (as an unplugged camera does) loses nothing eith
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import statistics
 import threading
@@ -73,14 +73,19 @@ def default_workers(cfg: RunConfig, device: str) -> int:
 
 class NewestFrame:
     """A one-frame slot: `put` replaces what is there (counting the frame dropped), `take`
-    waits for a frame and empties the slot."""
+    waits for a frame and empties the slot; `put(None)`: the stream has ended (`ended`), and
+    `take` then gives the last frame if it is still there, else None at once."""
 
     def __init__(self):
         self.cond = threading.Condition()
-        self.frame, self.received, self.dropped = None, 0, 0
+        self.frame, self.received, self.dropped, self.ended = None, 0, 0, False
 
     def put(self, frame) -> None:
         with self.cond:
+            if frame is None:
+                self.ended = True
+                self.cond.notify_all()
+                return
             if self.frame is not None:
                 self.dropped += 1
             self.frame = frame
@@ -89,80 +94,10 @@ class NewestFrame:
 
     def take(self, timeout: float):
         with self.cond:
-            if self.frame is None:
+            if self.frame is None and not self.ended:
                 self.cond.wait(timeout)
             frame, self.frame = self.frame, None
             return frame
-
-
-def _helper_start(start_file: str) -> None:
-    """A helper process of a live run: Ctrl-C is the main process's to handle; the engine is
-    built from the run's spec with the kernels the main process compiled."""
-    import signal
-
-    from .worker import _pool_start
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _pool_start(start_file)
-
-
-def _helper_infer(small: np.ndarray):
-    """(result, inference seconds, the process's name) of one frame at the engine's resolution."""
-    from .worker import _pool_worker
-
-    worker = _pool_worker[0]
-    t = time.perf_counter()
-    res = worker.engine.infer(small)
-    return res, time.perf_counter() - t, worker.name
-
-
-class Helpers:
-    """`n` processes, each with its own engine, inferring the frames the main process's
-    feeder thread hands them while its loop infers others (Warp runs a CPU launch on one
-    thread: this is how a live run uses more cores). If one dies, its frames are inferred by
-    the main process and the run goes on without helpers."""
-
-    def __init__(self, spec, engine, n: int):
-        from .worker import helper_pool
-
-        spec = dataclasses.replace(spec, background=engine.background_state())
-        engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))  # every kernel compiled
-        self.n, self.running = n, []
-        self.pool, self.start_file = helper_pool(spec, n, _helper_start)
-        try:
-            warm = [self.pool.submit(_helper_infer, np.zeros((engine.height, engine.width), np.float32))
-                    for _ in range(n)]
-            for w in warm:  # started, engines built: the first frames do not wait for them
-                w.result()
-        except BaseException:
-            self.close()
-            raise
-
-    def busy(self) -> list:
-        """The futures of the frames the helpers are inferring now."""
-        self.running = [f for f in self.running if not f.done()]
-        return list(self.running)
-
-    def submit(self, small: np.ndarray):
-        """A future of the frame's result; a pool already broken by a helper's death (which
-        the main process may learn of here first) gives a future holding that error, so the
-        frame is inferred where every other death is handled (run_live's adopt)."""
-        from .worker import failed_future
-
-        try:
-            fut = self.pool.submit(_helper_infer, small)
-        except BrokenProcessPool as e:
-            fut = failed_future(e)
-        self.running.append(fut)
-        return fut
-
-    def close(self):
-        from .worker import remove_start_file
-
-        if self.pool is not None:
-            self.pool.shutdown(wait=True, cancel_futures=True)
-            self.pool = None
-            remove_start_file(self.start_file)
 
 
 def stop_threads(thread: threading.Thread | None, stop: threading.Event) -> None:
@@ -183,11 +118,12 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
 
 
 def check_live(cfg: RunConfig, workers: int | None) -> None:
-    """What a live run cannot do, said before the camera starts."""
-    if cfg.inputs.auto_background:
+    """What a live run cannot do, said before the camera starts (played frames are known
+    before: auto background and pose are fitted on them as in a plain run)."""
+    if cfg.inputs.auto_background and not cfg.inputs.play:
         raise ConfigError("input.background: auto estimates the background from the run's frames; a live "
                           "run has none in advance; expected background frames or null")
-    if cfg.pose_auto:
+    if cfg.pose_auto and not cfg.inputs.play:
         raise ConfigError("camera.extrinsics: auto fits the floor on frames read before the run; expected "
                           "the live camera's pose ({height, pitch_deg, ...}; `dpom-warp fit-ground` on a "
                           "few saved frames gives it)")
@@ -219,15 +155,20 @@ class LiveRun:
         from .outputs import ShownTracks, prepare_output
         from .session import set_up
         from .sources import open_source
+        from .frames import played_source
         from .tracking import Cells, OnlineTracker
-        from .worker import FrameWorker
+        from .worker import FrameWorker, Helpers
 
         self.cfg, self.log, self.max_frames, self.first_frame_timeout = cfg, log, max_frames, first_frame_timeout
         self.t_start = time.perf_counter()
-        self.source = open_source(cfg.inputs.frames)  # a live kind of names.READERS: start(on_frame), stop()
+        if cfg.inputs.play:  # the plain run's frames, sent at their own rate
+            self.source, played = played_source(cfg, log, max_frames)
+        else:
+            self.source, played = open_source(cfg.inputs.frames), []  # a live kind of names.READERS
         self.info = info = self.source.info()
         self.out = Path(output_dir or cfg.output.dir)
-        self.setup = setup = set_up(cfg, [], device, log)  # the plain run's: device, engine, background frames
+        # the plain run's: device, engine, background (played frames: auto and the floor fit as a plain run's)
+        self.setup = setup = set_up(cfg, played, device, log)
         self.engine, self.geometry = setup.engine, setup.geometry
         self.workers = workers or default_workers(cfg, setup.device)
         self.worker = FrameWorker(setup.spec, engine=self.engine)
@@ -240,7 +181,8 @@ class LiveRun:
         prepare_output(self.out, cfg.resolved, overwrite, resume=False)
         log(f"live: {info.kind}, {info.width}x{info.height} at {self.fps:g} frames/s; device {setup.device}, "
             f"{self.workers} process{'es' * (self.workers > 1)}; background: "
-            f"{setup.background}; until Ctrl-C{f' or {max_frames} frames' if max_frames else ''}")
+            f"{setup.background}; until {'the frames end, ' if cfg.inputs.play else ''}Ctrl-C"
+            f"{f' or {max_frames} frames' if max_frames else ''}")
         self.view = None
         if cfg.output.rerun or cfg.output.view:
             from .view import RerunLog
@@ -400,7 +342,7 @@ class LiveRun:
         cfg, fr, res = self.cfg, item.frame, item.result
         due = cfg.output.images and self.done % cfg.output.images_every == 0
         self.worker.pictures = due and not self.tracking_on  # with tracks: drawn once committed (publish)
-        name = f"{fr.index:06d}"
+        name = fr.name or f"{fr.index:06d}"
         _, output, _ = self.worker._finish(FrameItem(name), item.depth, res, 0.0, item.infer_s, [])
         output.record["timestamp"] = output.record["stats"]["timestamp"] = fr.timestamp
         output.record["stats"]["worker"] = item.process
@@ -489,6 +431,8 @@ class LiveRun:
             item = self.take(self.first_frame_timeout if first else STALL_S, self.mine)
             if item is None:
                 self.unreserve()
+                if self.slot.ended:
+                    return "end of the frames"
                 if first:
                     raise ConfigError(f"input.frames: {self.cfg.inputs.frames}: no frame within "
                                       f"{self.first_frame_timeout:g} s of starting the camera")

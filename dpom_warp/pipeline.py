@@ -63,9 +63,7 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     frames are inferred by that many processes, this one and workers - 1 helpers, each with
     its own engine (Warp runs CPU kernels on one thread), and written here: the same files.
     """
-    from .names import is_live
-
-    if cfg.inputs.frames is not None and is_live(cfg.inputs.frames):
+    if cfg.live:
         from .live import run_live
 
         check_output(Path(output_dir or cfg.output.dir), cfg.resolved, overwrite, False)
@@ -368,10 +366,9 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
         camera = dataclasses.replace(camera, T_world_from_camera=np.array(
             summary["ground_fit"]["T_world_from_camera"], float))
     names = [p["frame"] for p in summary["per_frame"]]
-    from .names import is_live
-
-    if is_live(cfg.inputs.frames) and (cfg.output.images or cfg.output.rerun or cfg.output.view):
-        raise InputError(f"{run_dir}: a live run keeps no frames (input.frames: {cfg.inputs.frames}), so its "
+    if cfg.live and (cfg.output.images or cfg.output.rerun or cfg.output.view):
+        raise InputError(f"{run_dir}: a live run keeps no frames (input.frames: {cfg.inputs.frames}"
+                         f"{', played' if cfg.inputs.play else ''}), so its "
                          f"pictures and Rerun log cannot be drawn again; expected --set output.images=false "
                          f"--set output.rerun=null (tracks.csv, track_table.csv and the summary only)")
     if cfg.output.images:

@@ -4,7 +4,8 @@ A FrameWorker holds one engine (geometry, mask index, compiled kernels), built o
 depth frames into FrameOutputs: the occupancy map, the picture and point-cloud files as bytes,
 and the frame's record. It runs in the run's own process, in `--workers` processes and in Ray
 actors (cluster.py); only the run's own process writes outputs (write_output), so the files
-are the same whoever inferred them, and a cluster's nodes need no shared disk.
+are the same whoever inferred them, and a cluster's nodes need no shared disk. A live run's
+helper processes (Helpers) each hold a FrameWorker's engine too.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import tarfile
 import tempfile
 import time
 from concurrent.futures import Future
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
@@ -440,3 +442,63 @@ def _pool_started() -> bool:
 def _ready(value) -> bool:
     """A chunk's outcomes are in: inferred here, or its helper's future done."""
     return isinstance(value, list) or value.done()
+
+
+def _helper_start(start_file: str) -> None:
+    """A helper process of a live run: Ctrl-C is the main process's to handle; the engine is
+    built from the run's spec with the kernels the main process compiled."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _pool_start(start_file)
+
+
+def _helper_infer(small: np.ndarray):
+    """(result, inference seconds, the process's name) of one frame at the engine's resolution."""
+    worker = _pool_worker[0]
+    t = time.perf_counter()
+    res = worker.engine.infer(small)
+    return res, time.perf_counter() - t, worker.name
+
+
+class Helpers:
+    """`n` processes, each with its own engine, inferring the frames the main process's
+    feeder thread hands them while its loop infers others (Warp runs a CPU launch on one
+    thread: this is how a live run uses more cores). If one dies, its frames are inferred by
+    the main process and the run goes on without helpers."""
+
+    def __init__(self, spec, engine, n: int):
+        spec = dataclasses.replace(spec, background=engine.background_state())
+        engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))  # every kernel compiled
+        self.n, self.running = n, []
+        self.pool, self.start_file = helper_pool(spec, n, _helper_start)
+        try:
+            warm = [self.pool.submit(_helper_infer, np.zeros((engine.height, engine.width), np.float32))
+                    for _ in range(n)]
+            for w in warm:  # started, engines built: the first frames do not wait for them
+                w.result()
+        except BaseException:
+            self.close()
+            raise
+
+    def busy(self) -> list:
+        """The futures of the frames the helpers are inferring now."""
+        self.running = [f for f in self.running if not f.done()]
+        return list(self.running)
+
+    def submit(self, small: np.ndarray):
+        """A future of the frame's result; a pool already broken by a helper's death (which
+        the main process may learn of here first) gives a future holding that error, so the
+        frame is inferred where every other death is handled (run_live's adopt)."""
+        try:
+            fut = self.pool.submit(_helper_infer, small)
+        except BrokenProcessPool as e:
+            fut = failed_future(e)
+        self.running.append(fut)
+        return fut
+
+    def close(self):
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+            self.pool = None
+            remove_start_file(self.start_file)

@@ -330,7 +330,7 @@ def test_a_frame_handed_to_a_pool_already_broken_is_a_future_of_that_error(camer
     import numpy as np
 
     from dpom_warp.loading import load_config
-    from dpom_warp.live import Helpers
+    from dpom_warp.worker import Helpers
     from dpom_warp.session import set_up
 
     _, _, tmp = camera_config

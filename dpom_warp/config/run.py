@@ -50,6 +50,7 @@ class Inputs:
     stride: int | str = "auto"  # "auto" or an integer >= 1 (dpom_warp.resolution)
     reduce: str = "median"
     background_auto: AutoBackground = AutoBackground()  # for background: auto
+    play: bool = False  # frames sent as a live camera sends them (sources.played)
 
     @property
     def auto_background(self) -> bool:
@@ -109,6 +110,13 @@ class RunConfig:
         """Where the value of `key` came from: `--set KEY=VALUE`, else the config file."""
         return source_of(key, self.origin.get("set", ()), self.origin.get("file") or "config")
 
+    @property
+    def live(self) -> bool:
+        """A live run: a camera (input.frames: realsense[:SERIAL]) or frames played as one."""
+        from ..names import is_live
+
+        return self.inputs.play or (self.inputs.frames is not None and is_live(self.inputs.frames))
+
     def blame(self, message: str) -> str:
         """An error about a config key (`KEY: ...`) said with where its value came from."""
         key = config_key(message)
@@ -149,7 +157,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         raise ConfigError(_first_error(e)) from None
     s = c.input
     inputs = Inputs(frames=s.frames, background=s.background, depth_scale=s.depth_scale, fps=s.fps,
-                    topic=s.topic, stride=s.stride, reduce=s.reduce,
+                    topic=s.topic, stride=s.stride, reduce=s.reduce, play=s.play,
                     background_auto=_fill(AutoBackground, s.background_auto))
     cam, ext = c.camera, c.camera.extrinsics
     pose_auto = ext == "auto"

@@ -74,6 +74,10 @@ class InputSection(Node):
                                                             "(lower median of its readings), nearest "
                                                             "(one pixel), min")
     fps: Num = Field(15.0, gt=0, description="frames per second of the frames (tracking's speeds)")
+    play: bool = Field(False, description="send the frames (files at input.fps, a recording at its "
+                                          "timestamps) as a live camera would: the newest frame inferred, "
+                                          "the others dropped, tracks online (live mode tried without a "
+                                          "camera; --play)")
     background_auto: BackgroundAutoSection = BackgroundAutoSection()
 
 

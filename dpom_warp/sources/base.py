@@ -55,12 +55,15 @@ class Frame:
     timestamp: float | None
     depth: np.ndarray | None
     reason: str | None = None
+    name: str | None = None  # a live frame's name in the run's outputs (default: its index, 6 digits)
+    arrived: float | None = None  # a live frame's time.perf_counter() on arrival
 
 
 class Source:
     """A recording, a folder of frames or a live camera. A live camera also has
     `start(on_frame)`, which calls on_frame(Frame) from its own thread for each frame as it
-    arrives (`Frame.arrived`: time.perf_counter() then), and `stop()`."""
+    arrives (`Frame.arrived`: time.perf_counter() then) and on_frame(None) if its stream ends
+    (played frames: PlayedFrames), and `stop()`."""
 
     def info(self) -> SourceInfo:
         raise NotImplementedError

@@ -75,8 +75,7 @@ class RealSenseLive(Source):
         def callback(f):
             arrived = time.perf_counter()
             depth = np.asanyarray(f.get_data()).astype(np.uint16, copy=True)
-            fr = Frame(count[0], float(f.get_timestamp()) / 1000.0, depth)
-            fr.arrived = arrived
+            fr = Frame(count[0], float(f.get_timestamp()) / 1000.0, depth, arrived=arrived)
             count[0] += 1
             on_frame(fr)
 
