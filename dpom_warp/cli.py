@@ -230,12 +230,12 @@ def eval_output(run: str, compare: list[str], output: str | None):
 def _eval(args) -> int:
     from .evaluate import evaluate_runs, markdown_table, tracking_table
     from .io import write_json_atomic
-    from .outputs import _jsonable
+    from .writers import jsonable
 
     results = evaluate_runs([args.run] + args.compare, args.ground_truth, args.hidden_visibility,
                             args.min_rho)
     out = eval_output(args.run, args.compare, args.output)
-    write_json_atomic(out / "eval.json", _jsonable(results))
+    write_json_atomic(out / "eval.json", jsonable(results))
     print(markdown_table(results))
     tracks = tracking_table(results)
     if tracks:

@@ -222,6 +222,11 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
                     remove_temporaries(p.out)
                 raise
             wall = time.perf_counter() - t0
+        except BaseException:
+            for p in plans:
+                if p.writers is not None:
+                    p.writers.close()
+            raise
         finally:
             pool.kill()
         runner = {"kind": "ray", "cluster": where, "nodes": nodes, "actors": n,

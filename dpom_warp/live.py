@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import ConfigError, RunConfig
-from .io import WorkerError, units_to_metres, write_json_atomic
+from .io import WorkerError, units_to_metres
 
 STALL_S = 5.0  # seconds without a frame after which a streaming camera has stopped sending
 # processes of a live run on the CPU without --workers: one infers the demo's frame in ~40 to
@@ -158,6 +158,7 @@ class LiveRun:
         from .frames import played_source
         from .tracking import Cells, OnlineTracker
         from .worker import FrameWorker, Helpers
+        from .writers import Rerun, RunView, writers_for
 
         self.cfg, self.log, self.max_frames, self.first_frame_timeout = cfg, log, max_frames, first_frame_timeout
         self.t_start = time.perf_counter()
@@ -183,18 +184,16 @@ class LiveRun:
             f"{self.workers} process{'es' * (self.workers > 1)}; background: "
             f"{setup.background}; until {'the frames end, ' if cfg.inputs.play else ''}Ctrl-C"
             f"{f' or {max_frames} frames' if max_frames else ''}")
-        self.view = None
-        if cfg.output.rerun or cfg.output.view:
-            from .view import RerunLog
-
-            self.view = RerunLog(cfg.output.rerun, spawn=cfg.output.view)
-            self.view.camera(setup.spec.camera)
+        # the plain run's writers; with tracks, the pictures are drawn once the tracks are final
+        self.run_view = RunView(cfg, self.out, self.geometry, setup.spec.camera, worker_pictures=not self.tracking_on)
+        self.writers = writers_for(self.run_view)
+        self.rerun = self.writers.has(Rerun)
         self.slot = NewestFrame()
         self.records, self.names, self.latencies, self.infer_s = {}, [], [], []
         self.finished = []  # when each frame was written
         # with tracks, a frame's picture and its tracks on the view wait for the online tracker to
-        # commit it (tracking.delay frames later): frame index -> (name, timestamp, map as saved,
-        # depth where a picture is due)
+        # commit it (tracking.delay frames later): frame index -> its FrameDone (with its depth
+        # where a picture is due)
         self.trails, self.awaiting = ShownTracks(self.geometry, cfg.tracking.trail), {}
         self.done, self.taken, self.t_first, self.last_line, self.track_s = 0, 0, None, time.perf_counter(), 0.0
         self.pending: deque = deque()  # Pending frames, in the order they were taken
@@ -337,7 +336,8 @@ class LiveRun:
 
     def finish(self, item: Pending) -> None:
         """A frame's map, record and picture written, shown and tracked (as a plain run's)."""
-        from .worker import FrameItem, write_output
+        from .worker import FrameItem
+        from .writers import FrameDone
 
         cfg, fr, res = self.cfg, item.frame, item.result
         due = cfg.output.images and self.done % cfg.output.images_every == 0
@@ -346,14 +346,13 @@ class LiveRun:
         _, output, _ = self.worker._finish(FrameItem(name), item.depth, res, 0.0, item.infer_s, [])
         output.record["timestamp"] = output.record["stats"]["timestamp"] = fr.timestamp
         output.record["stats"]["worker"] = item.process
-        self.records[name] = write_output(self.out, output)
+        done = FrameDone(self.run_view, self.done, name, output.stem, fr.timestamp, output.map, output.record,
+                         output.files, result_dets=self.worker.detections(res)[1] if self.rerun else None,
+                         depth=item.depth if due or self.rerun else None)
+        self.records[name] = self.writers.frame(done)
         self.names.append(name)
-        if self.view is not None:
-            rho_map, dets = self.worker.detections(res)
-            self.view.frame(self.done, fr.timestamp, item.depth, dets, rho_map)
-        if self.tracking_on and (self.view is not None or due):
-            self.awaiting[self.done] = (name, fr.timestamp, output.map, item.depth if due else None)
         if self.tracking_on:
+            self.awaiting[self.done] = done
             t1 = time.perf_counter()
             self.tracker.push(output.map, fr.timestamp)  # frames dropped between: reach by the time apart
             self.track_s += time.perf_counter() - t1
@@ -365,26 +364,13 @@ class LiveRun:
 
     def publish(self, committed) -> None:
         """Frames the online tracker has committed: their tracks (identities as in tracks.csv)
-        on the view and, where a picture is due, the picture with the tracks and trails."""
-        from .detect import detect_map
-        from .io import write_bytes_atomic
-        from .outputs import tracked_picture
-
-        cfg = self.cfg
+        to the writers (the view; where a picture is due, the picture with the tracks and
+        trails, drawn as a finished run draws it: from the map as maps/ holds it)."""
         for f, rows in committed:
             shown = self.trails.at(f, rows)
-            got = self.awaiting.pop(f, None)
-            if got is None:
-                continue
-            name, stamp, saved, depth = got
-            # as a finished run draws them (frames_out): from the map as maps/ holds it
-            rho_map = saved.reshape(cfg.grid.shape)
-            dets = detect_map(rho_map, self.geometry, cfg.detection)
-            if self.view is not None:
-                self.view.tracks(f, stamp, dets, shown)
-            if depth is not None:
-                write_bytes_atomic(self.out / "images" / f"{name}.png",
-                                   tracked_picture(cfg, self.geometry, depth, rho_map, dets, name, None, shown))
+            done = self.awaiting.pop(f, None)
+            if done is not None:
+                self.writers.tracked(done, shown)
 
     def close_finisher(self) -> None:
         """Every frame taken written and tracked (the helpers' dead ones inferred here first),
@@ -466,26 +452,27 @@ class LiveRun:
             self.log(f"live: the camera did not stop cleanly ({stop_error})")
         if self.helpers is not None:
             self.helpers.close()
-        if self.view is not None and not clean:  # else closed once the last frames' tracks are on it
-            self.view.close()
+        if not clean:  # else the Rerun log is closed once the last frames' tracks are on it (summary)
+            self.writers.close()
         return stop_error
 
     # -- the run's outputs -------------------------------------------------------------------
     def summary(self, stopped_by: str, stop_error: str | None) -> dict:
         """detections.csv, tracks.csv, track_table.csv and summary.json (with its `live` block),
         as a plain run writes them; a camera that stopped sending is then an error."""
-        from .outputs import _jsonable, summarise
+        from .outputs import summarise
+        from .writers import RunEnd
 
         cfg, setup, done = self.cfg, self.setup, self.done
         wall = time.perf_counter() - (self.t_first or time.perf_counter())
-        summary = summarise(cfg, self.out, [Path(n) for n in self.names], self.records, [], None, self.geometry,
+        summary = summarise(cfg, [Path(n) for n in self.names], self.records, [], None, self.geometry,
                             setup.device, setup.background, None, [])
-        summary["tracking"] = self.tracks()
-        if self.view is not None:
-            self.view.close()
+        summary["tracking"], tracks = self.tracks()
         summary["live"] = self.live_block(stopped_by, stop_error, wall)
         summary["timings"]["total_s"] = time.perf_counter() - self.t_start
-        write_json_atomic(self.out / "summary.json", _jsonable(summary))
+        times = [self.records[n].get("timestamp") for n in self.names]
+        # detections.csv, the tracks' tables, the Rerun log closed, summary.json last
+        self.writers.finish(RunEnd(self.names, self.records, tracks, self.fps, times, summary))
         if stopped_by == "camera stopped sending":
             raise WorkerError(f"input.frames: {cfg.inputs.frames}: the camera stopped sending (no frame for "
                               f"{STALL_S:g} s after {done} frames: unplugged?); expected frames until Ctrl-C"
@@ -493,15 +480,14 @@ class LiveRun:
                               f"written to {self.out}")
         return summary
 
-    def tracks(self) -> dict:
-        """The online tracker's last frames committed, tracks.csv and track_table.csv; the
-        summary's `tracking` block."""
-        from .outputs import track_table_files
+    def tracks(self) -> tuple[dict, list | None]:
+        """The online tracker's last frames committed (to the writers); the summary's
+        `tracking` block and the tracks (None: not tracked)."""
         from .tracking import frames_without_map
 
         names = self.names
         if not (self.tracking_on and names):
-            return {"method": "off", "why": "tracking.method: off"}
+            return {"method": "off", "why": "tracking.method: off"}, None
         t1 = time.perf_counter()
         tracks, report = self.tracker.finish()
         self.track_s += time.perf_counter() - t1
@@ -510,8 +496,7 @@ class LiveRun:
         report = {"method": "online", "tracks": len(tracks), "time_s": self.track_s,
                   "ms_per_frame": 1000 * self.track_s / len(names), "fps": self.fps, "fps_from": "camera", **report,
                   "frames_without_map": frames_without_map(times, 1.0 / self.fps)}
-        track_table_files(self.out, tracks, names, self.fps, times)
-        return report
+        return report, tracks
 
     def live_block(self, stopped_by: str, stop_error: str | None, wall: float) -> dict:
         """summary.json's `live` block: frames, drops, rates and latencies."""

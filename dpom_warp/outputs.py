@@ -1,6 +1,6 @@
-"""What a run writes into its output folder, besides each frame`s own files (worker.write_output):
-the folder made ready (run.json, --overwrite, --resume), the pictures drawn with tracks, the
-tracks` tables, summary.json. The recorded and the live run write through these."""
+"""A run's output folder made ready (run.json, --overwrite, --resume), what its summary holds,
+and the tracks a frame's picture and Rerun log show; the files themselves are written by the
+writers (writers.py). The recorded and the live run both use these."""
 
 from __future__ import annotations
 
@@ -9,21 +9,16 @@ import platform
 import shutil
 import statistics
 from pathlib import Path
+
 import numpy as np
+
 from .config import ConfigError, RunConfig
 from .evaluate import score_frames
-from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
-from .io import TEMP_MARK, write_bytes_atomic, write_json_atomic, write_text_atomic
-from .worker import (read_frame)
-
-
-CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
+from .io import TEMP_MARK, write_json_atomic
+from .writers import TRACK_FILES, jsonable
 
 
 RUN_STATE = "run.json"
-
-
-TRACK_FILES = ("tracks.csv", "track_table.csv")
 
 
 OUTPUTS = ("maps", "images", "frames", "plots", "ply", "detections.csv", "summary.json", "eval.json",
@@ -46,7 +41,7 @@ def check_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> No
     except (OSError, json.JSONDecodeError):
         raise ConfigError(f"--resume: {out} holds no resumable run ({RUN_STATE} missing "
                           f"or unreadable)") from None
-    state = {"config": _jsonable(resolved)}
+    state = {"config": jsonable(resolved)}
     if before != json.loads(json.dumps(state)):
         diff = _first_difference(before.get("config", {}), state["config"])
         raise ConfigError(f"--resume: {out} holds a run of another config ({diff}); "
@@ -70,7 +65,7 @@ def prepare_output(out: Path, resolved: dict, overwrite: bool, resume: bool) -> 
         raise ConfigError(f"output.dir: {out}: cannot make the folder ({e.strerror or e}); expected a "
                           f"path where a new folder can be made") from None
     remove_temporaries(out)  # of a killed run
-    write_json_atomic(out / RUN_STATE, {"config": _jsonable(resolved)})
+    write_json_atomic(out / RUN_STATE, {"config": jsonable(resolved)})
 
 
 def remove_temporaries(out: Path) -> None:
@@ -132,80 +127,8 @@ class ShownTracks:
         return shown
 
 
-def tracked_picture(cfg: RunConfig, geometry, depth, rho_map, dets, name: str, truth, shown) -> bytes:
-    """A frame's picture with the tracks `shown` on it (ShownTracks; None: no tracks), as a
-    finished run and a live run draw it."""
-    from .render import frame_picture
-
-    return frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2], truth, name,
-                         in_view=geometry.rect_area > 0, tracks=shown, trail=cfg.tracking.trail)
-
-
-def frames_out(cfg: RunConfig, out: Path, done: list[Path], geometry, maps, truth, tracks,
-               pictures: bool, timestamps: dict | None = None, camera=None) -> None:
-    """After the frames: each frame's picture (with `tracks`, their identities and trails)
-    when `pictures` (of every output.images_every-th frame of `done`: the others' pictures,
-    left by an earlier drawing, are removed), and its Rerun log with output.rerun or output.view
-    (depth, boxes, map, tracks)."""
-    from .detect import detect_map
-    from .track_files import per_frame
-
-    log = None
-    if cfg.output.rerun or cfg.output.view:
-        from .view import RerunLog
-
-        log = RerunLog(cfg.output.rerun, spawn=cfg.output.view)
-        log.camera(camera or cfg.camera)
-    now = per_frame(tracks, len(done)) if tracks is not None else [[] for _ in done]
-    trails = ShownTracks(geometry, cfg.tracking.trail)
-    shown_all = [trails.at(i, now[i]) for i in range(len(done))]
-
-    def one(i):
-        """Frame i's detections, depth and (with `pictures`) picture file."""
-        f = done[i]
-        due = pictures and i % cfg.output.images_every == 0
-        if pictures and not due:
-            (out / "images" / f"{f.stem}.png").unlink(missing_ok=True)
-        if not due and log is None:
-            return None
-        rho_map = maps[i].reshape(cfg.grid.shape)
-        dets = detect_map(rho_map, geometry, cfg.detection)
-        depth = read_frame(cfg, f)
-        if due:
-            png = tracked_picture(cfg, geometry, depth, rho_map, dets, f.name, truth.get(f.name) if truth else None,
-                                  shown_all[i] if tracks is not None else None)
-            write_bytes_atomic(out / "images" / f"{f.stem}.png", png)
-        return (rho_map, dets, depth) if log is not None else None
-
-    # two threads: PNG encoding and Pillow's drawing release the GIL, so on two cores one
-    # picture is drawn while the other is encoded; 64 frames in flight at most
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(2) as pool:
-        for start in range(0, len(done), 64):
-            span = range(start, min(len(done), start + 64))
-            for i, got in zip(span, pool.map(one, span)):
-                if log is not None:
-                    rho_map, dets, depth = got
-                    log.frame(i, (timestamps or {}).get(done[i].name), depth, dets, rho_map,
-                              shown_all[i] if tracks is not None else None)
-    if log is not None:
-        log.close()
-
-
-def track_table_files(out: Path, tracks, names: list[str], fps: float, times: list | None = None) -> None:
-    """tracks.csv and track_table.csv of `tracks` over the frames `names` (`times`: their
-    timestamps, None where unknown)."""
-    from .track_files import track_table, tracks_csv
-
-    write_text_atomic(out / "tracks.csv", tracks_csv(tracks, names))
-    write_text_atomic(out / "track_table.csv", track_table(tracks, names, fps, times))
-
-
-def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background, ground, grown):
-    """detections.csv and the summary, from the frame records in frame order."""
-    rows = [CSV_HEADER] + [r for f in done for r in records[f.name]["rows"]]
-    write_text_atomic(out / "detections.csv", "\n".join(rows) + "\n")
+def summarise(cfg, done, records, skipped, truth, geometry, dev, background, ground, grown):
+    """The summary (summary.json's content), from the frame records in frame order."""
     per_frame = [records[f.name]["stats"] for f in done]
 
     def median(key):
@@ -237,13 +160,3 @@ def summarise(cfg, out, done, records, skipped, truth, geometry, dev, background
     return summary
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return None if not np.isfinite(x) else float(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    return x

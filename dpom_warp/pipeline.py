@@ -15,11 +15,12 @@ from .evaluate import load_ground_truth
 from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
 from .geometry import build_geometry
 from .io import InputError, write_json_atomic
-from .outputs import (RUN_STATE, TRACK_FILES, _jsonable, check_output, fps_of, frames_out, pictures_deferred, prepare_output,
-                      remove_temporaries, summarise, track_table_files)
+from .outputs import (RUN_STATE, ShownTracks, check_output, fps_of, pictures_deferred, prepare_output,
+                      remove_temporaries, summarise)
 from .session import Setup, set_up
 from .sources import expand
-from .worker import (FrameItem, FrameOutput, FrameWorker, pool_outcomes, write_output)
+from .worker import FrameItem, FrameOutput, FrameWorker, pool_outcomes
+from .writers import FrameDone, Pictures, Rerun, RunEnd, RunView, Summary, TrackTables, Writers, jsonable, writers_for
 
 
 @dataclasses.dataclass
@@ -39,6 +40,14 @@ class RunPlan(Setup):
     todo: list = dataclasses.field(default_factory=list)
     grown: list = dataclasses.field(default_factory=list)
     by_worker: Counter = dataclasses.field(default_factory=Counter)
+    writers: Writers | None = None  # once the output folder is ready (open_output)
+    view: RunView | None = None
+
+    def written(self, output: FrameOutput) -> dict:
+        """A frame's outputs written by the run's writers; returns its record."""
+        done = FrameDone(self.view, -1, output.name, output.stem, output.record.get("timestamp"), output.map,
+                         output.record, output.files)
+        return self.writers.frame(done)
 
     def chunks(self) -> list[list[FrameItem]]:
         """The frames to do in engine batches, in frame order (their files not read yet)."""
@@ -73,6 +82,16 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
     plan = plan_run(cfg, output_dir, device, log, strict, parallel=workers > 1, keep_engine=workers > 1,
                     max_frames=max_frames)
     open_output(plan, overwrite, resume, log)
+    try:
+        return infer_and_finish(plan, workers, progress, strict, log)
+    except BaseException:
+        plan.writers.close()
+        raise
+
+
+def infer_and_finish(plan: RunPlan, workers: int, progress: bool, strict: bool, log=print) -> dict:
+    """The frames inferred (in this process, or `workers` processes) and written as they come,
+    then the run's own outputs; returns the summary."""
     if workers > 1 and len(plan.todo) > 1:
         outcomes = pool_outcomes(plan.spec, plan.chunks(), workers, plan.engine)
         runner, desc = {"kind": "processes", "workers": workers}, f"dpom x{workers}"
@@ -131,6 +150,8 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
     `resume`, the frames whose record and map exist are done."""
     cfg, out, i = plan.cfg, plan.out, plan.inference
     prepare_output(out, cfg.resolved, overwrite, resume)
+    plan.view = RunView(cfg, out, plan.geometry, plan.spec.camera, worker_pictures=plan.spec.pictures)
+    plan.writers = writers_for(plan.view)
     log(f"device {plan.device}; {plan.geometry.locations.shape[0]} locations {cfg.grid.shape}; "
         f"{len(plan.frames)} frame{'' if len(plan.frames) == 1 else 's'}; background: {plan.background}; "
         f"inference at {i['image'][0]}x"
@@ -199,7 +220,7 @@ def collect(plan: RunPlan, outcomes, strict: bool, log=print) -> None:
         if failed:
             raise RuntimeError("not written: an earlier frame's write failed")
         try:
-            return write_output(plan.out, output)
+            return plan.written(output)
         except BaseException as e:
             failed.append(e)
             raise
@@ -238,7 +259,7 @@ def accept(plan: RunPlan, name: str, output: FrameOutput | None, error: str | No
            log=print) -> None:
     if error is None:
         stamp(plan, name, output)
-        plan.records[name] = write_output(plan.out, output)
+        plan.records[name] = plan.written(output)
         plan.grown += output.grown
         plan.by_worker[output.record["stats"]["worker"]] += 1
         return
@@ -273,7 +294,7 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
         first = plan.skipped[0]["reason"] if plan.skipped else "no frame"
         raise InputError(f"{first} (none of the {len(plan.frames)} readable frames could be inferred; "
                          f"nothing written)")
-    summary = summarise(cfg, out, done, plan.records, plan.skipped, truth, plan.geometry,
+    summary = summarise(cfg, done, plan.records, plan.skipped, truth, plan.geometry,
                         plan.device, plan.background, plan.ground, plan.grown)
     if plan.auto_report is not None:
         summary["background_auto"] = plan.auto_report
@@ -281,17 +302,17 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     summary["runner"] = {**runner, "frames_resumed": len(done) - sum(plan.by_worker.values()),
                          "frames_per_worker": dict(sorted(plan.by_worker.items()))}
     stamps = {f.name: plan.records[f.name].get("timestamp") for f in done}
-    summary["tracking"] = track_run(cfg, out, done, plan.geometry, truth, log=lambda *_: None,
-                                    fps=fps_of(list(stamps.values())), camera=plan.spec.camera,
-                                    timestamps=stamps, redraw=not plan.spec.pictures)
+    summary["tracking"], end = track_run(plan.view, plan.writers, done, truth, log=lambda *_: None,
+                                         fps=fps_of(list(stamps.values())), timestamps=stamps)
     summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
-    write_json_atomic(out / "summary.json", _jsonable(summary))
+    end.records, end.summary = plan.records, summary
+    plan.writers.finish(end)  # detections.csv, the tracks' tables, the Rerun log closed, summary.json last
     if truth is not None and done:  # the curves of `dpom-warp eval`, from the maps just written
         from .evaluate import evaluate_runs
 
         results = evaluate_runs([out], cfg.evaluation.ground_truth, cfg.evaluation.hidden_visibility)
-        write_json_atomic(out / "eval.json", _jsonable(results))
+        write_json_atomic(out / "eval.json", jsonable(results))
         if cfg.evaluation.plots:
             from .plots import write_figures
 
@@ -299,43 +320,57 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
     return summary
 
 
-def track_run(cfg: RunConfig, out: Path, done: list[Path], geometry, truth=None, log=print,
-              fps: float | None = None, camera=None, timestamps: dict | None = None,
-              redraw: bool = True) -> dict:
+def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log=print,
+              fps: float | None = None, timestamps: dict | None = None) -> tuple[dict, RunEnd]:
     """Tracks of a run whose maps are written (maps/<stem>.npy of the `done` frames, in
-    order): tracks.csv and track_table.csv, then, when the run has pictures, every frame's
-    picture with the tracks (deferred until now: pictures_deferred). `fps`: the frames' rate
-    from their timestamps (default input.fps). Returns the `tracking` block of summary.json.
-    tracking.method off (or a single frame): no track files, and the pictures are drawn here
-    only when `redraw` (False: whoever inferred the frames drew them)."""
+    order), then every frame's tracks handed to the writers (`tracked`: the pictures with the
+    tracks, deferred until now, and the Rerun log). `fps`: the frames' rate from their
+    timestamps (default input.fps). Returns (the `tracking` block of summary.json, the RunEnd
+    the writers finish with: the frames, their tracks). tracking.method off (or a single
+    frame): no tracks (their tables removed)."""
     from .tracking import Cells, FrameMaps, run_tracker
 
+    cfg, out = view.cfg, view.out
     method = cfg.tracking.resolved_method(len(done))
     maps = FrameMaps([out / "maps" / f"{f.stem}.npy" for f in done], keep=2 * cfg.tracking.window)
-    if method == "off":
-        for name in TRACK_FILES:
-            (out / name).unlink(missing_ok=True)
-        pictures = cfg.output.images and redraw  # the Rerun log is always drawn here
-        if cfg.output.rerun or cfg.output.view or pictures:
-            frames_out(cfg, out, done, geometry, maps, truth, None, pictures, timestamps, camera)
-        why = ("tracking.method: off" if cfg.tracking.method == "off" else
-               f"tracking.method {cfg.tracking.method} tracks 2 frames or more, found {len(done)}")
-        return {"method": "off", "why": why}
-    cells = Cells.for_run(geometry, cfg)
-    rate = fps or cfg.inputs.fps
     names = [f.name for f in done]
     times = [(timestamps or {}).get(n) for n in names]  # frames dropped or skipped between: by the clock
+    if method == "off":
+        tracked_frames(view, writers, done, maps, truth, None, timestamps)
+        why = ("tracking.method: off" if cfg.tracking.method == "off" else
+               f"tracking.method {cfg.tracking.method} tracks 2 frames or more, found {len(done)}")
+        return {"method": "off", "why": why}, RunEnd(names, {}, None, None, times)
+    cells = Cells.for_run(view.geometry, cfg)
+    rate = fps or cfg.inputs.fps
     tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, rate, cfg.detection.threshold,
                                  method, times)
     report["fps_from"] = "timestamps" if fps else "input.fps"
-    track_table_files(out, tracks, names, rate, times)
     log(f"{len(tracks)} tracks ({method}) in {report['time_s']:.2f} s "
         f"({report['ms_per_frame']:.1f} ms per frame)")
+    t = time.perf_counter()
+    tracked_frames(view, writers, done, maps, truth, tracks, timestamps)
     if cfg.output.images or cfg.output.rerun or cfg.output.view:
-        t = time.perf_counter()
-        frames_out(cfg, out, done, geometry, maps, truth, tracks, cfg.output.images, timestamps, camera)
         report["pictures_s"] = time.perf_counter() - t
-    return report
+    return report, RunEnd(names, {}, tracks, rate, times)
+
+
+def tracked_frames(view: RunView, writers: Writers, done: list[Path], maps, truth, tracks,
+                   timestamps: dict | None) -> None:
+    """Every frame of a tracked (or, `tracks` None, untracked) run handed to the writers with
+    its tracks (ShownTracks: identities, boxes, trails), its map loaded and its depth read only
+    where a writer asks."""
+    from .track_files import per_frame
+
+    now = per_frame(tracks, len(done)) if tracks is not None else [[] for _ in done]
+    trails = ShownTracks(view.geometry, view.cfg.tracking.trail)
+    shown = [trails.at(i, now[i]) if tracks is not None else None for i in range(len(done))]
+
+    def frame(i):
+        f = done[i]
+        return FrameDone(view, i, f.name, f.stem, (timestamps or {}).get(f.name), lambda: maps[i], path=f,
+                         truth=truth.get(f.name) if truth else None)
+
+    writers.tracked_all(frame, shown)
 
 
 RETRACK_KEYS = ("tracking.", "input.fps", "output.images", "output.rerun", "output.view")
@@ -385,21 +420,31 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
         if not (run_dir / "maps" / f"{Path(n).stem}.npy").is_file():
             raise InputError(f"{run_dir / 'maps' / (Path(n).stem + '.npy')}: missing occupancy map")
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
-    geometry = build_geometry(camera, cfg.grid, cfg.obj)
-    report = track_run(cfg, run_dir, done, geometry, truth, log,
-                       fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]), camera=camera,
-                       timestamps={p["frame"]: p.get("timestamp") for p in summary["per_frame"]})
+    view = RunView(cfg, run_dir, build_geometry(camera, cfg.grid, cfg.obj), camera)
+    # the writers of what tracking changes: the pictures (all drawn again), the Rerun log, the
+    # tracks' tables and summary.json
+    writers = Writers(([Pictures(view)] if cfg.output.images else []) +
+                      ([Rerun(view)] if cfg.output.rerun or cfg.output.view else []) +
+                      [TrackTables(view), Summary(view)])
+    try:
+        report, end = track_run(view, writers, done, truth, log,
+                                fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]),
+                                timestamps={p["frame"]: p.get("timestamp") for p in summary["per_frame"]})
+    except BaseException:
+        writers.close()
+        raise
     # the run's config stays as made (summary.json's config, run.json): a later plain `track`
     # tracks as the run did; what this one used is in its tracking block
     report["settings"] = {"set": list(overrides), "tracking": cfg.resolved["tracking"], "input_fps": cfg.inputs.fps,
                           "output": {k: cfg.resolved["output"][k] for k in ("images", "images_every", "rerun", "view")}}
     summary["tracking"] = report
-    write_json_atomic(run_dir / "summary.json", _jsonable(summary))
+    end.summary = summary
+    writers.finish(end)
     if truth is not None:
         from .evaluate import evaluate_runs
 
         results = evaluate_runs([run_dir], cfg.evaluation.ground_truth, cfg.evaluation.hidden_visibility)
-        write_json_atomic(run_dir / "eval.json", _jsonable(results))
+        write_json_atomic(run_dir / "eval.json", jsonable(results))
     return report
 
 

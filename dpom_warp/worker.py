@@ -3,7 +3,7 @@
 A FrameWorker holds one engine (geometry, mask index, compiled kernels), built once, and turns
 depth frames into FrameOutputs: the occupancy map, the picture and point-cloud files as bytes,
 and the frame's record. It runs in the run's own process, in `--workers` processes and in Ray
-actors (cluster.py); only the run's own process writes outputs (write_output), so the files
+actors (cluster.py); only the run's own process writes outputs (writers.py), so the files
 are the same whoever inferred them, and a cluster's nodes need no shared disk. A live run's
 helper processes (Helpers) each hold a FrameWorker's engine too.
 """
@@ -30,7 +30,7 @@ from .config import ConfigError, RunConfig
 from .detect import joint_detections
 from .engine import Engine, ListOverflow
 from .geometry import Camera, build_geometry
-from .io import InputError, read_depth, write_bytes_atomic, write_json_atomic, write_npy_atomic
+from .io import InputError, read_depth
 from .resolution import Resolution, auto_stride
 
 
@@ -210,18 +210,6 @@ class FrameWorker:
         }
         return f.name, FrameOutput(f.name, f.stem, rho_map, files, record,
                                    list(grown)), None
-
-
-def write_output(out: Path, output: FrameOutput) -> dict:
-    """Write a frame's map and files, then its record (a frame is done when its record
-    exists), each atomically; returns the record, with the writing time in its stats."""
-    t = time.perf_counter()
-    write_npy_atomic(out / "maps" / f"{output.stem}.npy", output.map)
-    for rel, data in output.files.items():
-        write_bytes_atomic(out / rel, data)
-    output.record["stats"]["write_s"] = time.perf_counter() - t
-    write_json_atomic(out / "frames" / f"{output.stem}.json", output.record)
-    return output.record
 
 
 def ply_files(stem: str, depth, geometry, dets, cfg: RunConfig) -> dict[str, bytes]:

@@ -538,18 +538,18 @@ def test_a_record_is_written_only_after_its_map_and_picture(tmp_path, scene, mon
     """The picture of the third frame cannot be written: the run stops with one line (exit 1),
     that frame has its map but no record (so it is not done), the frames before are whole, and
     --resume finishes the run to a whole run's files."""
-    import dpom_warp.worker as worker
+    import dpom_warp.writers as writers  # a frame's files: writers.Pictures
 
     path = write_config(tmp_path, scene[1], tracking__method="off")  # pictures drawn per frame
     assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "whole")]) == 0
-    real = worker.write_bytes_atomic
+    real = writers.write_bytes_atomic
 
     def failing(target, data):
         if Path(target).name == "0002.png":
             raise OSError(28, "No space left on device", str(target))
         return real(target, data)
 
-    monkeypatch.setattr(worker, "write_bytes_atomic", failing)
+    monkeypatch.setattr(writers, "write_bytes_atomic", failing)
     capsys.readouterr()
     assert main(["run", str(path), "--no-progress"]) == 1
     err = capsys.readouterr().err.strip()
@@ -557,7 +557,7 @@ def test_a_record_is_written_only_after_its_map_and_picture(tmp_path, scene, mon
     out = tmp_path / "out"
     assert (out / "maps" / "0002.npy").exists() and not (out / "frames" / "0002.json").exists()
     assert sorted(p.name for p in (out / "frames").glob("*.json")) == ["0000.json", "0001.json"]
-    monkeypatch.setattr(worker, "write_bytes_atomic", real)
+    monkeypatch.setattr(writers, "write_bytes_atomic", real)
     assert main(["run", str(path), "--no-progress", "--resume"]) == 0
     for name in ("detections.csv",):
         assert (out / name).read_bytes() == (tmp_path / "whole" / name).read_bytes()

@@ -81,7 +81,8 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     from dpom_warp.detect import detect_map
     from dpom_warp.geometry import build_geometry
     from dpom_warp.io import units_to_metres
-    from dpom_warp.outputs import ShownTracks, tracked_picture
+    from dpom_warp.outputs import ShownTracks
+    from dpom_warp.writers import tracked_picture
     from dpom_warp.track_files import per_frame, tracks_csv
     from dpom_warp.tracking import Cells, run_tracker
 
@@ -297,18 +298,18 @@ def test_ctrl_c_writes_and_tracks_every_frame_taken(camera_config, workers):
 def test_an_error_writing_a_frame_ends_the_live_run_with_one_line(camera_config, capsys, monkeypatch):
     """The finisher thread writes the frames; an error there (a full disk) ends the run with
     a non-zero exit and a line naming it, the frames before it written, nothing after."""
-    import dpom_warp.worker as worker_module
+    from dpom_warp.writers import Maps
 
     path, cam, tmp = camera_config
-    real, calls = worker_module.write_output, []
+    real, calls = Maps.frame, []
 
-    def failing(out, output):
-        calls.append(output.stem)
+    def failing(self, done):
+        calls.append(done.stem)
         if len(calls) == 4:
             raise OSError(28, "No space left on device")
-        return real(out, output)
+        return real(self, done)
 
-    monkeypatch.setattr(worker_module, "write_output", failing)
+    monkeypatch.setattr(Maps, "frame", failing)
     cam.start()
     try:
         assert main(["run", str(path), "--no-progress", "--max-frames", "12"]) != 0

@@ -130,13 +130,13 @@ def test_killed_actor_loses_no_frame(tmp_path, local_ray, scene, monkeypatch, ca
     tmp, path = scene
     monkeypatch.setattr(cluster, "ACTOR_RESTARTS", restarts)
     writes = []
-    real = pipeline.write_output
+    real = pipeline.RunPlan.written
 
-    def counted(out, output):
+    def counted(plan, output):
         writes.append(output.name)
-        return real(out, output)
+        return real(plan, output)
 
-    monkeypatch.setattr(pipeline, "write_output", counted)
+    monkeypatch.setattr(pipeline.RunPlan, "written", counted)
     killed = []
 
     def kill_first_busy_actor():
