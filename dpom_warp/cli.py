@@ -78,7 +78,7 @@ def _run(args) -> int:
         plans.append(plan_run(cfg, out, "cpu", strict=args.strict, parallel=True, max_frames=args.max_frames))
     devices = [args.device or cfg.device for cfg in cfgs]
     summaries = run_on_ray(plans, [str(Path(c)) for c in args.config], devices, args.ray or None,
-                           args.workers, args.strict, args.overwrite, args.resume,
+                           args.workers, args.overwrite, args.resume,
                            progress=not args.no_progress)
     for source, summary, out in zip(args.config, summaries, outputs):
         if many:

@@ -5,7 +5,7 @@ pose fitted, background estimated, kernels compiled); then Ray actors infer the 
 actor (one CPU, or one GPU when the runs' device is CUDA) builds a run's engine once, from
 the run's WorkerSpec and the driver's compiled kernels, and keeps the engines of the last two
 runs it served, so the frames of several runs share the actors. The driver writes every
-output, as a plain run does (pipeline.accept), so the files are the same.
+output, as a plain run does (its FrameLoop, loop.py), so the files are the same.
 
 Frames travel as the bytes of their files, read by the driver just before they are sent: the
 nodes need no shared disk, a 16-bit PNG is 3-5x smaller than the float32 array it decodes
@@ -179,7 +179,7 @@ def actor_count(ray, gpu: bool, wanted: int | None) -> int:
 
 
 def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str | None,
-               workers: int | None, strict: bool, overwrite: bool, resume: bool, progress: bool,
+               workers: int | None, overwrite: bool, resume: bool, progress: bool,
                log=print) -> list[dict]:
     """Infer the frames of every plan (pipeline.RunPlan, made with parallel=True) on Ray
     actors, each run writing to its own output; returns their summaries, in order.
@@ -187,7 +187,7 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
     `workers`: the number of actors (None: one per CPU, or per GPU, of the cluster).
     Nothing is written before the first actor has started."""
     from .outputs import remove_temporaries
-    from .pipeline import abandon_if_empty, accept, finish_run, open_output, progress_bar
+    from .pipeline import abandon_if_empty, finish_run, open_output, progress_bar
 
     with connect(address) as where:
         ray = import_ray()
@@ -212,7 +212,7 @@ def run_on_ray(plans: list, sources: list[str], devices: list[str], address: str
             outcomes = progress_bar(pool.outcomes(refs, jobs, log), frames, "dpom ray", progress)
             try:
                 for run, name, output, error in outcomes:
-                    accept(plans[run], name, output, error, strict, log)
+                    plans[run].loop.accept(name, output, error)
             except (InputError, ConfigError):
                 for p in plans:
                     abandon_if_empty(p)  # --strict before any frame: nothing left behind

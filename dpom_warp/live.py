@@ -152,7 +152,8 @@ class LiveRun:
 
     def __init__(self, cfg: RunConfig, output_dir, device, log, max_frames, overwrite, first_frame_timeout,
                  workers):
-        from .outputs import ShownTracks, prepare_output
+        from .loop import FrameLoop, OnlineTracks
+        from .outputs import prepare_output
         from .session import set_up
         from .sources import open_source
         from .frames import played_source
@@ -177,8 +178,6 @@ class LiveRun:
         if cfg.tracking.method == "ksp":
             log("tracking.method ksp needs the whole run; a live run tracks online")
         self.fps = info.rate_hz or cfg.inputs.fps
-        self.tracker = OnlineTracker(Cells.for_run(self.geometry, cfg), cfg.grid.shape, cfg.tracking, 1.0 / self.fps,
-                                     cfg.detection.threshold)
         prepare_output(self.out, cfg.resolved, overwrite, resume=False)
         log(f"live: {info.kind}, {info.width}x{info.height} at {self.fps:g} frames/s; device {setup.device}, "
             f"{self.workers} process{'es' * (self.workers > 1)}; background: "
@@ -188,14 +187,16 @@ class LiveRun:
         self.run_view = RunView(cfg, self.out, self.geometry, setup.spec.camera, worker_pictures=not self.tracking_on)
         self.writers = writers_for(self.run_view)
         self.rerun = self.writers.has(Rerun)
-        self.slot = NewestFrame()
-        self.records, self.names, self.latencies, self.infer_s = {}, [], [], []
-        self.finished = []  # when each frame was written
         # with tracks, a frame's picture and its tracks on the view wait for the online tracker to
-        # commit it (tracking.delay frames later): frame index -> its FrameDone (with its depth
-        # where a picture is due)
-        self.trails, self.awaiting = ShownTracks(self.geometry, cfg.tracking.trail), {}
-        self.done, self.taken, self.t_first, self.last_line, self.track_s = 0, 0, None, time.perf_counter(), 0.0
+        # commit it (tracking.delay frames later)
+        self.online = OnlineTracks(self.run_view, self.writers, OnlineTracker(
+            Cells.for_run(self.geometry, cfg), cfg.grid.shape, cfg.tracking, 1.0 / self.fps,
+            cfg.detection.threshold)) if self.tracking_on else None
+        self.frame_loop = FrameLoop(self.run_view, self.writers, online=self.online, log=log)  # every run's frame loop body
+        self.slot = NewestFrame()
+        self.latencies, self.infer_s = [], []
+        self.finished = []  # when each frame was written
+        self.done, self.taken, self.t_first, self.last_line = 0, 0, None, time.perf_counter()
         self.pending: deque = deque()  # Pending frames, in the order they were taken
         self.helpers = None
         if self.workers > 1:
@@ -335,42 +336,22 @@ class LiveRun:
             self.failure.append(e)
 
     def finish(self, item: Pending) -> None:
-        """A frame's map, record and picture written, shown and tracked (as a plain run's)."""
+        """A frame's map, record and picture written, shown and tracked (FrameLoop: as a plain
+        run's)."""
         from .worker import FrameItem
-        from .writers import FrameDone
 
         cfg, fr, res = self.cfg, item.frame, item.result
         due = cfg.output.images and self.done % cfg.output.images_every == 0
-        self.worker.pictures = due and not self.tracking_on  # with tracks: drawn once committed (publish)
-        name = fr.name or f"{fr.index:06d}"
-        _, output, _ = self.worker._finish(FrameItem(name), item.depth, res, 0.0, item.infer_s, [])
-        output.record["timestamp"] = output.record["stats"]["timestamp"] = fr.timestamp
+        self.worker.pictures = due and not self.tracking_on  # with tracks: drawn once committed (OnlineTracks)
+        _, output, _ = self.worker._finish(FrameItem(fr.name or f"{fr.index:06d}"), item.depth, res, 0.0,
+                                           item.infer_s, [])
         output.record["stats"]["worker"] = item.process
-        done = FrameDone(self.run_view, self.done, name, output.stem, fr.timestamp, output.map, output.record,
-                         output.files, result_dets=self.worker.detections(res)[1] if self.rerun else None,
-                         depth=item.depth if due or self.rerun else None)
-        self.records[name] = self.writers.frame(done)
-        self.names.append(name)
-        if self.tracking_on:
-            self.awaiting[self.done] = done
-            t1 = time.perf_counter()
-            self.tracker.push(output.map, fr.timestamp)  # frames dropped between: reach by the time apart
-            self.track_s += time.perf_counter() - t1
-            self.publish(self.tracker.take_committed())
+        self.frame_loop.accept(output.name, output, None, fr.timestamp, depth=item.depth if due or self.rerun else None,
+                         result_dets=self.worker.detections(res)[1] if self.rerun else None)
         self.finished.append(time.perf_counter())
         self.latencies.append(self.finished[-1] - fr.arrived)
         self.infer_s.append(item.infer_s)
         self.done += 1
-
-    def publish(self, committed) -> None:
-        """Frames the online tracker has committed: their tracks (identities as in tracks.csv)
-        to the writers (the view; where a picture is due, the picture with the tracks and
-        trails, drawn as a finished run draws it: from the map as maps/ holds it)."""
-        for f, rows in committed:
-            shown = self.trails.at(f, rows)
-            done = self.awaiting.pop(f, None)
-            if done is not None:
-                self.writers.tracked(done, shown)
 
     def close_finisher(self) -> None:
         """Every frame taken written and tracked (the helpers' dead ones inferred here first),
@@ -465,14 +446,15 @@ class LiveRun:
 
         cfg, setup, done = self.cfg, self.setup, self.done
         wall = time.perf_counter() - (self.t_first or time.perf_counter())
-        summary = summarise(cfg, [Path(n) for n in self.names], self.records, [], None, self.geometry,
+        names, records = self.frame_loop.names, self.frame_loop.records
+        summary = summarise(cfg, [Path(n) for n in names], records, [], None, self.geometry,
                             setup.device, setup.background, None, [])
         summary["tracking"], tracks = self.tracks()
         summary["live"] = self.live_block(stopped_by, stop_error, wall)
         summary["timings"]["total_s"] = time.perf_counter() - self.t_start
-        times = [self.records[n].get("timestamp") for n in self.names]
+        times = [records[n].get("timestamp") for n in names]
         # detections.csv, the tracks' tables, the Rerun log closed, summary.json last
-        self.writers.finish(RunEnd(self.names, self.records, tracks, self.fps, times, summary))
+        self.writers.finish(RunEnd(names, records, tracks, self.fps, times, summary))
         if stopped_by == "camera stopped sending":
             raise WorkerError(f"input.frames: {cfg.inputs.frames}: the camera stopped sending (no frame for "
                               f"{STALL_S:g} s after {done} frames: unplugged?); expected frames until Ctrl-C"
@@ -485,16 +467,14 @@ class LiveRun:
         `tracking` block and the tracks (None: not tracked)."""
         from .tracking import frames_without_map
 
-        names = self.names
+        names = self.frame_loop.names
         if not (self.tracking_on and names):
             return {"method": "off", "why": "tracking.method: off"}, None
-        t1 = time.perf_counter()
-        tracks, report = self.tracker.finish()
-        self.track_s += time.perf_counter() - t1
-        self.publish(self.tracker.take_committed())  # the last tracking.delay frames
-        times = [self.records[n].get("timestamp") for n in names]
-        report = {"method": "online", "tracks": len(tracks), "time_s": self.track_s,
-                  "ms_per_frame": 1000 * self.track_s / len(names), "fps": self.fps, "fps_from": "camera", **report,
+        tracks, report = self.online.finish()  # the last tracking.delay frames to the writers
+        times = [self.frame_loop.records[n].get("timestamp") for n in names]
+        seconds = self.online.seconds
+        report = {"method": "online", "tracks": len(tracks), "time_s": seconds,
+                  "ms_per_frame": 1000 * seconds / len(names), "fps": self.fps, "fps_from": "camera", **report,
                   "frames_without_map": frames_without_map(times, 1.0 / self.fps)}
         return report, tracks
 

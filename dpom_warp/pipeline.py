@@ -19,7 +19,8 @@ from .outputs import (RUN_STATE, ShownTracks, check_output, fps_of, pictures_def
                       remove_temporaries, summarise)
 from .session import Setup, set_up
 from .sources import expand
-from .worker import FrameItem, FrameOutput, FrameWorker, pool_outcomes
+from .worker import FrameItem, FrameWorker, pool_outcomes
+from .loop import FrameLoop
 from .writers import FrameDone, Pictures, Rerun, RunEnd, RunView, Summary, TrackTables, Writers, jsonable, writers_for
 
 
@@ -42,12 +43,8 @@ class RunPlan(Setup):
     by_worker: Counter = dataclasses.field(default_factory=Counter)
     writers: Writers | None = None  # once the output folder is ready (open_output)
     view: RunView | None = None
-
-    def written(self, output: FrameOutput) -> dict:
-        """A frame's outputs written by the run's writers; returns its record."""
-        done = FrameDone(self.view, -1, output.name, output.stem, output.record.get("timestamp"), output.map,
-                         output.record, output.files)
-        return self.writers.frame(done)
+    loop: FrameLoop | None = None  # what happens to each frame inferred, whoever inferred it
+    strict: bool = False  # a frame that cannot be inferred is fatal
 
     def chunks(self) -> list[list[FrameItem]]:
         """The frames to do in engine batches, in frame order (their files not read yet)."""
@@ -61,7 +58,8 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
         progress: bool = True, log=print, strict: bool = False, overwrite: bool = False,
         resume: bool = False, workers: int | None = None, max_frames: int | None = None) -> dict:
     """Run DPOM over the configured frames; returns the summary also written to summary.json.
-    A live camera (`input.frames: realsense[:SERIAL]`) runs until Ctrl-C or `max_frames`
+    A live camera (`input.frames: realsense[:SERIAL]`, or frames played as one: input.play)
+    runs until Ctrl-C or `max_frames`
     (live.run_live; `workers` None: live.default_workers); other frames are the first
     `max_frames` of input.frames (all by default).
 
@@ -83,13 +81,13 @@ def run(cfg: RunConfig, output_dir: str | None = None, device: str | None = None
                     max_frames=max_frames)
     open_output(plan, overwrite, resume, log)
     try:
-        return infer_and_finish(plan, workers, progress, strict, log)
+        return infer_and_finish(plan, workers, progress)
     except BaseException:
         plan.writers.close()
         raise
 
 
-def infer_and_finish(plan: RunPlan, workers: int, progress: bool, strict: bool, log=print) -> dict:
+def infer_and_finish(plan: RunPlan, workers: int, progress: bool) -> dict:
     """The frames inferred (in this process, or `workers` processes) and written as they come,
     then the run's own outputs; returns the summary."""
     if workers > 1 and len(plan.todo) > 1:
@@ -100,7 +98,7 @@ def infer_and_finish(plan: RunPlan, workers: int, progress: bool, strict: bool, 
         runner, desc = {"kind": "one process"}, "dpom"
     t = time.perf_counter()
     try:
-        collect(plan, progress_bar(outcomes, len(plan.todo), desc, progress), strict, log)
+        collect(plan, progress_bar(outcomes, len(plan.todo), desc, progress))
     except (InputError, ConfigError):
         abandon_if_empty(plan)  # --strict: a bad frame before any good one leaves nothing
         raise
@@ -142,7 +140,7 @@ def plan_run(cfg: RunConfig, output_dir: str | None = None, device: str | None =
     s.spec.pictures = cfg.output.images and not pictures_deferred(cfg, len(frames))
     return RunPlan(**{f.name: getattr(s, f.name) for f in dataclasses.fields(Setup)}, cfg=s.spec.cfg,
                    out=out, frames=frames, skipped=skipped, truth=truth, t_start=t_start,
-                   timestamps=timestamps)
+                   timestamps=timestamps, strict=strict)
 
 
 def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None:
@@ -152,6 +150,8 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
     prepare_output(out, cfg.resolved, overwrite, resume)
     plan.view = RunView(cfg, out, plan.geometry, plan.spec.camera, worker_pictures=plan.spec.pictures)
     plan.writers = writers_for(plan.view)
+    plan.loop = FrameLoop(plan.view, plan.writers, plan.records, plan.skipped, plan.grown, plan.by_worker,
+                          plan.timestamps, strict=plan.strict, log=log)
     log(f"device {plan.device}; {plan.geometry.locations.shape[0]} locations {cfg.grid.shape}; "
         f"{len(plan.frames)} frame{'' if len(plan.frames) == 1 else 's'}; background: {plan.background}; "
         f"inference at {i['image'][0]}x"
@@ -208,19 +208,20 @@ def progress_bar(outcomes, frames: int, desc: str, progress: bool):
     return tqdm(outcomes, total=frames, unit="frame", desc=desc, leave=False, disable=not progress)
 
 
-def collect(plan: RunPlan, outcomes, strict: bool, log=print) -> None:
-    """Write each frame's outputs as its outcome arrives, on a thread (while the next frame
-    infers), in order; a frame that could not be processed is skipped with its reason (fatal
-    with `strict`). Every write started is finished before this returns or raises."""
+def collect(plan: RunPlan, outcomes) -> None:
+    """Each frame's outcome through the run's FrameLoop as it arrives, its outputs written on
+    a thread (while the next frame infers), in order; a frame that could not be processed is
+    skipped with its reason (fatal with --strict). Every write started is finished before this
+    returns or raises."""
     from concurrent.futures import ThreadPoolExecutor
 
-    failed = []
+    loop, failed = plan.loop, []
 
-    def write(output):  # after a failed write no later frame is written: frames stay in order
+    def write(done):  # after a failed write no later frame is written: frames stay in order
         if failed:
             raise RuntimeError("not written: an earlier frame's write failed")
         try:
-            return plan.written(output)
+            return loop.write(done)
         except BaseException as e:
             failed.append(e)
             raise
@@ -230,43 +231,18 @@ def collect(plan: RunPlan, outcomes, strict: bool, log=print) -> None:
         try:
             for name, output, error in outcomes:
                 if error is None:
-                    stamp(plan, name, output)
-                    pending.append((name, output, writer.submit(write, output)))
+                    done = loop.done(name, output)
+                    pending.append((name, output, done, writer.submit(write, done)))
                 else:
-                    accept(plan, name, output, error, strict, log)
-                while pending and pending[0][2].done():
-                    _written(plan, *pending.pop(0))
+                    loop.skip(name, error)
+                while pending and pending[0][3].done():
+                    name, output, done, future = pending.pop(0)
+                    loop.keep(name, output, done, future.result())
         finally:
             for item in pending:
-                item[2].exception()  # wait for it; an error is raised below, in order
-        for item in pending:
-            _written(plan, *item)
-
-
-def stamp(plan: RunPlan, name: str, output: FrameOutput) -> None:
-    """A recording's frame record carries its timestamp."""
-    if name in plan.timestamps:
-        output.record["timestamp"] = output.record["stats"]["timestamp"] = plan.timestamps[name]
-
-
-def _written(plan: RunPlan, name: str, output: FrameOutput, future) -> None:
-    plan.records[name] = future.result()
-    plan.grown += output.grown
-    plan.by_worker[output.record["stats"]["worker"]] += 1
-
-
-def accept(plan: RunPlan, name: str, output: FrameOutput | None, error: str | None, strict: bool,
-           log=print) -> None:
-    if error is None:
-        stamp(plan, name, output)
-        plan.records[name] = plan.written(output)
-        plan.grown += output.grown
-        plan.by_worker[output.record["stats"]["worker"]] += 1
-        return
-    if strict:
-        raise InputError(error)
-    plan.skipped.append({"frame": name, "reason": error})
-    log(f"skipping {error}")
+                item[3].exception()  # wait for it; an error is raised below, in order
+        for name, output, done, future in pending:
+            loop.keep(name, output, done, future.result())
 
 
 def abandon_if_empty(plan: RunPlan) -> None:

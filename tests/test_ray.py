@@ -15,7 +15,7 @@ import yaml
 
 import ray
 
-from dpom_warp import cluster, pipeline
+from dpom_warp import cluster
 from dpom_warp.cli import main
 
 from test_cli import small_config
@@ -130,13 +130,15 @@ def test_killed_actor_loses_no_frame(tmp_path, local_ray, scene, monkeypatch, ca
     tmp, path = scene
     monkeypatch.setattr(cluster, "ACTOR_RESTARTS", restarts)
     writes = []
-    real = pipeline.RunPlan.written
+    from dpom_warp.loop import FrameLoop
 
-    def counted(plan, output):
-        writes.append(output.name)
-        return real(plan, output)
+    real = FrameLoop.write
 
-    monkeypatch.setattr(pipeline.RunPlan, "written", counted)
+    def counted(loop, done):
+        writes.append(done.name)
+        return real(loop, done)
+
+    monkeypatch.setattr(FrameLoop, "write", counted)
     killed = []
 
     def kill_first_busy_actor():
