@@ -122,7 +122,7 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
 
     from dpom_warp.worker import make_engine
 
-    cfg = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, graph="off"))
+    cfg = dataclasses.replace(cfg, engine=cfg.engine.model_copy(update={"graph": "off"}))
     t = time.perf_counter()
     engine = make_engine(cfg, cfg.camera, device, 1)
     reduce = engine.resolution.frames
@@ -199,7 +199,7 @@ def ingredient_times(name, stride, device, repeats, table=True):
         if key == "tiles" and not table:  # the fast path's lists come from the tiles already
             continue
         cfg, depth, bg = load_scene(name, [f"input.stride={stride}"] + sets)
-        cfg = dc.replace(cfg, engine=dc.replace(cfg.engine, graph="off"))
+        cfg = dc.replace(cfg, engine=cfg.engine.model_copy(update={"graph": "off"}))
         engine = make_engine(cfg, cfg.camera, device, 1)
         if key == "one_stack":  # the passes' stack scratch in one size (CPU; a GPU has none)
             if engine.local_scratch == 0:
@@ -296,7 +296,7 @@ def kernel_times(cfg, depth, bg, device, repeats, batch=1):
     from dpom_warp import engine as E
     from dpom_warp.worker import make_engine
 
-    cfg = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, graph="off"))
+    cfg = dataclasses.replace(cfg, engine=cfg.engine.model_copy(update={"graph": "off"}))
     engine = make_engine(cfg, cfg.camera, device, batch)
     engine.set_background_frames(engine.resolution.frames(bg))
     infer = engine.infer_batch if batch > 1 else engine.infer

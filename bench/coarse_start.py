@@ -62,7 +62,7 @@ def main():
         generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
         fine = make_engine(cfg, cfg.camera, "cpu", 1)
         stride = fine.resolution.stride
-        coarse_cfg = dataclasses.replace(cfg, inputs=dataclasses.replace(cfg.inputs, stride=min(8, a.factor * stride)))
+        coarse_cfg = dataclasses.replace(cfg, inputs=cfg.inputs.model_copy(update={"stride": min(8, a.factor * stride)}))
         coarse = make_engine(coarse_cfg, cfg.camera, "cpu", 1)
         later = dataclasses.replace(cfg.model, damping=cfg.model.damping * cfg.model.damping_growth ** a.skip)
         warm = make_engine(dataclasses.replace(cfg, model=later), cfg.camera, "cpu", 1)

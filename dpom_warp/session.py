@@ -115,7 +115,7 @@ def auto_batch(device: str, recorded: bool) -> int:
 
 def with_batch(cfg: RunConfig, batch: int) -> RunConfig:
     """cfg with engine.batch = batch."""
-    return dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, batch=batch))
+    return dataclasses.replace(cfg, engine=cfg.engine.model_copy(update={"batch": batch}))
 
 
 def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=print,
@@ -210,7 +210,7 @@ def estimate_background(cfg: RunConfig, files: list[Path], height: int, width: i
     """input.background: auto over `files`, streamed `chunk` frames at a time, reduced by
     `resolution` (None: full resolution). Returns the estimator and a report."""
     t = time.perf_counter()
-    estimator = BackgroundEstimator(height, width, cfg.model, cfg.inputs.background_auto, device)
+    estimator = BackgroundEstimator(height, width, cfg.model, cfg.inputs.background_auto.build(), device)
     for i in range(0, len(files), chunk):
         batch = np.stack([read_frame(cfg, f) for f in files[i:i + chunk]])
         estimator.add(resolution.frames(batch) if resolution else batch)

@@ -394,7 +394,7 @@ def test_mask_index_option_gives_the_same_results(tmp_path):
     depth = read_frame(cfg, expand(cfg.inputs.frames, "input.frames")[0])
     results = {}
     for index, want in [("auto", True), ("table", True), ("tiles", False)]:
-        c = dataclasses.replace(cfg, engine=dataclasses.replace(cfg.engine, mask_index=index))
+        c = dataclasses.replace(cfg, engine=cfg.engine.model_copy(update={"mask_index": index}))
         engine = make_engine(c, cfg.camera, "cpu", 1)
         assert engine.use_table == want
         results[index] = engine.infer(engine.resolution.frames(depth))

@@ -65,7 +65,7 @@ def test_play_with_resume_or_ray_is_one_line(tmp_path, capsys, flag):
     path = small_config(tmp_path, frames=2)
     assert main(["run", str(path), "--no-progress", "--play", flag]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"dpom-warp: error: --play: ") and err.rstrip().endswith(f"expected no {flag}")
+    assert err.startswith("dpom-warp: error: --play: ") and err.rstrip().endswith(f"expected no {flag}")
     assert not (tmp_path / "out").exists()
 
 

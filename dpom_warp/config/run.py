@@ -11,71 +11,24 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
+from ..detect import EDGE_RADIUS
 from ..geometry import Camera, Grid, ObjectBox, pose_from_angles
 from ..ground import GroundOptions
-from ..model import BEHIND_COST, EXACT_BETA, TOP_SHORTER, AutoBackground, ModelParams
+from ..model import BEHIND_COST, EXACT_BETA, TOP_SHORTER, ModelParams
 from ..synthetic import SceneSpec
 from ..tracking import TrackingOptions
 from .camera import PoseMatrix
 from .schema import ConfigFile
+from .sections import DetectionSection, EngineSection, EvaluationSection, InputSection, OutputSection
 from .values import ConfigError, _d, _first_error
 
 
 # -- the typed run config the pipeline uses ----------------------------------------------------
-@dataclass(frozen=True)
-class Detection:
-    threshold: float = 0.5
-    nms_radius: float = 0.4
-    edge_radius: float = 0.0
-    edge_view: float = 0.5
-    min_log_odds: float = MIN_LOG_ODDS
-
-
-@dataclass(frozen=True)
-class Evaluation:
-    ground_truth: str | None = None
-    match_distance: float = 0.5
-    hidden_visibility: float = 0.1
-    plots: bool = False
-
-
-@dataclass(frozen=True)
-class Inputs:
-    frames: str | None = None
-    background: str | None = None
-    depth_scale: float = 0.001
-    fps: float = 15.0
-    topic: str | None = None
-    stride: int | str = "auto"  # "auto" or an integer >= 1 (dpom_warp.resolution)
-    reduce: str = "median"
-    background_auto: AutoBackground = AutoBackground()  # for background: auto
-    play: bool = False  # frames sent as a live camera sends them (sources.played)
-
-    @property
-    def auto_background(self) -> bool:
-        return self.background == "auto"
-
-
-@dataclass(frozen=True)
-class Output:
-    dir: str = "runs/out"
-    images: bool = True
-    images_every: int = 1
-    rerun: str | None = None
-    ply: bool = False
-    view: bool = False
-
-
-@dataclass(frozen=True)
-class EngineOptions:
-    entries_per_pixel: float = 8.0
-    max_entries: int | None = None
-    memory_gb: float | None = 8.0
-    batch: int | str = "auto"  # (an int once a run has chosen: pipeline.set_up)
-    graph: str = "auto"
-    exact: bool = False
-    mask_index: str = "auto"
+# The run uses these sections as validated (each field declared once, in config/sections.py);
+# parse_config fills in the values that depend on other keys (detection.edge_radius, the exact
+# path's stride, engine.batch once a run chooses it).
+Inputs, Output, EngineOptions, Detection, Evaluation = (InputSection, OutputSection, EngineSection, DetectionSection,
+                                                        EvaluationSection)
 
 
 @dataclass
@@ -155,10 +108,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         c = ConfigFile.model_validate(raw)
     except ValidationError as e:
         raise ConfigError(_first_error(e)) from None
-    s = c.input
-    inputs = Inputs(frames=s.frames, background=s.background, depth_scale=s.depth_scale, fps=s.fps,
-                    topic=s.topic, stride=s.stride, reduce=s.reduce, play=s.play,
-                    background_auto=_fill(AutoBackground, s.background_auto))
+    inputs = c.input
     cam, ext = c.camera, c.camera.extrinsics
     pose_auto = ext == "auto"
     if pose_auto:
@@ -194,13 +144,11 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
                   top_heights=top_heights, top_unseen=top_unseen, beta=beta)
     edge_radius = (c.detection.edge_radius if c.detection.edge_radius is not None else
                    EDGE_RADIUS if c.grid.mode == "ground" else 0.0)
-    detection = _fill(Detection, c.detection, edge_radius=edge_radius)
-    evaluation = _fill(Evaluation, c.evaluation)
-    output = _fill(Output, c.output)
-    engine = _fill(EngineOptions, c.engine)
+    detection = c.detection.model_copy(update={"edge_radius": edge_radius})
+    evaluation, output, engine = c.evaluation, c.output, c.engine
     tracking = _fill(TrackingOptions, c.tracking, regions=tuple(tuple(r) for r in c.tracking.regions))
     if engine.exact:  # the exact path: full resolution, every pass full, no warm start
-        inputs = dataclasses.replace(inputs, stride=1)
+        inputs = inputs.model_copy(update={"stride": 1})
         model = dataclasses.replace(model, sparse_epsilon=0.0, warm_start=False)
     synthetic = _fill(SceneSpec, c.synthetic) if c.synthetic is not None else None
     cache = c.synthetic.cache if c.synthetic is not None else None
@@ -210,7 +158,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
 
     resolved = {
         "device": c.device,
-        "input": {**vars_of(inputs), "background_auto": vars_of(inputs.background_auto)},
+        "input": inputs.model_dump(),
         "camera": {"width": cam.width, "height": cam.height,
                    "intrinsics": {"fx": i.fx, "fy": i.fy, "cx": i.cx, "cy": i.cy},
                    "extrinsics": pose_resolved,
@@ -219,9 +167,9 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         "grid": {"mode": grid.mode, "x": list(grid.x), "y": list(grid.y), **({"z": list(grid.z)} if grid.z else {})},
         "object": vars_of(obj),
         "model": {k: plain(v) for k, v in vars_of(model).items()},
-        "detection": vars_of(detection), "evaluation": vars_of(evaluation),
+        "detection": detection.model_dump(), "evaluation": evaluation.model_dump(),
         "tracking": {**vars_of(tracking), "regions": [list(r) for r in tracking.regions]},
-        "output": vars_of(output), "engine": vars_of(engine),
+        "output": output.model_dump(), "engine": engine.model_dump(),
     }
     if synthetic is not None:
         resolved["synthetic"] = {"cache": cache, **{k: plain(v) for k, v in vars_of(synthetic).items()}}

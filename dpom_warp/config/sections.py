@@ -45,6 +45,10 @@ class BackgroundAutoSection(Node):
                                             "sigmas + cluster_floor of its mean")
     cluster_floor: Num = Field(_d(AutoBackground, "cluster_floor"), ge=0, description="metres")
 
+    def build(self) -> AutoBackground:
+        """The estimator's options (model.AutoBackground)."""
+        return AutoBackground(**self.model_dump())
+
     @model_validator(mode="after")
     def _frames(self):
         if self.min_frames > self.max_frames:
@@ -79,6 +83,10 @@ class InputSection(Node):
                                           "the others dropped, tracks online (live mode tried without a "
                                           "camera; --play)")
     background_auto: BackgroundAutoSection = BackgroundAutoSection()
+
+    @property
+    def auto_background(self) -> bool:
+        return self.background == "auto"
 
 
 class GridSection(Node):
