@@ -5,6 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field, model_validator
+
+from .values import Int, Node, Num, _fail
 
 
 TOP_MIN_RHO = 1e-3  # locations whose rho* is below it before the top-band test skip it (a factor <= 1)
@@ -237,37 +240,34 @@ class ModelParams:
         return a + b * np.asarray(z, dtype=np.float64) ** 2
 
 
-@dataclass(frozen=True)
-class AutoBackground:
-    """How `input.background: auto` estimates each pixel's background from the run's own
-    frames (kernels.background_auto; reference.background_clusters).
+# How `input.background: auto` estimates each pixel's background from the run's own frames
+# (kernels.background_auto; reference.background_clusters). Each pixel keeps `slots` clusters of
+# its readings, streamed frame by frame: a reading joins the nearest cluster when within
+# `cluster_sigmas` sensor sigmas plus `cluster_floor` metres of its mean, else starts a new one in
+# a free slot or in place of the smallest other than the farthest (of equal ones the nearest):
+# people pass in front of the surface that is the background, which must not be pushed out by
+# them when it shows rarely. The background is the farthest cluster holding at least `min_share`
+# of the frames (people are always in front of the static surface); with no such cluster, a pixel
+# whose readings are missing in at least `min_share` of the frames has a broad background, and
+# any other pixel (or every pixel, with fewer than `min_frames` frames) falls back to the
+# floor-only model. The config's `input.background_auto` section: each field declared here, once.
+class AutoBackground(Node):
+    """How `input.background: auto` estimates the background from the run's own frames."""
 
-    Each pixel keeps `slots` clusters of its readings, streamed frame by frame: a reading
-    joins the nearest cluster when within `cluster_sigmas` sensor sigmas plus `cluster_floor`
-    metres of its mean, else starts a new one in a free slot or in place of the smallest
-    other than the farthest (of equal ones the nearest): people pass in front of the surface
-    that is the background, which must not be pushed out by them when it shows rarely. The
-    background is the farthest cluster holding at least `min_share` of the frames (people are
-    always in front of the static surface); with no such cluster, a pixel whose readings are
-    missing in at least `min_share` of the frames has a broad background, and any other pixel
-    (or every pixel, with fewer than `min_frames` frames) falls back to the floor-only model.
+    max_frames: Int = Field(100, ge=1, description="frames used, evenly spread over the sequence")
+    min_frames: Int = Field(8, ge=1, description="fewer frames: the floor-only model everywhere")
+    min_share: Num = Field(0.2, gt=0, le=1, description="share of the frames a cluster must hold to be the background")
+    slots: Int = Field(4, ge=1, le=16, description="clusters kept per pixel")
+    cluster_sigmas: Num = Field(3.0, ge=0, description="a reading joins a cluster within cluster_sigmas sensor "
+                                                       "sigmas + cluster_floor of its mean")
+    cluster_floor: Num = Field(0.03, ge=0, description="metres")
 
-    Attributes:
-        max_frames: frames used, evenly spread over the sequence (a streaming estimate: the
-            memory does not grow with the number of frames).
-        min_frames: fewer frames than this: the floor-only model everywhere.
-        min_share: share of the frames a cluster must hold to be the background.
-        slots: clusters kept per pixel.
-        cluster_sigmas, cluster_floor: a reading joins a cluster within
-            cluster_sigmas * sigma_sensor(mean) + cluster_floor metres of its mean.
-    """
-
-    max_frames: int = 100
-    min_frames: int = 8
-    min_share: float = 0.2
-    slots: int = 4
-    cluster_sigmas: float = 3.0
-    cluster_floor: float = 0.03
+    @model_validator(mode="after")
+    def _frames(self):
+        if self.min_frames > self.max_frames:
+            raise _fail(f"expected at most max_frames ({self.max_frames}), found {self.min_frames}",
+                        "min_frames")
+        return self
 
     def state_bytes(self, n_pixels: int) -> int:
         """Device memory of the estimate: per pixel and slot a count (int32) and a running

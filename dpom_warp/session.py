@@ -210,7 +210,7 @@ def estimate_background(cfg: RunConfig, files: list[Path], height: int, width: i
     """input.background: auto over `files`, streamed `chunk` frames at a time, reduced by
     `resolution` (None: full resolution). Returns the estimator and a report."""
     t = time.perf_counter()
-    estimator = BackgroundEstimator(height, width, cfg.model, cfg.inputs.background_auto.build(), device)
+    estimator = BackgroundEstimator(height, width, cfg.model, cfg.inputs.background_auto, device)
     for i in range(0, len(files), chunk):
         batch = np.stack([read_frame(cfg, f) for f in files[i:i + chunk]])
         estimator.add(resolution.frames(batch) if resolution else batch)

@@ -21,33 +21,43 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Annotated, Literal
 
 import numpy as np
+from pydantic import Field
 
 from .track_files import Track, frame_steps
+from .values import Int, Node, Num, Switch, _numbers
 
 SCALE = 1000.0  # costs are integers for the solver: thousandths
 
 
-@dataclass(frozen=True)
-class TrackingOptions:
-    """tracking.* (config.TrackingSection documents each)."""
+class TrackingOptions(Node):  # the config's `tracking` section: each field declared here, once
+    """Tracks with identities over the run's maps (K-shortest paths as a min-cost flow)."""
 
-    method: str = "auto"
-    max_speed: float = 2.0
-    prune: float = 0.02
-    peak: float = 0.3
-    min_rho: float = 0.02
-    max_rho: float = 0.999
-    jitter: float = 0.2
-    entry_cost: float = 7.0
-    appear_cost: float = 20.0
-    max_gap: int = 15
-    window: int = 300
-    overlap: int = 60
-    delay: int = 10
-    regions: tuple = ()
-    trail: int = 30
+    method: Annotated[Literal["auto", "ksp", "online", "off"], Switch] = Field(
+        "auto", description="auto: ksp for runs of two frames or more; ksp: offline, globally "
+                            "optimal; online: causal, committed `delay` frames behind; off: no tracks")
+    max_speed: Num = Field(2.0, gt=0, description="fastest move between frames, m/s")
+    prune: Num = Field(0.02, gt=0, lt=1, description="cells below this rho* are left out of the graph")
+    peak: Num = Field(0.3, gt=0, lt=1, description="map peaks at least this high may be bridged "
+                                                   "across hidden frames")
+    min_rho: Num = Field(0.02, gt=0, lt=0.5, description="rho* floor of a node's cost: a "
+                                                         "bridged frame costs -log(min_rho / (1 - min_rho))")
+    max_rho: Num = Field(0.999, gt=0.5, lt=1, description="rho* ceiling of a node's cost")
+    jitter: Num = Field(0.2, ge=0, description="how far a map's peak may wander from the "
+                                               "person between frames, metres (reach = "
+                                               "max_speed / fps + jitter)")
+    entry_cost: Num = Field(7.0, ge=0, description="starting or ending a track at an entry "
+                                                   "cell (grid border, edge of the view, regions)")
+    appear_cost: Num = Field(20.0, ge=0, description="starting or ending one anywhere else")
+    max_gap: Int = Field(15, ge=0, description="most frames a track is bridged across")
+    window: Int = Field(300, ge=2, description="ksp: frames per solved window")
+    overlap: Int = Field(60, ge=0, description="ksp: frames two windows share (stitched there)")
+    delay: Int = Field(10, ge=0, description="online: frames between the newest and the committed one")
+    regions: tuple[Annotated[tuple[float, float, float, float], _numbers(4)], ...] = Field(
+        (), description="more entry areas [x_min, x_max, y_min, y_max], metres (doors)")
+    trail: Int = Field(30, ge=0, description="frames of trail drawn behind a track in the pictures")
 
     def resolved_method(self, frames: int) -> str:
         """auto: ksp for two frames or more, else off."""

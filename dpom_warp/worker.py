@@ -100,7 +100,7 @@ def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engi
                     graph={"auto": None, "on": True, "off": False}[cfg.engine.graph],
                     table={"auto": None, "table": True, "tiles": False}[cfg.engine.mask_index],
                     resolution=resolution,
-                    background_auto=cfg.inputs.background_auto.build() if cfg.inputs.auto_background else None)
+                    background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
     if cfg.detection.min_log_odds > 0:  # results carry the joint test's lists (joint.JointLists)
         engine.joint_threshold = cfg.detection.threshold
     return engine

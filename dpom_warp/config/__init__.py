@@ -18,7 +18,7 @@ from .read import apply_overrides, camera_from_file, camera_shorthand, read_conf
 from .run import (Detection, EngineOptions, Evaluation, Inputs, Output, RunConfig, config_key, parse_config, source_of,
                   vars_of)
 from .schema import ConfigFile, json_schema, path_keys
-from .values import ConfigError, Node, check_device
+from ..values import ConfigError, Node, check_device
 
 __all__ = ["CameraFile", "ConfigError", "ConfigFile", "Detection", "EngineOptions", "Evaluation", "Inputs", "Node",
            "Output", "RunConfig", "apply_overrides", "camera_from_file", "camera_shorthand", "check_device",

@@ -19,7 +19,7 @@ from pydantic import (
 
 from ..geometry import Camera
 from ..ground import GroundOptions
-from .values import (
+from ..values import (
     ConfigError,
     FilePath,
     Int,

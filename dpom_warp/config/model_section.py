@@ -8,7 +8,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from ..model import BEHIND_COST, EXACT_BETA, TOP_SHORTER, ModelParams
-from .values import Bool, Heights, Int, Node, Num, Pair, _d, _fail
+from ..values import Bool, Heights, Int, Node, Num, Pair, _d, _fail
 
 
 class ModelSection(Node):

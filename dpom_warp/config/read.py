@@ -13,7 +13,7 @@ from pydantic import ValidationError
 from ..names import is_live
 from .camera import CameraFile
 from .schema import path_keys
-from .values import ConfigError, _first_error, _fmt, _read_yaml
+from ..values import ConfigError, _first_error, _fmt, _read_yaml
 
 
 def camera_shorthand(raw: dict) -> dict:

@@ -20,7 +20,7 @@ from ..tracking import TrackingOptions
 from .camera import PoseMatrix
 from .schema import ConfigFile
 from .sections import DetectionSection, EngineSection, EvaluationSection, InputSection, OutputSection
-from .values import ConfigError, _d, _first_error
+from ..values import ConfigError, _d, _first_error
 
 
 # -- the typed run config the pipeline uses ----------------------------------------------------
@@ -146,7 +146,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
                    EDGE_RADIUS if c.grid.mode == "ground" else 0.0)
     detection = c.detection.model_copy(update={"edge_radius": edge_radius})
     evaluation, output, engine = c.evaluation, c.output, c.engine
-    tracking = _fill(TrackingOptions, c.tracking, regions=tuple(tuple(r) for r in c.tracking.regions))
+    tracking = c.tracking
     if engine.exact:  # the exact path: full resolution, every pass full, no warm start
         inputs = inputs.model_copy(update={"stride": 1})
         model = dataclasses.replace(model, sparse_epsilon=0.0, warm_start=False)
@@ -168,7 +168,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         "object": vars_of(obj),
         "model": {k: plain(v) for k, v in vars_of(model).items()},
         "detection": detection.model_dump(), "evaluation": evaluation.model_dump(),
-        "tracking": {**vars_of(tracking), "regions": [list(r) for r in tracking.regions]},
+        "tracking": {**tracking.model_dump(), "regions": [list(r) for r in tracking.regions]},
         "output": output.model_dump(), "engine": engine.model_dump(),
     }
     if synthetic is not None:

@@ -18,7 +18,7 @@ from .sections import (
     SyntheticSection,
     TrackingSection,
 )
-from .values import Device, Node, PathValue, _fail
+from ..values import Device, Node, PathValue, _fail
 
 
 class ConfigFile(Node):

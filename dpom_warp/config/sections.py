@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Union
 
-from pydantic import BeforeValidator, Field, model_validator
+from pydantic import Field, model_validator
 
 from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
 from ..geometry import ObjectBox
@@ -13,7 +13,7 @@ from ..model import AutoBackground
 from ..resolution import REDUCERS
 from ..synthetic import SceneSpec
 from ..tracking import TrackingOptions
-from .values import (
+from ..values import (
     Axis,
     Batch,
     Bool,
@@ -24,37 +24,14 @@ from .values import (
     Pair,
     Str,
     Stride,
+    Switch,
     _d,
     _fail,
     _numbers,
 )
 
 
-class BackgroundAutoSection(Node):
-    """How `input.background: auto` estimates the background from the run's own frames."""
-
-    max_frames: Int = Field(_d(AutoBackground, "max_frames"), ge=1,
-                            description="frames used, evenly spread over the sequence")
-    min_frames: Int = Field(_d(AutoBackground, "min_frames"), ge=1,
-                            description="fewer frames: the floor-only model everywhere")
-    min_share: Num = Field(_d(AutoBackground, "min_share"), gt=0, le=1,
-                           description="share of the frames a cluster must hold to be the background")
-    slots: Int = Field(_d(AutoBackground, "slots"), ge=1, le=16, description="clusters kept per pixel")
-    cluster_sigmas: Num = Field(_d(AutoBackground, "cluster_sigmas"), ge=0,
-                                description="a reading joins a cluster within cluster_sigmas sensor "
-                                            "sigmas + cluster_floor of its mean")
-    cluster_floor: Num = Field(_d(AutoBackground, "cluster_floor"), ge=0, description="metres")
-
-    def build(self) -> AutoBackground:
-        """The estimator's options (model.AutoBackground)."""
-        return AutoBackground(**self.model_dump())
-
-    @model_validator(mode="after")
-    def _frames(self):
-        if self.min_frames > self.max_frames:
-            raise _fail(f"expected at most max_frames ({self.max_frames}), found {self.min_frames}",
-                        "min_frames")
-        return self
+BackgroundAutoSection = AutoBackground  # declared by its owner (model.py)
 
 
 class InputSection(Node):
@@ -164,44 +141,7 @@ class EvaluationSection(Node):
     plots: Bool = Field(False, description="also write the evaluation figures into plots/")
 
 
-def _td(name):
-    return _d(TrackingOptions, name)
-
-
-def _switch(v):
-    """YAML 1.1 reads a bare on / off as true / false: the words they were."""
-    return {True: "on", False: "off"}.get(v, v) if isinstance(v, bool) else v
-
-
-Switch = BeforeValidator(_switch)
-
-
-class TrackingSection(Node):
-    """Tracks with identities over the run's maps (K-shortest paths as a min-cost flow)."""
-
-    method: Annotated[Literal["auto", "ksp", "online", "off"], Switch] = Field(
-        _td("method"), description="auto: ksp for runs of two frames or more; ksp: offline, globally "
-                                   "optimal; online: causal, committed `delay` frames behind; off: no tracks")
-    max_speed: Num = Field(_td("max_speed"), gt=0, description="fastest move between frames, m/s")
-    prune: Num = Field(_td("prune"), gt=0, lt=1, description="cells below this rho* are left out of the graph")
-    peak: Num = Field(_td("peak"), gt=0, lt=1, description="map peaks at least this high may be bridged "
-                                                           "across hidden frames")
-    min_rho: Num = Field(_td("min_rho"), gt=0, lt=0.5, description="rho* floor of a node's cost: a "
-                                                                   "bridged frame costs -log(min_rho / (1 - min_rho))")
-    max_rho: Num = Field(_td("max_rho"), gt=0.5, lt=1, description="rho* ceiling of a node's cost")
-    jitter: Num = Field(_td("jitter"), ge=0, description="how far a map's peak may wander from the "
-                                                         "person between frames, metres (reach = "
-                                                         "max_speed / fps + jitter)")
-    entry_cost: Num = Field(_td("entry_cost"), ge=0, description="starting or ending a track at an entry "
-                                                                 "cell (grid border, edge of the view, regions)")
-    appear_cost: Num = Field(_td("appear_cost"), ge=0, description="starting or ending one anywhere else")
-    max_gap: Int = Field(_td("max_gap"), ge=0, description="most frames a track is bridged across")
-    window: Int = Field(_td("window"), ge=2, description="ksp: frames per solved window")
-    overlap: Int = Field(_td("overlap"), ge=0, description="ksp: frames two windows share (stitched there)")
-    delay: Int = Field(_td("delay"), ge=0, description="online: frames between the newest and the committed one")
-    regions: list[Annotated[tuple[float, float, float, float], _numbers(4)]] = Field(
-        [], description="more entry areas [x_min, x_max, y_min, y_max], metres (doors)")
-    trail: Int = Field(_td("trail"), ge=0, description="frames of trail drawn behind a track in the pictures")
+TrackingSection = TrackingOptions  # declared by its owner (tracking.py)
 
 
 class OutputSection(Node):

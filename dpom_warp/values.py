@@ -1,5 +1,8 @@
 """The config's value types, each checking its input and saying what it expected, and `Node`,
-the mapping every section is: unknown keys are errors naming the closest known key."""
+the mapping every section is: unknown keys are errors naming the closest known key. Below every
+layer, so that the owner of a config section (the tracker, the background estimator, ...)
+declares its typed options once, with their checks and descriptions, and the config package
+composes them."""
 
 from __future__ import annotations
 
@@ -170,6 +173,14 @@ def _batch(v):
 
 
 Batch = Annotated[Union[Literal["auto"], Annotated[int, Field(ge=1)]], BeforeValidator(_batch)]
+
+
+def _switch(v):
+    """YAML 1.1 reads a bare on / off as true / false: the words they were."""
+    return {True: "on", False: "off"}.get(v, v) if isinstance(v, bool) else v
+
+
+Switch = BeforeValidator(_switch)
 
 
 def _up(v):
