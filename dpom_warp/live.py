@@ -152,14 +152,12 @@ class LiveRun:
 
     def __init__(self, cfg: RunConfig, output_dir, device, log, max_frames, overwrite, first_frame_timeout,
                  workers):
-        from .loop import FrameLoop, OnlineTracks
-        from .outputs import prepare_output
+        from .loop import open_loop
         from .session import set_up
         from .sources import open_source
         from .frames import played_source
-        from .tracking import Cells, OnlineTracker
         from .worker import FrameWorker, Helpers
-        from .writers import Rerun, RunView, writers_for
+        from .writers import Rerun
 
         self.cfg, self.log, self.max_frames, self.first_frame_timeout = cfg, log, max_frames, first_frame_timeout
         self.t_start = time.perf_counter()
@@ -178,21 +176,17 @@ class LiveRun:
         if cfg.tracking.method == "ksp":
             log("tracking.method ksp needs the whole run; a live run tracks online")
         self.fps = info.rate_hz or cfg.inputs.fps
-        prepare_output(self.out, cfg.resolved, overwrite, resume=False)
+        # the plain run's writers; with tracks, a frame's picture and its tracks on the view wait for
+        # the online tracker to commit it (tracking.delay frames later)
+        self.frame_loop = open_loop(cfg, self.out, self.geometry, setup.spec.camera, overwrite=overwrite,
+                                    resume=False, worker_pictures=not self.tracking_on,
+                                    online_fps=self.fps if self.tracking_on else None, log=log)
+        self.run_view, self.writers, self.online = self.frame_loop.view, self.frame_loop.writers, self.frame_loop.online
+        self.rerun = self.writers.has(Rerun)
         log(f"live: {info.kind}, {info.width}x{info.height} at {self.fps:g} frames/s; device {setup.device}, "
             f"{self.workers} process{'es' * (self.workers > 1)}; background: "
             f"{setup.background}; until {'the frames end, ' if cfg.inputs.play else ''}Ctrl-C"
             f"{f' or {max_frames} frames' if max_frames else ''}")
-        # the plain run's writers; with tracks, the pictures are drawn once the tracks are final
-        self.run_view = RunView(cfg, self.out, self.geometry, setup.spec.camera, worker_pictures=not self.tracking_on)
-        self.writers = writers_for(self.run_view)
-        self.rerun = self.writers.has(Rerun)
-        # with tracks, a frame's picture and its tracks on the view wait for the online tracker to
-        # commit it (tracking.delay frames later)
-        self.online = OnlineTracks(self.run_view, self.writers, OnlineTracker(
-            Cells.for_run(self.geometry, cfg), cfg.grid.shape, cfg.tracking, 1.0 / self.fps,
-            cfg.detection.threshold)) if self.tracking_on else None
-        self.frame_loop = FrameLoop(self.run_view, self.writers, online=self.online, log=log)  # every run's frame loop body
         self.slot = NewestFrame()
         self.latencies, self.infer_s = [], []
         self.finished = []  # when each frame was written

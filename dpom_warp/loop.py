@@ -10,10 +10,14 @@ from __future__ import annotations
 import time
 from collections import Counter
 
+from pathlib import Path
+
+from .config import RunConfig
+from .geometry import Camera, Geometry
 from .io import InputError
-from .outputs import ShownTracks
+from .outputs import ShownTracks, prepare_output
 from .worker import FrameOutput
-from .writers import FrameDone, RunView, Writers
+from .writers import FrameDone, RunView, Writers, writers_for
 
 
 class OnlineTracks:
@@ -26,6 +30,15 @@ class OnlineTracks:
         self.trails = ShownTracks(view.geometry, view.cfg.tracking.trail)
         self.awaiting: dict[int, FrameDone] = {}  # frames pushed, not yet committed
         self.seconds = 0.0  # the tracker's time
+
+    @classmethod
+    def for_run(cls, view: RunView, writers: Writers, fps: float) -> OnlineTracks:
+        """The run's online tracker (its cells, grid and tracking section) at `fps` frames a second."""
+        from .tracking import Cells, OnlineTracker
+
+        cfg = view.cfg
+        return cls(view, writers, OnlineTracker(Cells.for_run(view.geometry, cfg), cfg.grid.shape, cfg.tracking,
+                                                1.0 / fps, cfg.detection.threshold))
 
     def push(self, done: FrameDone) -> None:
         self.awaiting[done.index] = done
@@ -106,3 +119,16 @@ class FrameLoop:
         done = self.done(name, output, timestamp, depth, result_dets)
         self.keep(name, output, done, self.write(done))
         return done
+
+
+def open_loop(cfg: RunConfig, out: Path, geometry: Geometry, camera: Camera, *, overwrite: bool, resume: bool,
+              worker_pictures: bool, online_fps: float | None = None, log=print, **kept) -> FrameLoop:
+    """Every run's frame loop opened, whichever executor feeds it (a recorded run's, a live
+    run's): the output folder made ready (prepare_output), the writers the config asks for
+    (writers_for) and, with `online_fps`, the online tracker of a live run at that rate;
+    `kept`: FrameLoop's mappings and `strict`, `timestamps`."""
+    prepare_output(out, cfg.resolved, overwrite, resume)
+    view = RunView(cfg, out, geometry, camera, worker_pictures=worker_pictures)
+    writers = writers_for(view)
+    online = OnlineTracks.for_run(view, writers, online_fps) if online_fps else None
+    return FrameLoop(view, writers, online=online, log=log, **kept)

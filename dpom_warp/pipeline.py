@@ -15,13 +15,12 @@ from .evaluate import load_ground_truth
 from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
 from .geometry import build_geometry
 from .io import InputError, write_json_atomic
-from .outputs import (RUN_STATE, ShownTracks, check_output, fps_of, pictures_deferred, prepare_output,
-                      remove_temporaries, summarise)
+from .outputs import (RUN_STATE, ShownTracks, check_output, fps_of, pictures_deferred, remove_temporaries, summarise)
 from .session import Setup, set_up
 from .sources import expand
 from .worker import FrameItem, FrameWorker, pool_outcomes
-from .loop import FrameLoop
-from .writers import FrameDone, Pictures, Rerun, RunEnd, RunView, Summary, TrackTables, Writers, jsonable, writers_for
+from .loop import FrameLoop, open_loop
+from .writers import FrameDone, Pictures, Rerun, RunEnd, RunView, Summary, TrackTables, Writers, jsonable
 
 
 @dataclasses.dataclass
@@ -147,11 +146,11 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
     """Make the output folder ready (prepare_output) and find the frames left to do: with
     `resume`, the frames whose record and map exist are done."""
     cfg, out, i = plan.cfg, plan.out, plan.inference
-    prepare_output(out, cfg.resolved, overwrite, resume)
-    plan.view = RunView(cfg, out, plan.geometry, plan.spec.camera, worker_pictures=plan.spec.pictures)
-    plan.writers = writers_for(plan.view)
-    plan.loop = FrameLoop(plan.view, plan.writers, plan.records, plan.skipped, plan.grown, plan.by_worker,
-                          plan.timestamps, strict=plan.strict, log=log)
+    plan.loop = open_loop(cfg, out, plan.geometry, plan.spec.camera, overwrite=overwrite, resume=resume,
+                          worker_pictures=plan.spec.pictures, log=log, records=plan.records,
+                          skipped=plan.skipped, grown=plan.grown, by_worker=plan.by_worker,
+                          timestamps=plan.timestamps, strict=plan.strict)
+    plan.view, plan.writers = plan.loop.view, plan.loop.writers
     log(f"device {plan.device}; {plan.geometry.locations.shape[0]} locations {cfg.grid.shape}; "
         f"{len(plan.frames)} frame{'' if len(plan.frames) == 1 else 's'}; background: {plan.background}; "
         f"inference at {i['image'][0]}x"
