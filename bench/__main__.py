@@ -129,7 +129,7 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     engine.set_background_frames(reduce(bg))
     setup = time.perf_counter() - t
     warm = engine.infer(depth)
-    lengths = engine.counts.numpy()  # after the bound: what the passes walk
+    lengths = engine.lists.counts.numpy()  # after the bound: what the passes walk
     median_list = float(np.median(lengths[lengths > 0])) if (lengths > 0).any() else 0.0
     small = reduce(depth)
 

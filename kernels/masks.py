@@ -43,8 +43,8 @@ from typing import Any
 
 import warp as wp
 
-from .pixel_model import (LOG_SQRT_2PI, GeometryArrays, PixelModel, f64, gaussian_logpdf_from_log, is_reading,
-                          object_delta)
+from .pixel_model import (LOG_SQRT_2PI, GeometryArrays, PixelLists, PixelModel, f64, gaussian_logpdf_from_log,
+                          is_reading, object_delta)
 from .pixel_model import object_depth, object_log_inlier, object_sigma
 
 EMPTY = wp.constant(wp.float64(1.0e300))
@@ -339,17 +339,13 @@ def pixel_entries(
     table: PixelTable,
     n_locations: int,
     fill: int,
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
+    lists: PixelLists,
     capacity: int,
-    entry_loc: wp.array(dtype=wp.int32),
-    entry_mu: wp.array(dtype=wp.float32),
-    entry_delta: wp.array(dtype=wp.float32),
     reserved: wp.array(dtype=wp.int32),
 ):
     b, v, u = wp.tid()
     p = (b * depth.shape[1] + v) * depth.shape[2] + u
-    if fill == 1 and reserved.shape[0] > 0 and counts[p] <= LOCAL_MATCHES:
+    if fill == 1 and reserved.shape[0] > 0 and lists.counts[p] <= LOCAL_MATCHES:
         return  # after pixel_entries_once: only the lists too long for its stack buffer
     z = f64(depth[b, v, u])
     n = int(0)
@@ -357,7 +353,7 @@ def pixel_entries(
         d = geo.rays[v, u]
         e0 = int(0)
         if fill == 1:
-            e0 = offsets[p]
+            e0 = lists.offsets[p]
         span = candidates(tiles, table, u, v, z)
         j = span[0]
         while j < span[1] and more(tiles, table, j, u, v, z):
@@ -367,18 +363,18 @@ def pixel_entries(
                     mu32 = wp.float32(m[0])
                     kb = b * n_locations + candidate_loc(tiles, table, j)
                     e = e0 + n
-                    while e > e0 and entry_before(mu32, kb, entry_mu[e - 1], entry_loc[e - 1]):
-                        entry_loc[e] = entry_loc[e - 1]
-                        entry_mu[e] = entry_mu[e - 1]
-                        entry_delta[e] = entry_delta[e - 1]
+                    while e > e0 and entry_before(mu32, kb, lists.mu[e - 1], lists.loc[e - 1]):
+                        lists.loc[e] = lists.loc[e - 1]
+                        lists.mu[e] = lists.mu[e - 1]
+                        lists.delta[e] = lists.delta[e - 1]
                         e -= 1
-                    entry_loc[e] = kb
-                    entry_mu[e] = mu32
-                    entry_delta[e] = wp.float32(m[1])
+                    lists.loc[e] = kb
+                    lists.mu[e] = mu32
+                    lists.delta[e] = wp.float32(m[1])
                 n += 1
             j += 1
     if fill == 0:
-        counts[p] = n
+        lists.counts[p] = n
 
 
 LOCAL_MATCHES = 128  # pixel_entries_once keeps up to this many of a pixel's entries on its stack
@@ -395,12 +391,8 @@ def pixel_entries_once(
     tiles: TileIndex,
     table: PixelTable,
     n_locations: int,
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
+    lists: PixelLists,
     capacity: int,
-    entry_loc: wp.array(dtype=wp.int32),
-    entry_mu: wp.array(dtype=wp.float32),
-    entry_delta: wp.array(dtype=wp.float32),
     reserved: wp.array(dtype=wp.int32),
 ):
     """The lists in one pass (CPU): each pixel runs pixel_entries' mask tests once, keeps its
@@ -441,15 +433,15 @@ def pixel_entries_once(
                     deltas[e] = wp.float32(m[1])
                 n += 1
             j += 1
-    counts[p] = n
+    lists.counts[p] = n
     start = int(0)
     if n > 0:
         start = wp.atomic_add(reserved, 0, n)
-    offsets[p] = start
+    lists.offsets[p] = start
     if n > LOCAL_MATCHES:
         wp.atomic_add(reserved, 1, 1)
     elif start + n <= capacity:
         for e in range(n):
-            entry_loc[start + e] = locs[e]
-            entry_mu[start + e] = mus[e]
-            entry_delta[start + e] = deltas[e]
+            lists.loc[start + e] = locs[e]
+            lists.mu[start + e] = mus[e]
+            lists.delta[start + e] = deltas[e]

@@ -15,7 +15,7 @@ from typing import Any
 import warp as wp
 
 from .masks import test_half_width
-from .pixel_model import (GeometryArrays, PixelModel, f64, is_reading, object_depth, object_log_inlier,
+from .pixel_model import (GeometryArrays, PixelLists, PixelModel, f64, is_reading, object_depth, object_log_inlier,
                           object_sigma)
 
 
@@ -69,10 +69,7 @@ def frame_of(index: int, per_frame: int) -> int:
 
 @wp.kernel(enable_backward=False)
 def evidence_pass(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
-    entry_delta: wp.array(dtype=wp.float32),
+    lists: PixelLists,
     delta_bg: wp.array(dtype=wp.float64),
     rho: wp.array(dtype=wp.float64),
     behind: wp.array(dtype=wp.float64),
@@ -93,30 +90,30 @@ def evidence_pass(
     p = wp.tid()
     if active.shape[0] > 0:
         p = active[p]
-    n = counts[p]
+    n = lists.counts[p]
     if n == 0:
         return
     if done[frame_of(p, pixels)] != 0:  # (Warp evaluates both sides of an `or`)
         return
-    start = offsets[p]
+    start = lists.offsets[p]
     b = delta_bg[p]  # B_n: what lies behind the last entry
     if local != 0 and n <= LOCAL_ENTRIES:
         if local == SIZED_STACK and n <= LOCAL_SHORT:
-            local_evidence(start, n, b, entry_loc, entry_delta, rho, evidence, LocalScratch16(), LocalScratch16())
+            local_evidence(start, n, b, lists.loc, lists.delta, rho, evidence, LocalScratch16(), LocalScratch16())
         elif local == SIZED_STACK and n <= LOCAL_MEDIUM:
-            local_evidence(start, n, b, entry_loc, entry_delta, rho, evidence, LocalScratch48(), LocalScratch48())
+            local_evidence(start, n, b, lists.loc, lists.delta, rho, evidence, LocalScratch48(), LocalScratch48())
         else:
-            local_evidence(start, n, b, entry_loc, entry_delta, rho, evidence, LocalScratch(), LocalScratch())
+            local_evidence(start, n, b, lists.loc, lists.delta, rho, evidence, LocalScratch(), LocalScratch())
         return
     for jj in range(n):
         j = start + n - 1 - jj
         behind[j] = b
-        r = rho[entry_loc[j]]
-        b = r * f64(entry_delta[j]) + (f64(1.0) - r) * b
+        r = rho[lists.loc[j]]
+        b = r * f64(lists.delta[j]) + (f64(1.0) - r) * b
     t = f64(1.0)
     for j in range(start, start + n):
-        k = entry_loc[j]
-        wp.atomic_add(evidence, k, t * (f64(entry_delta[j]) - behind[j]))
+        k = lists.loc[j]
+        wp.atomic_add(evidence, k, t * (f64(lists.delta[j]) - behind[j]))
         t = t * (f64(1.0) - rho[k])
 
 
@@ -265,18 +262,16 @@ def check_converged(
 
 @wp.kernel(enable_backward=False)
 def transparency_pass(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
+    lists: PixelLists,
     rho: wp.array(dtype=wp.float64),
     visible: wp.array(dtype=wp.float64),
 ):
     """visible[k] = sum over i in M_k of T_{k,i}: the unhidden, supported part of S_k."""
     p = wp.tid()
-    start = offsets[p]
+    start = lists.offsets[p]
     t = f64(1.0)
-    for j in range(start, start + counts[p]):
-        k = entry_loc[j]
+    for j in range(start, start + lists.counts[p]):
+        k = lists.loc[j]
         wp.atomic_add(visible, k, t)
         t = t * (f64(1.0) - rho[k])
 

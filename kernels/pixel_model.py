@@ -30,6 +30,20 @@ class GeometryArrays:
 
 
 @wp.struct
+class PixelLists:
+    """Per pixel of a batch, its list of entries in depth order (kernels.masks): pixel p's are
+    entries offsets[p] to offsets[p] + counts[p] - 1 of loc (the location), mu (the object
+    depth, float32) and delta (Delta_ki, eq. 12). The lists compacted to the live locations
+    (kernels.sparse) are the same struct, without mu (empty)."""
+
+    offsets: wp.array(dtype=wp.int32)
+    counts: wp.array(dtype=wp.int32)
+    loc: wp.array(dtype=wp.int32)
+    mu: wp.array(dtype=wp.float32)
+    delta: wp.array(dtype=wp.float32)
+
+
+@wp.struct
 class PixelModel:
     """Object pixel model and sensor range, as logs where the kernels use logs."""
 

@@ -27,7 +27,7 @@ import warp as wp
 
 from .mean_field import (LOCAL_ENTRIES, LOCAL_MEDIUM, LOCAL_SHORT, SIZED_STACK, LocalScratch, LocalScratch16,
                          LocalScratch48, frame_of, sigmoid)
-from .pixel_model import f64
+from .pixel_model import PixelLists, f64
 
 PRUNED = -1  # live[k] of a location the pruning bound removed for the whole frame
 IDLE = -2  # live[k] of a location in no list: its evidence is 0, it keeps its start
@@ -102,10 +102,7 @@ def local_bound(start: int, n: int, b: wp.float64, entry_loc: wp.array(dtype=wp.
 
 @wp.kernel(enable_backward=False)
 def bound_pass(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
-    entry_delta: wp.array(dtype=wp.float32),
+    lists: PixelLists,
     delta_bg: wp.array(dtype=wp.float64),
     rho: wp.array(dtype=wp.float64),
     upper: wp.array(dtype=wp.float64),
@@ -128,15 +125,15 @@ def bound_pass(
     settled adds nothing anyone uses, so it is skipped (half the demo frame's entries in the
     second and third rounds)."""
     p = wp.tid()
-    n = counts[p]
+    n = lists.counts[p]
     if n == 0:
         return
     if done[frame_of(p, pixels)] != 0:
         return
-    start = offsets[p]
+    start = lists.offsets[p]
     skip = int(1)  # every location of the pixel settled
     for j in range(start, start + n):
-        k = entry_loc[j]
+        k = lists.loc[j]
         if not settled(upper[k], rho[k], settle):
             skip = 0
             break
@@ -145,23 +142,23 @@ def bound_pass(
     b = delta_bg[p]
     if local != 0 and n <= LOCAL_ENTRIES:
         if local == SIZED_STACK and n <= LOCAL_SHORT:
-            local_bound(start, n, b, entry_loc, entry_delta, rho, upper, evidence, LocalScratch16(), LocalScratch16())
+            local_bound(start, n, b, lists.loc, lists.delta, rho, upper, evidence, LocalScratch16(), LocalScratch16())
         elif local == SIZED_STACK and n <= LOCAL_MEDIUM:
-            local_bound(start, n, b, entry_loc, entry_delta, rho, upper, evidence, LocalScratch48(), LocalScratch48())
+            local_bound(start, n, b, lists.loc, lists.delta, rho, upper, evidence, LocalScratch48(), LocalScratch48())
         else:
-            local_bound(start, n, b, entry_loc, entry_delta, rho, upper, evidence, LocalScratch(), LocalScratch())
+            local_bound(start, n, b, lists.loc, lists.delta, rho, upper, evidence, LocalScratch(), LocalScratch())
         return
     for jj in range(n):
         j = start + n - 1 - jj
         behind[j] = b
-        k = entry_loc[j]
-        x = f64(entry_delta[j]) - b
+        k = lists.loc[j]
+        x = f64(lists.delta[j]) - b
         if x < f64(0.0):
             b = b + wp.max(rho[k], upper[k]) * x
     t = f64(1.0)
     for j in range(start, start + n):
-        k = entry_loc[j]
-        x = f64(entry_delta[j]) - behind[j]
+        k = lists.loc[j]
+        x = f64(lists.delta[j]) - behind[j]
         if x >= f64(0.0):
             wp.atomic_add(evidence, k, x)
         else:
@@ -207,11 +204,7 @@ def prune(
 
 @wp.kernel(enable_backward=False)
 def prune_lists(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
-    entry_mu: wp.array(dtype=wp.float32),
-    entry_delta: wp.array(dtype=wp.float32),
+    lists: PixelLists,
     live: wp.array(dtype=wp.int32),
     per_location: wp.array(dtype=wp.int32),
     listed: wp.array(dtype=wp.int32),
@@ -223,47 +216,44 @@ def prune_lists(
     CPU thread): the passes over the lists run over those alone (an empty pixel's thread costs
     ~2 ns, and most of a frame's pixels are empty after the pruning)."""
     p = wp.tid()
-    start = offsets[p]
+    start = lists.offsets[p]
     e = start
-    for j in range(start, start + counts[p]):
-        k = entry_loc[j]
+    for j in range(start, start + lists.counts[p]):
+        k = lists.loc[j]
         if live[k] != PRUNED:
-            entry_loc[e] = k
-            entry_mu[e] = entry_mu[j]
-            entry_delta[e] = entry_delta[j]
+            lists.loc[e] = k
+            lists.mu[e] = lists.mu[j]
+            lists.delta[e] = lists.delta[j]
             wp.atomic_add(per_location, k, 1)
             e += 1
-    counts[p] = e - start
+    lists.counts[p] = e - start
     if e > start:
         listed[wp.atomic_add(n_listed, 0, 1)] = p
 
 
 @wp.kernel(enable_backward=False)
 def count_entries(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
+    lists: PixelLists,
     per_location: wp.array(dtype=wp.int32),
 ):
     """per_location[k] += the entries of location k in the lists (prune_lists' count, without
     its copies)."""
     p = wp.tid()
-    start = offsets[p]
-    for j in range(start, start + counts[p]):
-        wp.atomic_add(per_location, entry_loc[j], 1)
+    start = lists.offsets[p]
+    for j in range(start, start + lists.counts[p]):
+        wp.atomic_add(per_location, lists.loc[j], 1)
 
 
 @wp.func
-def live_entries(offsets: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32),
-                 entry_loc: wp.array(dtype=wp.int32), live: wp.array(dtype=wp.int32), pixels: int,
-                 done: wp.array(dtype=wp.int32), p: int) -> int:
+def live_entries(lists: PixelLists, live: wp.array(dtype=wp.int32), pixels: int, done: wp.array(dtype=wp.int32),
+                 p: int) -> int:
     """Pixel p's entries of live locations (none when its frame is done; the lists hold no
     pruned location, so live is 0 or 1 there)."""
     n = int(0)
     if done[frame_of(p, pixels)] == 0:
-        start = offsets[p]
-        for j in range(start, start + counts[p]):
-            n += live[entry_loc[j]]
+        start = lists.offsets[p]
+        for j in range(start, start + lists.counts[p]):
+            n += live[lists.loc[j]]
     return n
 
 
@@ -284,17 +274,11 @@ def copy_live(start: int, n: int, entry_loc: wp.array(dtype=wp.int32), entry_del
 
 @wp.kernel(enable_backward=False)
 def compact_once(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
-    entry_delta: wp.array(dtype=wp.float32),
+    lists: PixelLists,
     live: wp.array(dtype=wp.int32),
     pixels: int,
     done: wp.array(dtype=wp.int32),
-    live_offsets: wp.array(dtype=wp.int32),
-    live_counts: wp.array(dtype=wp.int32),
-    live_loc: wp.array(dtype=wp.int32),
-    live_delta: wp.array(dtype=wp.float32),
+    compact: PixelLists,
     active: wp.array(dtype=wp.int32),
     totals: wp.array(dtype=wp.int32),
 ):
@@ -304,22 +288,19 @@ def compact_once(
     a GPU: each slice is still the pixel's own); the sparse evidence passes then run over the
     active pixels alone, on the CPU in the same order as over every pixel (the same sums)."""
     p = wp.tid()
-    n = live_entries(offsets, counts, entry_loc, live, pixels, done, p)
-    live_counts[p] = n
+    n = live_entries(lists, live, pixels, done, p)
+    compact.counts[p] = n
     if n > 0:
         e = wp.atomic_add(totals, 1, n)
-        live_offsets[p] = e
+        compact.offsets[p] = e
         active[wp.atomic_add(totals, 2, 1)] = p
-        copy_live(offsets[p], counts[p], entry_loc, entry_delta, live, e, live_loc, live_delta)
+        copy_live(lists.offsets[p], lists.counts[p], lists.loc, lists.delta, live, e, compact.loc, compact.delta)
 
 
 @wp.kernel(enable_backward=False)
 def compact_again(
     active: wp.array(dtype=wp.int32),
-    live_offsets: wp.array(dtype=wp.int32),
-    live_counts: wp.array(dtype=wp.int32),
-    live_loc: wp.array(dtype=wp.int32),
-    live_delta: wp.array(dtype=wp.float32),
+    compact: PixelLists,
     live: wp.array(dtype=wp.int32),
     pixels: int,
     done: wp.array(dtype=wp.int32),
@@ -331,44 +312,37 @@ def compact_again(
     compact list loses its dead entries in place, in order, and the pixels still holding some
     go to active_out at totals[2] (in order on one CPU thread)."""
     p = active[wp.tid()]
-    start = live_offsets[p]
+    start = compact.offsets[p]
     e = start
     if done[frame_of(p, pixels)] == 0:
-        e = copy_live(start, live_counts[p], live_loc, live_delta, live, start, live_loc, live_delta)
-    live_counts[p] = e - start
+        e = copy_live(start, compact.counts[p], compact.loc, compact.delta, live, start, compact.loc, compact.delta)
+    compact.counts[p] = e - start
     if e > start:
         active_out[wp.atomic_add(totals, 2, 1)] = p
 
 
 @wp.kernel(enable_backward=False)
 def count_live(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
+    lists: PixelLists,
     live: wp.array(dtype=wp.int32),
     pixels: int,
     done: wp.array(dtype=wp.int32),
-    live_counts: wp.array(dtype=wp.int32),
+    compact: PixelLists,
 ):
     p = wp.tid()
-    live_counts[p] = live_entries(offsets, counts, entry_loc, live, pixels, done, p)
+    compact.counts[p] = live_entries(lists, live, pixels, done, p)
 
 
 @wp.kernel(enable_backward=False)
 def fill_live(
-    offsets: wp.array(dtype=wp.int32),
-    counts: wp.array(dtype=wp.int32),
-    entry_loc: wp.array(dtype=wp.int32),
-    entry_delta: wp.array(dtype=wp.float32),
+    lists: PixelLists,
     live: wp.array(dtype=wp.int32),
-    live_offsets: wp.array(dtype=wp.int32),
-    live_counts: wp.array(dtype=wp.int32),
-    live_loc: wp.array(dtype=wp.int32),
-    live_delta: wp.array(dtype=wp.float32),
+    compact: PixelLists,
 ):
     p = wp.tid()
-    if live_counts[p] > 0:
-        copy_live(offsets[p], counts[p], entry_loc, entry_delta, live, live_offsets[p], live_loc, live_delta)
+    if compact.counts[p] > 0:
+        copy_live(lists.offsets[p], lists.counts[p], lists.loc, lists.delta, live, compact.offsets[p], compact.loc,
+                  compact.delta)
 
 
 @wp.kernel(enable_backward=False)

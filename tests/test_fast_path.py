@@ -216,7 +216,7 @@ def check_bound_against_reference(device, seed, shape, step=0.3, behind_cost=0.0
         engine.local_scratch = local
         engine.set_background_frames(bg_frames)
         engine.build_lists(depth)
-        lengths = engine.counts.numpy().copy()
+        lengths = engine.lists.counts.numpy().copy()
         engine.rho.assign(start)
         engine.done.zero_()
         engine.prune(math.log(params.prior) - math.log1p(-params.prior))
@@ -286,7 +286,7 @@ def test_sparse_path_matches_sparse_reference(device, seed, streak, graph):
     # the passes over the lists ran over the pixels with entries after the pruning, all of them
     # (their count as the device wrote it: a loop captured as a graph, CUDA's default, reads
     # nothing back, and launches over every pixel)
-    held = np.flatnonzero(engine.counts.numpy())
+    held = np.flatnonzero(engine.lists.counts.numpy())
     n_listed = int(engine.n_listed_out.numpy()[0])
     assert engine.n_listed == (None if engine.graph else n_listed)
     listed = engine.listed.numpy()[:n_listed]

@@ -41,11 +41,11 @@ def test_rho_matches_reference(device, seed, path, shape):
 
 def lists_as_entries(engine):
     """(pixel, loc, mu, delta) of the engine's lists, in list order."""
-    counts, offsets = engine.counts.numpy(), engine.offsets.numpy()
+    counts, offsets = engine.lists.counts.numpy(), engine.lists.offsets.numpy()
     order = np.concatenate([np.arange(o, o + c) for o, c in zip(offsets, counts) if c])
     pixel = np.repeat(np.arange(len(counts)), counts)
-    return (pixel, engine.entry_loc.numpy()[order], engine.entry_mu.numpy()[order],
-            engine.entry_delta.numpy()[order])
+    return (pixel, engine.lists.loc.numpy()[order], engine.lists.mu.numpy()[order],
+            engine.lists.delta.numpy()[order])
 
 
 def distorted_voxel_scene(seed, shape="plane"):
@@ -307,7 +307,7 @@ def test_evidence_scratch_on_stack_or_global_agree(device):
         got = engine.infer(depth)
         assert got.iterations == want["iterations"]
         np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
-    lengths = engine.counts.numpy()
+    lengths = engine.lists.counts.numpy()
     tiers = np.digitize(lengths[lengths > 0], [LOCAL_SHORT + 1, LOCAL_MEDIUM + 1, LOCAL_ENTRIES + 1])
     assert set(tiers) == {0, 1, 2, 3}, np.bincount(tiers)  # every stack size and the global scratch
 

@@ -184,8 +184,10 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
             self.centre = wp.vec3d(*(float(c) for c in geometry.centre))
             self.depth = wp.zeros((batch, self.height, self.width), dtype=wp.float32)
-            self.counts = wp.zeros(P, dtype=wp.int32)
-            self.offsets = wp.zeros(P, dtype=wp.int32)
+            # the per-pixel lists (kernels.PixelLists: their entries' arrays by _allocate_lists)
+            self.lists, self.compact_lists = K.PixelLists(), K.PixelLists()
+            self.lists.counts = wp.zeros(P, dtype=wp.int32)
+            self.lists.offsets = wp.zeros(P, dtype=wp.int32)
             self.delta_bg = wp.zeros(P, dtype=wp.float64)
             self.bg = wp.zeros((P, 4), dtype=wp.float64)
             self.bg_logs = wp.zeros(P, dtype=wp.vec4d)  # its logarithms (kernels.background_delta)
@@ -218,8 +220,8 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
             self.live = wp.ones(L, dtype=wp.int32)
             self.streak = wp.zeros(L, dtype=wp.int32)  # per-location damping runs (update_rho)
             self.n_behind = wp.zeros(L, dtype=wp.int32)  # silhouette pixels read behind (behind_count)
-            self.live_counts = wp.zeros(P, dtype=wp.int32)
-            self.live_offsets = wp.zeros(P, dtype=wp.int32)
+            self.compact_lists.counts = wp.zeros(P, dtype=wp.int32)  # the lists compacted (kernels.sparse)
+            self.compact_lists.offsets = wp.zeros(P, dtype=wp.int32)
             self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
             self.kept_index = wp.zeros(L, dtype=wp.int32)
             self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.prune_lists
@@ -268,7 +270,8 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
         t0 = time.perf_counter()
         self.build_lists(depths_m)
         self.tallies.zero_()  # (the entries counted now: the bound's pruning changes the counts)
-        self._launch(K.frame_tally, self.batch * self.n_pixels, [self.counts, self.n_pixels, K.TALLY_SUM, self.tallies, 0])
+        self._launch(K.frame_tally, self.batch * self.n_pixels,
+                     [self.lists.counts, self.n_pixels, K.TALLY_SUM, self.tallies, 0])
         wp.synchronize_device(dev)
         t1 = time.perf_counter()
         logit_prior, bound = self._start(n, start)

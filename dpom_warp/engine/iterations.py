@@ -55,8 +55,7 @@ class IterationsMixin:
         walks every list and updates every location; otherwise the compact lists of the live
         locations (see `compact`) and only those move (kernels.sparse)."""
         full_lists = full or self.sparse_on_lists
-        lists = ((self.offsets, self.counts, self.entry_loc, self.entry_delta) if full_lists else
-                 (self.live_offsets, self.live_counts, self.live_loc, self.live_delta))
+        lists = self.lists if full_lists else self.compact_lists
         pixels, active = self.batch * self.n_pixels, self.no_index
         if not full_lists and self.n_active is not None:  # the pixels with live entries alone
             pixels, active = self.n_active, self.active
@@ -64,7 +63,7 @@ class IterationsMixin:
             pixels, active = self.n_listed, self.listed
         launch, p = self._launch, self.params
         if pixels:
-            launch(K.evidence_pass, pixels, [*lists, self.delta_bg, self.rho, self.behind, self.evidence,
+            launch(K.evidence_pass, pixels, [lists, self.delta_bg, self.rho, self.behind, self.evidence,
                                              self.n_pixels, self.done, self.local_scratch, active])
         index, dim = self.no_index, self.batch * self.n_locations
         if not full and self.n_live is not None:  # the live locations alone (gather_live)
@@ -150,7 +149,7 @@ class IterationsMixin:
         if not self.graph:
             self._iterate_all(logit_prior)
             return
-        lists = (self.entry_loc.ptr, self.capacity)
+        lists = (self.lists.loc.ptr, self.capacity)
         if self._graph is None or self._graph_lists != lists:  # new list buffers: new graph
             with wp.ScopedCapture(device=self.device) as capture:
                 self._iterate_all(logit_prior)

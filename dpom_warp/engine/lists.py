@@ -64,7 +64,7 @@ class ListsMixin:
         self._launch(K.background_delta, self.depth.shape, [self.depth, self.pm, self.bg, int(self.bg_fresh),
                                                             self.bg_logs, self.delta_bg])
         self.bg_fresh = False
-        lists = [self.offsets, self.counts, self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
+        lists = [self.lists, self.capacity]
         inputs = [self.depth, self.geo, self.pm, self.bg, self.tiles, self.table, self.n_locations]
         if self.one_pass_lists:  # CPU: each mask test once (kernels.masks.pixel_entries_once)
             def one_pass():
@@ -75,17 +75,17 @@ class ListsMixin:
             total, long_lists = one_pass()
             if total > self.capacity:
                 self._grow(total)
-                lists[2:] = [self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
+                lists = [self.lists, self.capacity]
                 total, long_lists = one_pass()
             if long_lists:  # lists longer than its stack buffer: filled as on a GPU, alone
                 self._launch(K.pixel_entries, self.depth.shape, inputs + [1] + lists + [self.reserved])
             return total
         self._launch(K.pixel_entries, self.depth.shape, inputs + [0] + lists + [self.no_reserved])
-        wp.utils.array_scan(self.counts, self.offsets, inclusive=False)
-        total = int(self.offsets[-1:].numpy()[0]) + int(self.counts[-1:].numpy()[0])
+        wp.utils.array_scan(self.lists.counts, self.lists.offsets, inclusive=False)
+        total = int(self.lists.offsets[-1:].numpy()[0]) + int(self.lists.counts[-1:].numpy()[0])
         if total > self.capacity:
             self._grow(total)
-            lists[2:] = [self.capacity, self.entry_loc, self.entry_mu, self.entry_delta]
+            lists = [self.lists, self.capacity]
         self._launch(K.pixel_entries, self.depth.shape, inputs + [1] + lists + [self.no_reserved])
         return total
 
@@ -105,11 +105,10 @@ class ListsMixin:
         those of self.live of the frames not self.done, or of `live` of the frames not `done`."""
         dim = self.batch * self.n_pixels
         live = self.live if live is None else live
-        self._launch(K.count_live, dim, [self.offsets, self.counts, self.entry_loc, live, self.n_pixels,
-                                         self.done if done is None else done, self.live_counts])
-        wp.utils.array_scan(self.live_counts, self.live_offsets, inclusive=False)
-        self._launch(K.fill_live, dim, [self.offsets, self.counts, self.entry_loc, self.entry_delta, live,
-                                        self.live_offsets, self.live_counts, self.live_loc, self.live_delta])
+        self._launch(K.count_live, dim, [self.lists, live, self.n_pixels, self.done if done is None else done,
+                                         self.compact_lists])
+        wp.utils.array_scan(self.compact_lists.counts, self.compact_lists.offsets, inclusive=False)
+        self._launch(K.fill_live, dim, [self.lists, live, self.compact_lists])
 
     def prune(self, logit_prior: float):
         """The pruning bound from the current rho (the start): params.bound_rounds rounds,
@@ -123,18 +122,16 @@ class ListsMixin:
             self.upper.fill_(1.0)
             self.evidence.zero_()
             for _ in range(p.bound_rounds):
-                self._launch(K.bound_pass, dim, [self.offsets, self.counts, self.entry_loc, self.entry_delta,
-                                                 self.delta_bg, self.rho, self.upper, self.behind, self.evidence,
-                                                 self.n_pixels, self.done, self.local_scratch, p.sparse_epsilon])
+                self._launch(K.bound_pass, dim, [self.lists, self.delta_bg, self.rho, self.upper, self.behind,
+                                                 self.evidence, self.n_pixels, self.done, self.local_scratch,
+                                                 p.sparse_epsilon])
                 self._launch(K.update_bound, len(self.upper),
                              [logit_prior, p.behind_cost, self.n_behind, self.evidence, self.upper,
                               p.sparse_epsilon, self.rho])
             self._launch(K.prune, len(self.upper), [p.sparse_epsilon, self.upper, self.rho, self.live])
         self.per_location.zero_()
         self.n_listed_out.zero_()
-        self._launch(K.prune_lists, dim, [self.offsets, self.counts, self.entry_loc, self.entry_mu,
-                                          self.entry_delta, self.live, self.per_location, self.listed,
-                                          self.n_listed_out])
+        self._launch(K.prune_lists, dim, [self.lists, self.live, self.per_location, self.listed, self.n_listed_out])
         self._launch(K.mark_idle, len(self.live), [self.per_location, self.live])
 
     def _count_behind(self):
@@ -143,7 +140,7 @@ class ListsMixin:
         (before the pruning, or after it: the pruned ones are in no list)."""
         self.per_location.zero_()
         self._launch(K.count_entries, self.batch * self.n_pixels,
-                     [self.offsets, self.counts, self.entry_loc, self.per_location])
+                     [self.lists, self.per_location])
         p = self.params
         self._launch(K.behind_count, len(self.live), [self.depth, self.pm, self.behind_first, self.behind_pixel,
                                                       self.behind_mu, self.behind_var, self.behind_half,
@@ -158,12 +155,10 @@ class ListsMixin:
         self.live_count.zero_()
         if compact == "lists":
             self._launch(K.compact_once, self.batch * self.n_pixels,
-                         [self.offsets, self.counts, self.entry_loc, self.entry_delta, self.live, self.n_pixels,
-                          self.done, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
-                          self.active, self.live_count])
+                         [self.lists, self.live, self.n_pixels, self.done, self.compact_lists, self.active,
+                          self.live_count])
         elif compact == "again" and self.n_active:
-            self._launch(K.compact_again, self.n_active, [self.active, self.live_offsets, self.live_counts,
-                                                          self.live_loc, self.live_delta, self.live,
+            self._launch(K.compact_again, self.n_active, [self.active, self.compact_lists, self.live,
                                                           self.n_pixels, self.done, self.active_next,
                                                           self.live_count])
             self.active, self.active_next = self.active_next, self.active

@@ -148,13 +148,20 @@ class StaticsMixin:
     def _allocate_lists(self, capacity: int):
         self._recorded = {}  # Engine._launch: the launches recorded with the old lists
         capacity = min(max(1024, capacity), self.max_entries)
+        # new structs (not the old ones' fields rewritten): Engine._launch knows a changed
+        # argument by its identity
+        lists, compact = K.PixelLists(), K.PixelLists()
+        lists.offsets, lists.counts = self.lists.offsets, self.lists.counts
+        compact.offsets, compact.counts = self.compact_lists.offsets, self.compact_lists.counts
         with wp.ScopedDevice(self.device):
-            self.entry_loc = wp.zeros(capacity, dtype=wp.int32)
-            self.entry_mu = wp.zeros(capacity, dtype=wp.float32)
-            self.entry_delta = wp.zeros(capacity, dtype=wp.float32)
+            lists.loc = wp.zeros(capacity, dtype=wp.int32)
+            lists.mu = wp.zeros(capacity, dtype=wp.float32)
+            lists.delta = wp.zeros(capacity, dtype=wp.float32)
             self.behind = wp.zeros(capacity, dtype=wp.float64)
-            self.live_loc = wp.zeros(capacity, dtype=wp.int32)
-            self.live_delta = wp.zeros(capacity, dtype=wp.float32)
+            compact.loc = wp.zeros(capacity, dtype=wp.int32)
+            compact.mu = wp.zeros(0, dtype=wp.float32)  # (the compact lists carry no depths)
+            compact.delta = wp.zeros(capacity, dtype=wp.float32)
+        self.lists, self.compact_lists = lists, compact
         self.capacity = capacity
 
     def memory_bytes(self) -> int:

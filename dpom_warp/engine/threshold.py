@@ -37,26 +37,26 @@ class ThresholdMixin:
             # scan (into listed), then each such pixel and its count placed at its rank (into
             # active and active_next: the flags are spent), arrays the iterations are done with
             dim = self.batch * self.n_pixels
-            self._launch(K.has_entries, dim, [self.live_counts, self.active_next])
+            self._launch(K.has_entries, dim, [self.compact_lists.counts, self.active_next])
             wp.utils.array_scan(self.active_next, self.listed, inclusive=True)
-            self._launch(K.place_active, dim, [self.live_counts, self.listed, self.active, self.active_next])
+            self._launch(K.place_active, dim, [self.compact_lists.counts, self.listed, self.active, self.active_next])
             pixels = int(self.listed[-1:].numpy()[0])
             index = self.active[:pixels]
             active, count = index.numpy(), self.active_next[:pixels].numpy()
             entries = int(count.sum())
-            loc, delta = self.live_loc[:entries].numpy(), self.live_delta[:entries].numpy()
+            loc, delta = self.compact_lists.loc[:entries].numpy(), self.compact_lists.delta[:entries].numpy()
             dbg = self.delta_bg[index].numpy()
         else:
             self.live_count.zero_()
             self._launch(K.compact_once, self.batch * self.n_pixels,
-                         [self.offsets, self.counts, self.entry_loc, self.entry_delta, self.candidate, self.n_pixels,
-                          self.not_done, self.live_offsets, self.live_counts, self.live_loc, self.live_delta,
+                         [self.lists, self.candidate, self.n_pixels, self.not_done, self.compact_lists,
                           self.active, self.live_count])
             _, entries, pixels = (int(x) for x in self.live_count.numpy())
             active = np.sort(self.active[:pixels].numpy())
-            first, count, dbg = (a.numpy()[active] for a in (self.live_offsets, self.live_counts, self.delta_bg))
+            compact = self.compact_lists
+            first, count, dbg = (a.numpy()[active] for a in (compact.offsets, compact.counts, self.delta_bg))
             at = np.repeat(first, count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
-            loc, delta = self.live_loc[:entries].numpy()[at], self.live_delta[:entries].numpy()[at]
+            loc, delta = compact.loc[:entries].numpy()[at], compact.delta[:entries].numpy()[at]
         p = self.params
         if p.behind_cost > 0:  # counted for every candidate (n_behind leaves out locations in no list)
             self._launch(K.behind_count, len(self.candidate),
@@ -74,7 +74,7 @@ class ThresholdMixin:
         p = self.params
         self.visible.zero_()
         self._launch(K.transparency_pass, self.batch * self.n_pixels,
-                     [self.offsets, self.counts, self.entry_loc, self.rho, self.visible])
+                     [self.lists, self.rho, self.visible])
         top = p.top_support if self.geometry.height > 0 else 0.0
         unhidden = int(p.share_of == "unhidden")
         if unhidden:
