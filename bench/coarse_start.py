@@ -64,7 +64,7 @@ def main():
         stride = fine.resolution.stride
         coarse_cfg = dataclasses.replace(cfg, inputs=cfg.inputs.model_copy(update={"stride": min(8, a.factor * stride)}))
         coarse = make_engine(coarse_cfg, cfg.camera, "cpu", 1)
-        later = dataclasses.replace(cfg.model, damping=cfg.model.damping * cfg.model.damping_growth ** a.skip)
+        later = cfg.model.replace(damping=cfg.model.damping * cfg.model.damping_growth ** a.skip)
         warm = make_engine(dataclasses.replace(cfg, model=later), cfg.camera, "cpu", 1)
         shape = (cfg.camera.height, cfg.camera.width)
         empty = np.stack([read_depth(f, cfg.inputs.depth_scale, shape)

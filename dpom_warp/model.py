@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from pydantic import Field, model_validator
 
-from .values import Int, Node, Num, _fail
+from .values import Bool, Heights, Int, Node, Num, Pair, _fail
 
 
 TOP_MIN_RHO = 1e-3  # locations whose rho* is below it before the top-band test skip it (a factor <= 1)
@@ -20,8 +21,7 @@ BAND_ALL = 1e30  # a height band that holds every pixel (the unhidden share of e
 MISSING_READ = 0.5
 
 
-@dataclass(frozen=True)
-class ModelParams:
+class ModelParams(Node):  # the config's `model` section (config.model_section: its automatic defaults)
     """Parameters of the DPOM pixel models and of mean-field inference.
 
     Attributes:
@@ -178,50 +178,117 @@ class ModelParams:
         behind_side, behind_low, behind_high, behind_step: see behind_cost.
     """
 
-    prior: float = 0.01
-    sigma_object: float = 0.1
-    sensor_noise: tuple[float, float] = (0.002, 0.0015)
-    outlier_prob: float = 0.05
-    missing_prob: float = 0.05
-    z_max: float = 10.0
-    alpha: float = 100.0
-    beta: float = -3.5
-    share_of: str = "silhouette"
-    damping: float = 0.1
-    damping_growth: float = 1.03
-    damping_max: float | None = 0.4
-    damping_streak: float = 1.0
-    damping_streak_max: float = 0.6
-    tolerance: float = 1e-4
-    max_iterations: int = 100
-    check_every: int = 5
-    missing_clip: float = 0.01
-    background_outside_grid: bool = True
-    background_occludes: bool = False
-    occlusion_margin: float = 0.1
-    sparse_epsilon: float = 1e-4
-    sparse_drop: float = 0.0
-    bound_rounds: int = 3
-    warm_start: bool = False
-    top_support: float = 0.13
-    top_band: float = 0.75
-    top_hidden: float = 0.25
-    top_slope: float = 100.0
-    top_min_pixels: int = 3
-    top_unseen: float = 0.0
-    top_unseen_share: float = 0.1
-    top_unseen_part: float = 0.05
-    top_sigmas: float = 2.0
-    top_heights: tuple[float, ...] = ()
-    top_missing: float = 1.0
-    exclusion: float = 10.0
-    exclusion_radius: float = 0.45
-    exclusion_gate: float = 0.5
-    behind_cost: float = 0.0
-    behind_side: float = 0.2
-    behind_low: float = 0.45
-    behind_high: float = 0.85
-    behind_step: int = 2
+    prior: Num = Field(0.01, gt=0, lt=1, description="prior occupancy of every cell")
+    sigma_object: Num = Field(0.1, gt=0,
+                              description="spread of an object's surface about the depth its model expects "
+                                          "(the solid's surface, or the facing plane), metres")
+    sensor_noise: Pair = Field((0.002, 0.0015),
+                               description="sensor sigma(z) = a + b z^2, metres; adds to sigma_object "
+                                           "and floors the background spread")
+    outlier_prob: Num = Field(0.05, gt=0, lt=1, description="pi_out")
+    missing_prob: Num = Field(0.05, ge=0, lt=1,
+                              description="pi_inf of objects and of the floor-only background")
+    z_max: Num = Field(10.0, gt=0, description="sensor range, metres")
+    alpha: Num = Field(100.0, description="soft threshold rho* = sigmoid(alpha e + beta) rho")
+    beta: Num = Field(-3.5, description="see alpha")
+    share_of: Literal["silhouette", "unhidden"] = Field(
+        "silhouette", description="eq. 13's e: share of the silhouette, or of its "
+        "pixels not hidden by something nearer (README, How it works)")
+    damping: Num = Field(0.1, gt=0, le=1,
+                         description="lambda of the damped update at the first iteration")
+    damping_growth: Num = Field(1.03, ge=1, description="growth of lambda per iteration")
+    damping_max: Num | None = Field(0.4, gt=0, le=1, description="cap of lambda (None: no growth beyond damping)")
+    damping_streak: Num = Field(1.0, ge=1,
+                                description="per-location growth of lambda while a location's target stays on one side of "
+                                            "its rho (1: off)")
+    damping_streak_max: Num = Field(0.6, gt=0, le=1,
+                                    description="cap of the per-location lambda (never below the iteration's lambda)")
+    tolerance: Num = Field(1e-4, gt=0,
+                           description="stop when max |rho_new - rho| is below it")
+    max_iterations: Int = Field(100, ge=1,
+                                description="iteration cap; frames that reach it unconverged are counted")
+    check_every: Int = Field(5, ge=1,
+                             description="iterations between convergence checks")
+    missing_clip: Num = Field(0.01, gt=0, lt=0.5,
+                              description="background pi_inf is clipped to [c, 1 - c]")
+    background_outside_grid: Bool = Field(True,
+                                          description="floor-only background: readings out of every "
+                                                      "object box are background")
+    background_occludes: Bool = Field(False,
+                                      description="a location does not claim pixels where the known "
+                                                  "background is in front of it by occlusion_margin")
+    occlusion_margin: Num = Field(0.1, ge=0, description="metres")
+    sparse_epsilon: Num = Field(1e-4, ge=0, le=0.5,
+                                description="sparse iterations: cells whose rho and rho_new are below "
+                                            "it leave the lists until a full pass; 0: every pass full")
+    sparse_drop: Num = Field(0.0, ge=0, le=1,
+                             description="sparse iterations: a full pass also drops, setting its rho to 0, a cell "
+                                         "whose rho_new is below sparse_epsilon and rho below this; 0: off")
+    bound_rounds: Int = Field(3, ge=0,
+                              description="with sparse iterations: rounds of the pruning bound, which "
+                                          "removes before the first pass the cells whose rho_new can "
+                                          "never reach sparse_epsilon; 0: no pruning")
+    warm_start: Bool = Field(False,
+                             description="start each frame from the previous frame's rho capped at the "
+                                         "prior (not with --workers or --ray)")
+    top_support: Num = Field(0.13, ge=0, le=1,
+                             description="the top-band test: rho* x sigmoid(top_slope (u - top_support)); 0: off")
+    top_band: Num = Field(0.75, ge=0, lt=1,
+                          description="the band starts at top_band x the object height")
+    top_hidden: Num = Field(0.25, ge=0, le=1,
+                            description="a hidden band pixel counts as this much of a supporting one")
+    top_slope: Num = Field(100.0, gt=0, description="steepness of the top-band sigmoid")
+    top_min_pixels: Int = Field(3, ge=1,
+                                description="fewer readings in the band: not judged")
+    top_unseen: Num = Field(0.0, ge=0, le=1, description="the top-band factor where the band is out of view "
+                                                          "(top_min_pixels, top_unseen_part); 1: not judged")
+    top_unseen_share: Num = Field(0.1, ge=0, le=1,
+                                  description="where the band is out of view, rho* also x sigmoid(top_slope "
+                                              "(e - this)), e eq. 13's share; 0: off")
+    top_unseen_part: Num = Field(0.05, ge=0, le=1,
+                                 description="a band with fewer than this share of the silhouette's pixels in "
+                                             "the image also counts as out of view")
+    top_sigmas: Num = Field(2.0, ge=0,
+                            description="a band pixel supports the object within this many sigma of "
+                                        "its depth; 0: the mask test")
+    top_heights: Heights = Field((), description="heights (metres, below the object's) of shorter people whose "
+                                                "top band is also tried, the best kept")
+    top_missing: Num = Field(1.0, ge=0, le=1,
+                             description="a band pixel with no reading where the object lies within z_max "
+                                         "(the sensor would read it there) and the background is mostly "
+                                         "read counts as this much of one reading behind it; 0: none")
+    exclusion: Num = Field(10.0, ge=0, description="two objects cannot stand within exclusion_radius: a "
+                                                   "location's evidence loses exclusion x its neighbours' rho "
+                                                   "above exclusion_gate; 0: off")
+    exclusion_radius: Num = Field(0.45, gt=0, description="metres")
+    exclusion_gate: Num = Field(0.5, ge=0, lt=1,
+                                description="neighbours' rho above it count")
+    behind_cost: Num = Field(0.0, ge=0, description="evidence a location loses per pixel of its silhouette's "
+                                                   "core that reads behind its object; 0: off (the paper)")
+    behind_side: Num = Field(0.2, ge=0, lt=0.5,
+                             description="share of each silhouette row left out at either end")
+    behind_low: Num = Field(0.45, ge=0, le=1,
+                            description="pixels whose object point lies below behind_low x the height "
+                                        "are left out (ground grids)")
+    behind_high: Num = Field(0.85, ge=0, le=1,
+                             description="pixels whose object point lies above behind_high x the height "
+                                         "are left out (ground grids)")
+    behind_step: int = Field(2, ge=1,
+                             description="counted on every behind_step-th row and column, each pixel "
+                                         "standing for behind_step^2")
+
+    @model_validator(mode="after")
+    def _checks(self):
+        if min(self.sensor_noise) < 0:
+            raise _fail(f"expected [a, b] >= 0, found {list(self.sensor_noise)}", "sensor_noise")
+        if self.damping_max is not None and self.damping_max < self.damping:
+            raise _fail(f"expected at least model.damping ({self.damping}), found {self.damping_max}",
+                        "damping_max")
+        return self
+
+    def replace(self, **changes) -> ModelParams:
+        """These parameters with `changes`, validated."""
+        return type(self)(**{**self.model_dump(), **changes})
 
     def full_pass(self, iteration: int) -> bool:
         """Whether iteration `iteration` (0-based) is a full pass: always on the exact path;

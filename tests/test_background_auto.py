@@ -1,7 +1,6 @@
 """`input.background: auto`: the streamed per-pixel estimate against its NumPy reference, what
 it finds behind moving people, its fallback pixels, and the run that uses it."""
 
-import dataclasses
 import json
 
 import numpy as np
@@ -144,7 +143,7 @@ def test_mixed_background_matches_reference(device):
     """Some pixels estimated, the others on the floor-only model completed from each frame:
     the engine's background and rho equal the reference's mix of the two."""
     geom, params, depth, bg_frames = random_scene(4)
-    params = dataclasses.replace(params, sparse_epsilon=0.0)
+    params = params.replace(sparse_epsilon=0.0)
     rng = np.random.default_rng(4)
     frames = np.concatenate([bg_frames, bg_frames[:3]])
     frames[:, :, :20] = rng.uniform(0.5, 8, frames[:, :, :20].shape)  # left part: nothing stable

@@ -198,7 +198,7 @@ def check_bound_against_reference(device, seed, shape, step=0.3, behind_cost=0.0
     from dpom_warp.kernels.mean_field import ONE_STACK, SIZED_STACK
 
     geom, params, depth, bg_frames = random_scene(seed, shape=shape, step=step)
-    params = dataclasses.replace(params, sparse_epsilon=1e-3, bound_rounds=1 + seed % 3, behind_cost=behind_cost,
+    params = params.replace(sparse_epsilon=1e-3, bound_rounds=1 + seed % 3, behind_cost=behind_cost,
                                  behind_side=0.2, behind_low=0.3)
     valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, ref.background_from_frames(bg_frames, params), params)
     start = np.random.default_rng(seed).uniform(0, 2 * params.prior, len(geom.rect))  # a warm start
@@ -208,8 +208,8 @@ def check_bound_against_reference(device, seed, shape, step=0.3, behind_cost=0.0
         alone = ref.evidence_bound(valid, L, D, dbg, start, params)
         assert ((want < params.sparse_epsilon) & (alone >= params.sparse_epsilon)).any()
     if params.bound_rounds > 1:  # not vacuous: the last round starts with settled locations
-        before = ref.evidence_bound(valid, L, D, dbg, start, dataclasses.replace(
-            params, bound_rounds=params.bound_rounds - 1), behind)
+        before = ref.evidence_bound(valid, L, D, dbg, start, params.replace(
+            bound_rounds=params.bound_rounds - 1), behind)
         assert ((before < params.sparse_epsilon) & (before <= start)).sum() > 10
     for local in (0, ONE_STACK, SIZED_STACK):
         engine = Engine(geom, params, device)
@@ -254,14 +254,14 @@ def test_pruning_bound_holds_at_every_iteration_of_the_exact_path(seed, shape, b
     reaches epsilon. With model.behind_cost the bound subtracts the readings behind each
     location, as every update does."""
     geom, params, depth, bg_frames = random_scene(seed, shape=shape)
-    params = dataclasses.replace(params, behind_cost=behind_cost, behind_side=0.2, behind_low=0.3)
+    params = params.replace(behind_cost=behind_cost, behind_side=0.2, behind_low=0.3)
     bg = ref.background_from_frames(bg_frames, params)
     valid, L, D, dbg, _ = ref.pixel_lists(depth, geom, bg, params)
-    params = dataclasses.replace(params, bound_rounds=4)
+    params = params.replace(bound_rounds=4)
     behind = ref.behind_evidence(depth, geom, params, valid, L)
     upper = ref.evidence_bound(valid, L, D, dbg, np.full(len(geom.rect), params.prior), params, behind)
     trace = []
-    ref.mean_field(depth, geom, bg, dataclasses.replace(params, sparse_epsilon=0.0), trace=trace)
+    ref.mean_field(depth, geom, bg, params.replace(sparse_epsilon=0.0), trace=trace)
     assert len(trace) > 10
     assert max((rho_new - upper).max() for rho_new in trace) <= 1e-12
     assert (upper < 1e-3).sum() > len(upper) // 4  # not vacuous: it prunes
@@ -273,7 +273,7 @@ def test_pruning_bound_holds_at_every_iteration_of_the_exact_path(seed, shape, b
 @pytest.mark.parametrize("seed", range(4))
 def test_sparse_path_matches_sparse_reference(device, seed, streak, graph):
     geom, params, depth, bg_frames = random_scene(seed)
-    params = dataclasses.replace(params, sparse_epsilon=1e-3, damping_streak=streak, damping_streak_max=0.6)
+    params = params.replace(sparse_epsilon=1e-3, damping_streak=streak, damping_streak_max=0.6)
     engine = Engine(geom, params, device, graph=graph)
     engine.set_background_frames(bg_frames)
     want = ref.mean_field(depth, geom, ref.background_from_frames(bg_frames, params), params)
@@ -302,7 +302,7 @@ def test_direct_launches_give_warps_launches_results():
     frame with other depths, a batch and lists that grow (new arrays in the blocks); and an
     engine switched to a graph afterwards replays what Warp's launches give."""
     geom, params, depth, bg_frames = random_scene(3, shape="solid")
-    params = dataclasses.replace(params, sparse_epsilon=1e-3)
+    params = params.replace(sparse_epsilon=1e-3)
     rng = np.random.default_rng(7)
     frames = [depth, np.where(rng.random(depth.shape) < 0.1, 0.0, depth * 0.97), depth[::-1].copy()]
     got = {}
@@ -332,8 +332,8 @@ def test_direct_launches_give_warps_launches_results():
 @pytest.mark.parametrize("seed", range(8))
 def test_sparse_path_stays_within_bound_of_exact(seed, eps):
     geom, params, depth, bg_frames = random_scene(seed)
-    engine = Engine(geom, dataclasses.replace(params, sparse_epsilon=eps), "cpu")
-    exact = Engine(geom, dataclasses.replace(params, sparse_epsilon=0.0), "cpu")
+    engine = Engine(geom, params.replace(sparse_epsilon=eps), "cpu")
+    exact = Engine(geom, params.replace(sparse_epsilon=0.0), "cpu")
     for e in (engine, exact):
         e.set_background_frames(bg_frames)
     fast, slow = engine.infer(depth), exact.infer(depth)
@@ -361,7 +361,7 @@ def test_sparse_path_within_bound_on_rendered_people(tmp_path):
     eps = cfg.model.sparse_epsilon
     engines = []
     for e in (0.0, eps):
-        c = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, sparse_epsilon=e))
+        c = dataclasses.replace(cfg, model=cfg.model.replace(sparse_epsilon=e))
         engine = make_engine(c, cfg.camera, "cpu", 1)
         engine.set_background_frames(engine.resolution.frames(bg))
         engines.append(engine)
@@ -410,7 +410,7 @@ def test_mask_index_option_gives_the_same_results(tmp_path):
 
 def test_warm_start_starts_from_the_previous_frame_capped_at_the_prior(device):
     geom, params, depth, bg_frames = random_scene(2)
-    params = dataclasses.replace(params, warm_start=True)
+    params = params.replace(warm_start=True)
     engine = Engine(geom, params, device)
     engine.set_background_frames(bg_frames)
     bg = ref.background_from_frames(bg_frames, params)
@@ -421,5 +421,5 @@ def test_warm_start_starts_from_the_previous_frame_capped_at_the_prior(device):
     start = np.minimum(first.rho, params.prior)
     want = ref.mean_field(second_depth, geom, bg, params, start=start)
     np.testing.assert_allclose(second.rho, want["rho"], rtol=0, atol=1e-6)
-    cold = ref.mean_field(second_depth, geom, bg, dataclasses.replace(params, warm_start=False))
+    cold = ref.mean_field(second_depth, geom, bg, params.replace(warm_start=False))
     assert np.abs(cold["rho"] - want["rho"]).max() > 1e-9  # the start really differs

@@ -32,7 +32,7 @@ def with_low_slabs(seed):
 @pytest.mark.parametrize("by_row", [False, True])  # a thread a location (the CPU's) or a row (a GPU's)
 def test_top_band_matches_reference(device, seed, sigmas, by_row):
     geom, params, depth = with_low_slabs(seed)
-    params = dataclasses.replace(params, sparse_epsilon=0.0, top_support=0.3, top_sigmas=sigmas)
+    params = params.replace(sparse_epsilon=0.0, top_support=0.3, top_sigmas=sigmas)
     engine = Engine(geom, params, device)
     engine.top_band_by_row = by_row
     got = engine.infer(depth)
@@ -59,8 +59,8 @@ def test_top_sigmas_is_a_stricter_support_than_the_mask_test():
     geom, params, depth = with_low_slabs(1)
     gate = np.ones(len(geom.rect))
     bg = ref.floor_background(geom, params, depth)
-    mask = ref.top_band(depth, geom, dataclasses.replace(params, top_sigmas=0.0), gate, bg)
-    strict = ref.top_band(depth, geom, dataclasses.replace(params, top_sigmas=1.0), gate, bg)
+    mask = ref.top_band(depth, geom, params.replace(top_sigmas=0.0), gate, bg)
+    strict = ref.top_band(depth, geom, params.replace(top_sigmas=1.0), gate, bg)
     assert np.all(strict[0] <= mask[0]) and np.any(strict[0] < mask[0])
     np.testing.assert_array_equal(sum(strict[:3]), sum(mask[:3]))
     np.testing.assert_array_equal(strict[3:], mask[3:])
@@ -68,14 +68,14 @@ def test_top_sigmas_is_a_stricter_support_than_the_mask_test():
 
 def test_off_and_voxel_grids_leave_rho_star_alone():
     geom, params, depth = with_low_slabs(1)
-    params = dataclasses.replace(params, sparse_epsilon=0.0, top_support=0.0)
+    params = params.replace(sparse_epsilon=0.0, top_support=0.0)
     bg = ref.floor_background(geom, params, depth)
     off = ref.mean_field(depth, geom, bg, params)
-    on = ref.mean_field(depth, geom, bg, dataclasses.replace(params, top_support=0.3))
+    on = ref.mean_field(depth, geom, bg, params.replace(top_support=0.3))
     np.testing.assert_array_equal(off["rho"], on["rho"])  # only the soft threshold changes
     assert np.any(on["rho_star"] < off["rho_star"] - 0.1)
     flat = ref.mean_field(depth, dataclasses.replace(geom, height=0.0), bg,
-                          dataclasses.replace(params, top_support=0.3))
+                          params.replace(top_support=0.3))
     np.testing.assert_array_equal(flat["rho_star"], off["rho_star"])
 
 
@@ -235,10 +235,10 @@ def test_missing_band_readings_count_against(device, seed):
     with it on (1) and off (0); the band counts are the same both ways (only the factor
     changes), the factor only lowers rho*, and somewhere it lowers it by more than 0.1."""
     geom, params, depth = with_low_slabs(seed)
-    params = dataclasses.replace(params, sparse_epsilon=0.0, top_support=0.3)
+    params = params.replace(sparse_epsilon=0.0, top_support=0.3)
     got = {}
     for weight in (0.0, 1.0):
-        p = dataclasses.replace(params, top_missing=weight)
+        p = params.replace(top_missing=weight)
         engine = Engine(geom, p, device)
         res = engine.infer(depth)
         want = ref.mean_field(depth, geom, ref.floor_background(geom, p, depth), p)
@@ -261,7 +261,7 @@ def test_missing_readings_count_only_where_the_object_would_be_read():
     bg = ref.floor_background(geom, params, depth)
     counts = ref.top_band(depth, geom, params, gate, bg)
     assert counts[3].sum() > 0
-    near = ref.top_band(depth, geom, dataclasses.replace(params, z_max=0.5), gate, bg)
+    near = ref.top_band(depth, geom, params.replace(z_max=0.5), gate, bg)
     assert near[3].sum() == 0  # every object lies beyond 0.5 m
 
 
@@ -274,7 +274,7 @@ def test_a_sensors_dead_region_is_not_missing(device, seed):
     from scenes import random_scene
 
     geom, params, depth, bg_frames = random_scene(seed)
-    params = dataclasses.replace(params, sparse_epsilon=0.0, top_support=0.3)
+    params = params.replace(sparse_epsilon=0.0, top_support=0.3)
     w = depth.shape[1] // 3
     depth, bg_frames = depth.copy(), bg_frames.copy()
     depth[:, :w] = 0.0  # the dead region

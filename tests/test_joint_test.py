@@ -2,7 +2,6 @@
 detections present, against the model's joint probability evaluated by brute force, from the
 lists the engine hands over on every device, and on rendered people."""
 
-import dataclasses
 
 import numpy as np
 import pytest
@@ -42,7 +41,7 @@ def log_joint(depth, geom, bg, params, cells):
 @pytest.mark.parametrize("seed", range(4))
 def test_log_odds_are_the_joint_probability_with_and_without_each_cell(seed, shape):
     geom, params, depth, bg_frames = random_scene(seed, shape=shape)
-    params = dataclasses.replace(params, behind_cost=2.0 if shape == "solid" else 0.0, exclusion=10.0,
+    params = params.replace(behind_cost=2.0 if shape == "solid" else 0.0, exclusion=10.0,
                                  exclusion_radius=0.45)
     bg = ref.background_from_frames(bg_frames, params) if seed % 2 else ref.floor_background(geom, params, depth)
     _, loc, _, _ = ref.mask_entries(depth, geom, params, bg)
@@ -67,7 +66,7 @@ def test_engine_hands_over_the_joint_tests_lists(device, frames):
     frames, or the floor-only model completed from the frame), alone and in a batch; a cell
     that is not a candidate is refused."""
     geom, params, depth, bg_frames = random_scene(5, shape="solid")
-    params = dataclasses.replace(params, behind_cost=2.0, exclusion=10.0, exclusion_radius=0.45,
+    params = params.replace(behind_cost=2.0, exclusion=10.0, exclusion_radius=0.45,
                                  background_outside_grid=True)
     engines = [Engine(geom, params, device), Engine(geom, params, device, batch=3), Engine(geom, params, device, batch=3)]
     engines[2].ordered_joint_lists = not engines[2].ordered_joint_lists  # the other device's way

@@ -431,7 +431,7 @@ def test_a_live_run_without_workers_uses_both_cores_on_the_cpu(tmp_path, monkeyp
     from test_cli import small_config
 
     cfg = load_config(small_config(tmp_path, frames=2))
-    warm = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, warm_start=True))
+    warm = dataclasses.replace(cfg, model=cfg.model.replace(warm_start=True))
     assert 1 <= live.usable_cpus() <= (os.cpu_count() or 1)
     for cpus, device, c, want in ((2, "cpu", cfg, 3), (16, "cpu", cfg, 3), (1, "cpu", cfg, 1),
                                   (16, "cuda:0", cfg, 1), (16, "cpu", warm, 1)):

@@ -1,7 +1,6 @@
 """Property-based: random small scenes and parameters never give NaN, rho outside [0, 1],
 or a Warp / NumPy mismatch."""
 
-import dataclasses
 
 import numpy as np
 from hypothesis import given, settings
@@ -36,7 +35,7 @@ params_strategy = st.fixed_dictionaries({
 def test_random_scene_is_finite_bounded_and_matches_reference(seed, width, height, use_frames, changes):
     geom, params, depth, frames = random_scene(seed, width, height)
     changes["damping_max"] = max(changes["damping"], 0.5)
-    params = dataclasses.replace(params, **changes)
+    params = params.replace(**changes)
     bg = ref.background_from_frames(frames, params) if use_frames else ref.floor_background(geom, params, depth)
     want = ref.mean_field(depth, geom, bg, params)
     for device in DEVICES:

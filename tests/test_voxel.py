@@ -34,7 +34,7 @@ def test_voxel_behind_a_cupboard_is_hidden_not_penalised(device):
     depth[1:3, 3] = 3.3  # the drone's visible part
     params = ModelParams(prior=0.01, sigma_object=0.15, damping_growth=1.0, max_iterations=200)
     without = run_both(device, depth, geom, cupboard_background(), params)
-    occl = dataclasses.replace(params, background_occludes=True, occlusion_margin=0.1)
+    occl = params.replace(background_occludes=True, occlusion_margin=0.1)
     with_rule = run_both(device, depth, geom, cupboard_background(), occl)
     # the cupboard's pixels (3.0 m, within 3 sigma of 3.3 m) count against the drone unless
     # the background is allowed to hide it
@@ -90,7 +90,7 @@ def test_background_occlusion_matches_reference_on_random_scenes(device):
 
     for seed in range(3):
         geom, params, depth, frames = random_scene(seed)
-        params = dataclasses.replace(params, background_occludes=True, occlusion_margin=0.05)
+        params = params.replace(background_occludes=True, occlusion_margin=0.05)
         engine = Engine(geom, params, device)
         engine.set_background_frames(frames)
         got = engine.infer(depth)

@@ -1,6 +1,5 @@
 """The Warp kernels against the plain NumPy reference, on random small scenes, every device."""
 
-import dataclasses
 
 import numpy as np
 import pytest
@@ -19,7 +18,7 @@ from scenes import random_scene
 @pytest.mark.parametrize("seed", range(6))
 def test_rho_matches_reference(device, seed, path, shape):
     geom, params, depth, bg_frames = random_scene(seed, shape=shape)
-    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4)
+    params = params.replace(sparse_epsilon=0.0 if path == "exact" else 1e-4)
     engine = Engine(geom, params, device)
     use_frames = seed % 2 == 0
     if use_frames:
@@ -133,7 +132,7 @@ def test_background_delta_follows_every_change_of_background(device, outside):
     from dpom_warp.model import Background
 
     geom, params, depth, frames = random_scene(3)
-    params = dataclasses.replace(params, background_outside_grid=outside)
+    params = params.replace(background_outside_grid=outside)
     engine = Engine(geom, params, device)
     given = ref.background_from_frames(frames[::-1] * 1.05, params)
     given = Background(mu=given.mu, sigma=2 * given.sigma, missing=np.full_like(given.missing, 0.2),
@@ -163,7 +162,7 @@ def test_lists_longer_than_the_one_pass_buffer(device):
     geom, params, depth, _ = random_scene(4)
     geom = build_geometry(Camera(24, 20, 20.0, 20.0, 11.5, 9.5, pose_from_angles(2.2, 15.0, 0.0)),
                           Grid(x=(-1.5, 1.5, 0.1), y=(1.5, 5.0, 0.1)), ObjectBox(0.5, 1.8))
-    params = dataclasses.replace(params, sigma_object=3.0)  # every box claims every reading
+    params = params.replace(sigma_object=3.0)  # every box claims every reading
     depth = np.random.default_rng(4).uniform(1.0, 6.0, (20, 24)).astype(np.float32)
     want = ref.mask_entries(depth, geom, params, None)
     lists = []
@@ -227,10 +226,9 @@ def test_list_overflow_is_refused_not_truncated(device):
 
 @pytest.mark.parametrize("outside", [True, False])
 def test_floor_background_per_frame_matches_reference(device, outside):
-    import dataclasses
 
     geom, params, depth, _ = random_scene(8)
-    params = dataclasses.replace(params, background_outside_grid=outside)
+    params = params.replace(background_outside_grid=outside)
     engine = Engine(geom, params, device)
     got = engine.infer(depth)
     bg = ref.floor_background(geom, params, depth)
@@ -318,7 +316,7 @@ def test_unhidden_share_matches_reference(device, seed, shape):
     """model.share_of: unhidden (eq. 13's e over the pixels not hidden by something nearer)
     on the Warp path equals the reference, and differs from the silhouette share somewhere."""
     geom, params, depth, _ = random_scene(seed, shape=shape)
-    params = dataclasses.replace(params, share_of="unhidden")
+    params = params.replace(share_of="unhidden")
     bg = ref.floor_background(geom, params, depth)
     want = ref.mean_field(depth, geom, bg, params)
     engine = Engine(geom, params, device)
@@ -327,7 +325,7 @@ def test_unhidden_share_matches_reference(device, seed, shape):
         got = engine.infer(depth)
         np.testing.assert_allclose(got.evidence_share, want["evidence_share"], rtol=0, atol=1e-9)
         np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
-    plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, share_of="silhouette"))
+    plain = ref.mean_field(depth, geom, bg, params.replace(share_of="silhouette"))
     assert np.any(want["evidence_share"] > plain["evidence_share"] + 1e-3)
 
 
@@ -341,12 +339,12 @@ def test_exclusion_matches_reference(device, seed, path):
 
     geom, params, depth, bg_frames = random_scene(seed, shape="solid")
     bg = ref.background_from_frames(bg_frames, params)
-    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4)
+    params = params.replace(sparse_epsilon=0.0 if path == "exact" else 1e-4)
     k = int(np.argmax(ref.mean_field(depth, geom, bg, params)["rho"]))
     near = np.linalg.norm(geom.locations - geom.locations[k], axis=1)
     other = int(np.flatnonzero((near > 0.2) & (near < 0.35) & (geom.rect_area > 0))[0])
     draw_slab(depth, geom, other)
-    params = dataclasses.replace(params, exclusion=100.0, exclusion_radius=0.45, exclusion_gate=0.2)
+    params = params.replace(exclusion=100.0, exclusion_radius=0.45, exclusion_gate=0.2)
     engine = Engine(geom, params, device, graph=path == "graph")
     engine.set_background_frames(bg_frames)
     want = ref.mean_field(depth, geom, bg, params)
@@ -354,7 +352,7 @@ def test_exclusion_matches_reference(device, seed, path):
     assert got.iterations == want["iterations"]
     np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
-    plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, exclusion=0.0))["rho"]
+    plain = ref.mean_field(depth, geom, bg, params.replace(exclusion=0.0))["rho"]
     assert min(plain[k], plain[other]) > 0.9 and min(want["rho"][k], want["rho"][other]) < 0.1
 
 
@@ -380,7 +378,7 @@ def test_behind_table_serves_every_frame_and_counts_in_memory(device, seed):
     from dpom_warp.engine import BEHIND_POINT_BYTES
 
     geom, params, depth, bg_frames = random_scene(seed, shape="solid")
-    params = dataclasses.replace(params, sparse_epsilon=0.0, behind_cost=3.0, behind_low=0.3, behind_step=1)
+    params = params.replace(sparse_epsilon=0.0, behind_cost=3.0, behind_low=0.3, behind_step=1)
     engine = Engine(geom, params, device)
     engine.set_background_frames(bg_frames)
     everyone = np.ones(len(geom.rect), bool)
@@ -392,7 +390,7 @@ def test_behind_table_serves_every_frame_and_counts_in_memory(device, seed):
         np.testing.assert_array_equal(engine.n_behind.numpy()[listed], want[listed])
         assert want[listed].max() > 0, "no reading behind any listed location: the count is not exercised"
     assert engine.behind_table == len(engine.behind_mu) > 0
-    plain = Engine(geom, dataclasses.replace(params, behind_cost=0.0), device)
+    plain = Engine(geom, params.replace(behind_cost=0.0), device)
     assert engine.memory_bytes() - plain.memory_bytes() == BEHIND_POINT_BYTES * engine.behind_table
 
 
@@ -401,7 +399,7 @@ def test_behind_count_at_the_mask_tests_edge(device):
     readings a millionth of W inside and outside mu +- W, in front and behind, get the
     reference's classes (the mask test itself), so the counts are the reference's."""
     geom, params, depth, bg_frames = random_scene(1, shape="solid")
-    params = dataclasses.replace(params, sparse_epsilon=0.0, behind_cost=3.0, behind_low=0.3, behind_step=1)
+    params = params.replace(sparse_epsilon=0.0, behind_cost=3.0, behind_low=0.3, behind_step=1)
     engine = Engine(geom, params, device)
     engine.set_background_frames(bg_frames)
     pixel, mu, half = (a.numpy() for a in (engine.behind_pixel, engine.behind_mu, engine.behind_half))
@@ -429,7 +427,7 @@ def test_behind_cost_matches_reference(device, seed, shape, path):
     after the iterations; the location with the most such readings gets a lower first update
     than without the cost."""
     geom, params, depth, bg_frames = random_scene(seed, shape=shape)
-    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4, behind_cost=3.0,
+    params = params.replace(sparse_epsilon=0.0 if path == "exact" else 1e-4, behind_cost=3.0,
                                  behind_side=0.2, behind_low=0.3, behind_step=1 + seed % 2)
     engine = Engine(geom, params, device, graph=path == "graph")
     engine.set_background_frames(bg_frames)
@@ -445,9 +443,9 @@ def test_behind_cost_matches_reference(device, seed, shape, path):
     np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     first, first_plain = [], []  # each iteration's rho_new: the first from the same start
-    exact = dataclasses.replace(params, sparse_epsilon=0.0)  # (the model's update, nothing pruned)
+    exact = params.replace(sparse_epsilon=0.0)  # (the model's update, nothing pruned)
     ref.mean_field(depth, geom, bg, exact, trace=first)
-    ref.mean_field(depth, geom, bg, dataclasses.replace(exact, behind_cost=0.0), trace=first_plain)
+    ref.mean_field(depth, geom, bg, exact.replace(behind_cost=0.0), trace=first_plain)
     k = int(np.argmax(np.where(listed, counts, -1)))
     assert first[0][k] < first_plain[0][k], "the location with the most readings behind it lost nothing"
 
@@ -466,7 +464,7 @@ def test_shorter_top_bands_match_reference(device, seed, shape, path):
     seen = np.flatnonzero(geom.rect_area > 0)
     for k in seen[len(seen) // 4::len(seen) // 4]:  # short people, in front of what is there
         draw_slab(depth, geom, k, below=0.72 * geom.height)
-    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4, top_heights=heights)
+    params = params.replace(sparse_epsilon=0.0 if path == "exact" else 1e-4, top_heights=heights)
     engine = Engine(geom, params, device)
     engine.set_background_frames(bg_frames)
     bg = ref.background_from_frames(bg_frames, params)
@@ -477,7 +475,7 @@ def test_shorter_top_bands_match_reference(device, seed, shape, path):
         for key in ("top_support", "top_against", "top_hidden", "top_missing", "top_seen"):
             np.testing.assert_array_equal(getattr(engine, key).numpy(), want[key], err_msg=key)
         np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
-    plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, top_heights=()))
+    plain = ref.mean_field(depth, geom, bg, params.replace(top_heights=()))
     kept_shorter = np.any([want[k] != plain[k] for k in ("top_support", "top_against", "top_hidden")], axis=0)
     assert kept_shorter.any(), "no location kept a shorter band: the choice is not exercised"
     assert np.all(want["rho_star"] >= plain["rho_star"] - 1e-12)
@@ -492,7 +490,7 @@ def test_unseen_band_share_matches_reference(device, seed, path):
     scene with the share off, exactly the locations whose band is out of view change, by that
     factor (the share set between their e values, so that some are cut and some kept)."""
     geom, params, depth, bg_frames = random_scene(seed, shape="solid")
-    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4, top_unseen=1.0,
+    params = params.replace(sparse_epsilon=0.0 if path == "exact" else 1e-4, top_unseen=1.0,
                                  top_unseen_share=0.0)
     bg = ref.background_from_frames(bg_frames, params)
     off = ref.mean_field(depth, geom, bg, params)
@@ -500,7 +498,7 @@ def test_unseen_band_share_matches_reference(device, seed, path):
     judged = unseen & (off["rho_star"] > 1e-3)
     assert judged.sum() >= 2, "fewer than two locations with their band out of view: not exercised"
     share = float(np.median(off["evidence_share"][judged]))
-    params = dataclasses.replace(params, top_unseen_share=share)
+    params = params.replace(top_unseen_share=share)
     engine = Engine(geom, params, device)
     engine.set_background_frames(bg_frames)
     want = ref.mean_field(depth, geom, bg, params)
@@ -528,14 +526,14 @@ def test_band_partly_out_of_view_matches_reference(device, seed, path):
     seen = np.flatnonzero(geom.rect_area > 0)
     for k in seen[len(seen) // 4::len(seen) // 4]:  # people whose bands are counted
         draw_slab(depth, geom, k, below=0.9 * geom.height)
-    params = dataclasses.replace(params, sparse_epsilon=0.0 if path == "exact" else 1e-4, top_unseen=0.0,
+    params = params.replace(sparse_epsilon=0.0 if path == "exact" else 1e-4, top_unseen=0.0,
                                  top_unseen_part=0.0, top_heights=(0.85 * geom.height,))
     bg = ref.background_from_frames(bg_frames, params)
     off = ref.mean_field(depth, geom, bg, params)
     counted = (off["top_seen"] >= params.top_min_pixels) & (geom.area > 0)
     assert counted.sum() >= 2, "fewer than two bands counted: not exercised"
     part = float(np.median(off["top_seen"][counted] / geom.area[counted]))
-    params = dataclasses.replace(params, top_unseen_part=part)
+    params = params.replace(top_unseen_part=part)
     engine = Engine(geom, params, device)
     engine.set_background_frames(bg_frames)
     want = ref.mean_field(depth, geom, bg, params)
@@ -582,7 +580,7 @@ def test_sparse_drop_matches_reference(device, seed, shape, graph):
     sparse_epsilon and whose rho is below sparse_drop) on the Warp path, driven from the host
     or as a graph, equals the reference; it changes the iterations' course somewhere."""
     geom, params, depth, bg_frames = random_scene(seed, shape=shape)
-    params = dataclasses.replace(params, sparse_epsilon=1e-4, sparse_drop=0.5)
+    params = params.replace(sparse_epsilon=1e-4, sparse_drop=0.5)
     engine = Engine(geom, params, device, graph=graph)
     engine.set_background_frames(bg_frames)
     bg = ref.background_from_frames(bg_frames, params)
@@ -591,7 +589,7 @@ def test_sparse_drop_matches_reference(device, seed, shape, graph):
     assert got.iterations == want["iterations"]
     np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
-    plain = ref.mean_field(depth, geom, bg, dataclasses.replace(params, sparse_drop=0.0))
+    plain = ref.mean_field(depth, geom, bg, params.replace(sparse_drop=0.0))
     assert np.abs(plain["rho"] - want["rho"]).max() > 1e-9, "nothing was dropped: the option is not exercised"
 
 

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import re
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -14,13 +13,13 @@ from pydantic import BaseModel, ValidationError
 from ..detect import EDGE_RADIUS
 from ..geometry import Camera, Grid, ObjectBox, pose_from_angles
 from ..ground import GroundOptions
-from ..model import BEHIND_COST, EXACT_BETA, TOP_SHORTER, ModelParams
+from ..model import ModelParams
 from ..synthetic import SceneSpec
 from ..tracking import TrackingOptions
 from .camera import PoseMatrix
 from .schema import ConfigFile
 from .sections import DetectionSection, EngineSection, EvaluationSection, InputSection, OutputSection
-from ..values import ConfigError, _d, _first_error
+from ..values import ConfigError, _first_error
 
 
 # -- the typed run config the pipeline uses ----------------------------------------------------
@@ -124,24 +123,8 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     ground = _fill(GroundOptions, cam.ground)
     grid = Grid(x=c.grid.x, y=c.grid.y, mode=c.grid.mode, z=c.grid.z)
     obj = _fill(ObjectBox, c.object)
-    m = c.model
-    damping_max = m.damping_max if m.damping_max is not None else max(_d(ModelParams, "damping_max"), m.damping)
-    exclusion = m.exclusion if m.exclusion is not None else (_d(ModelParams, "exclusion") if c.grid.mode == "ground" else 0.0)
-    behind_cost = (m.behind_cost if m.behind_cost is not None else  # the core is the solid's
-                   (BEHIND_COST if c.grid.mode == "ground" and c.object.shape == "solid" else 0.0))
-    # a person shorter than the solid; not floor-only, where the band is what tells furniture
-    # from people and a shorter one lets a cabinet of that height through
-    top_heights = (m.top_heights if m.top_heights is not None else
-                   ((round(c.object.height - TOP_SHORTER, 6),) if c.grid.mode == "ground" and c.object.shape == "solid"
-                    and c.object.height > 1.0 and c.input.background is not None else ()))
-    # a cell whose band is out of the image is not judged by it (people entering the view, a
-    # ceiling camera's edges); floor-only it is rejected: a table at the image's edge supports
-    # the lower part of such a solid, and without a background nothing tells it from a person
-    top_unseen = m.top_unseen if m.top_unseen is not None else (1.0 if c.input.background is not None else 0.0)
-    # eq. 13's cut-off, chosen for each path on the tuning draw (README, Defaults and why)
-    beta = m.beta if m.beta is not None else (EXACT_BETA if c.engine.exact else _d(ModelParams, "beta"))
-    model = _fill(ModelParams, m, damping_max=damping_max, exclusion=exclusion, behind_cost=behind_cost,
-                  top_heights=top_heights, top_unseen=top_unseen, beta=beta)
+    model = c.model.build(c.grid.mode, c.object.shape, c.object.height, c.input.background is not None,
+                          c.engine.exact)
     edge_radius = (c.detection.edge_radius if c.detection.edge_radius is not None else
                    EDGE_RADIUS if c.grid.mode == "ground" else 0.0)
     detection = c.detection.model_copy(update={"edge_radius": edge_radius})
@@ -149,7 +132,6 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     tracking = c.tracking
     if engine.exact:  # the exact path: full resolution, every pass full, no warm start
         inputs = inputs.model_copy(update={"stride": 1})
-        model = dataclasses.replace(model, sparse_epsilon=0.0, warm_start=False)
     synthetic = _fill(SceneSpec, c.synthetic) if c.synthetic is not None else None
     cache = c.synthetic.cache if c.synthetic is not None else None
 
@@ -166,7 +148,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
                    "ground": {"frames": cam.ground.frames, **{k: plain(v) for k, v in vars_of(ground).items()}}},
         "grid": {"mode": grid.mode, "x": list(grid.x), "y": list(grid.y), **({"z": list(grid.z)} if grid.z else {})},
         "object": vars_of(obj),
-        "model": {k: plain(v) for k, v in vars_of(model).items()},
+        "model": {k: plain(v) for k, v in model.model_dump().items()},
         "detection": detection.model_dump(), "evaluation": evaluation.model_dump(),
         "tracking": {**tracking.model_dump(), "regions": [list(r) for r in tracking.regions]},
         "output": output.model_dump(), "engine": engine.model_dump(),
