@@ -9,20 +9,21 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Annotated, Literal
 
 import numpy as np
-from ._open3d import o3d
+from pydantic import Field
 
+from ._open3d import o3d
 from .geometry import Camera
 from .io import write_depth_png, write_json_atomic
+from .values import Int, Node, Num, Pair, _numbers
 
 GENERATOR_VERSION = 3  # 2: objects with no visible pixel are left out of the ground truth; 3: objects carry ids
 
 
-@dataclass(frozen=True)
-class SceneSpec:
+class SceneSpec(Node):  # the config's `synthetic` section (config.sections adds its cache folder)
     """What to generate.
 
     Attributes:
@@ -57,27 +58,33 @@ class SceneSpec:
         range_m: (near, far) sensor range; outside it there is no reading.
     """
 
-    seed: int = 0
-    frames: int = 20
-    background_frames: int = 10
-    people: int = 5
-    kind: str = "people"
-    area: tuple[float, float, float, float] = (-2.7, 2.7, 1.5, 6.7)
-    altitude: tuple[float, float] = (0.6, 2.1)
-    obstacles: int = 0
-    room: tuple[float, float, float, float, float] = (-3.6, 3.6, -0.5, 8.0, 3.0)
-    furniture: int = 4
-    step_m: float = 0.3
-    pair_gap: float = 0.0
-    min_gap: float = 0.6
-    tables: int = 0
-    in_view: str = "body"
-    motion: str = "random"
-    leave: float = 0.0
-    noise: tuple[float, float] = (0.002, 0.0015)
-    dropout: float = 0.01
-    edge_holes: float = 0.5
-    range_m: tuple[float, float] = (0.5, 8.0)
+    seed: Int = Field(0, ge=0, description="seed of the whole sequence")
+    frames: Int = Field(20, ge=1, description="frames with people")
+    background_frames: Int = Field(10, ge=0, description="frames of the empty room")
+    people: Int = Field(5, ge=0, description="people walking, or drones flying")
+    kind: Literal["people", "drones"] = Field("people", description="what is rendered")
+    area: Annotated[tuple[float, float, float, float], _numbers(4)] = Field(
+        (-2.7, 2.7, 1.5, 6.7), description="x_min, x_max, y_min, y_max where they move, metres")
+    altitude: Pair = Field((0.6, 2.1), description="drones' heights, metres")
+    obstacles: Int = Field(0, ge=0, description="free-standing cabinets")
+    room: Annotated[tuple[float, float, float, float, float], _numbers(5)] = Field(
+        (-3.6, 3.6, -0.5, 8.0, 3.0), description="x_min, x_max, y_min, y_max, height of the walls, metres")
+    furniture: Int = Field(4, ge=0, description="furniture pieces placed in the room")
+    step_m: Num = Field(0.3, ge=0, description="walk per frame, metres")
+    pair_gap: Num = Field(0.0, ge=0, description="> 0: people walk in pairs this far apart")
+    min_gap: Num = Field(0.6, gt=0, description="people keep this far apart, metres")
+    tables: Int = Field(0, ge=0, description="free-standing tables inside the area")
+    in_view: Literal["body", "head"] = Field("body", description="what of a person must be in "
+                                             "the image: body (eye level) or head (ceiling cameras)")
+    motion: Literal["random", "paths"] = Field("random", description="random: a random walk in view; "
+                                               "paths: straight walks to waypoints with stops (tracking scenes)")
+    leave: Num = Field(0.0, ge=0, description="paths: waypoints up to this far outside the area "
+                                                       "(people leave the view and come back), metres")
+    noise: Pair = Field((0.002, 0.0015), description="depth noise a + b z^2, metres")
+    dropout: Num = Field(0.01, ge=0, le=1, description="share of pixels with no reading")
+    edge_holes: Num = Field(0.5, ge=0, le=1,
+                            description="probability of no reading at a depth edge")
+    range_m: Pair = Field((0.5, 8.0), description="near, far sensor range, metres")
 
 
 def _cylinder(radius, length, p0, p1=None, resolution=12):
@@ -500,7 +507,7 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
         The scene description written to scene.json.
     """
     out = Path(out_dir)
-    desc = {"version": GENERATOR_VERSION, "spec": asdict(spec),
+    desc = {"version": GENERATOR_VERSION, "spec": spec.model_dump(),
             "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx,
                        "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
                        "T_world_from_camera": np.asarray(camera.T_world_from_camera).tolist()}}

@@ -132,7 +132,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     tracking = c.tracking
     if engine.exact:  # the exact path: full resolution, every pass full, no warm start
         inputs = inputs.model_copy(update={"stride": 1})
-    synthetic = _fill(SceneSpec, c.synthetic) if c.synthetic is not None else None
+    synthetic = c.synthetic.spec() if c.synthetic is not None else None
     cache = c.synthetic.cache if c.synthetic is not None else None
 
     def plain(v):
@@ -154,7 +154,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         "output": output.model_dump(), "engine": engine.model_dump(),
     }
     if synthetic is not None:
-        resolved["synthetic"] = {"cache": cache, **{k: plain(v) for k, v in vars_of(synthetic).items()}}
+        resolved["synthetic"] = {"cache": cache, **{k: plain(v) for k, v in synthetic.model_dump().items()}}
     return RunConfig(c.device, inputs, camera, grid, obj, model, detection, evaluation, output,
                      engine, synthetic, cache, resolved, pose_auto, ground, cam.ground.frames, tracking)
 

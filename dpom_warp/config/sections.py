@@ -21,13 +21,11 @@ from ..values import (
     Int,
     Node,
     Num,
-    Pair,
     Str,
     Stride,
     Switch,
     _d,
     _fail,
-    _numbers,
 )
 
 
@@ -179,38 +177,11 @@ class EngineSection(Node):
                             "memory_gb")
 
 
-def _sd(name):
-    return _d(SceneSpec, name)
-
-
-class SyntheticSection(Node):
+class SyntheticSection(SceneSpec):
     """Render a synthetic sequence before the run (once; later runs reuse it)."""
 
     cache: FilePath = Field(description="folder of the rendered frames, background and ground truth")
-    seed: Int = Field(_sd("seed"), ge=0, description="seed of the whole sequence")
-    frames: Int = Field(_sd("frames"), ge=1, description="frames with people")
-    background_frames: Int = Field(_sd("background_frames"), ge=0, description="frames of the empty room")
-    people: Int = Field(_sd("people"), ge=0, description="people walking, or drones flying")
-    kind: Literal["people", "drones"] = Field(_sd("kind"), description="what is rendered")
-    area: Annotated[tuple[float, float, float, float], _numbers(4)] = Field(
-        _sd("area"), description="x_min, x_max, y_min, y_max where they move, metres")
-    altitude: Pair = Field(_sd("altitude"), description="drones' heights, metres")
-    obstacles: Int = Field(_sd("obstacles"), ge=0, description="free-standing cabinets")
-    room: Annotated[tuple[float, float, float, float, float], _numbers(5)] = Field(
-        _sd("room"), description="x_min, x_max, y_min, y_max, height of the walls, metres")
-    furniture: Int = Field(_sd("furniture"), ge=0, description="furniture pieces placed in the room")
-    step_m: Num = Field(_sd("step_m"), ge=0, description="walk per frame, metres")
-    pair_gap: Num = Field(_sd("pair_gap"), ge=0, description="> 0: people walk in pairs this far apart")
-    min_gap: Num = Field(_sd("min_gap"), gt=0, description="people keep this far apart, metres")
-    tables: Int = Field(_sd("tables"), ge=0, description="free-standing tables inside the area")
-    in_view: Literal["body", "head"] = Field(_sd("in_view"), description="what of a person must be in "
-                                             "the image: body (eye level) or head (ceiling cameras)")
-    motion: Literal["random", "paths"] = Field(_sd("motion"), description="random: a random walk in view; "
-                                               "paths: straight walks to waypoints with stops (tracking scenes)")
-    leave: Num = Field(_sd("leave"), ge=0, description="paths: waypoints up to this far outside the area "
-                                                       "(people leave the view and come back), metres")
-    noise: Pair = Field(_sd("noise"), description="depth noise a + b z^2, metres")
-    dropout: Num = Field(_sd("dropout"), ge=0, le=1, description="share of pixels with no reading")
-    edge_holes: Num = Field(_sd("edge_holes"), ge=0, le=1,
-                            description="probability of no reading at a depth edge")
-    range_m: Pair = Field(_sd("range_m"), description="near, far sensor range, metres")
+
+    def spec(self) -> SceneSpec:
+        """What to render (the scene without the folder it is kept in)."""
+        return SceneSpec(**self.model_dump(exclude={"cache"}))
