@@ -23,7 +23,6 @@ import numpy as np
 
 def fit_scene(name: str, overrides: list[str], tuning: bool, up="auto") -> dict:
     """Render (or check) the scene's frames and fit its floor with the default options but `up`."""
-    import dataclasses
 
     from bench.robustness import scene_sets
     from dpom_warp.loading import load_config
@@ -38,7 +37,7 @@ def fit_scene(name: str, overrides: list[str], tuning: bool, up="auto") -> dict:
     true = camera.T_world_from_camera
     row = {"scene": name, "draw": "tuning" if tuning else "held-out", "height_m": float(true[2, 3])}
     try:
-        fit = fit_ground_files(files, camera, cfg.inputs.depth_scale, dataclasses.replace(cfg.ground, up=up))
+        fit = fit_ground_files(files, camera, cfg.inputs.depth_scale, cfg.ground.model_copy(update={"up": up}))
     except InputError as e:
         return row | {"error": str(e)}
     up_true = true[2, :3]  # world z in camera coordinates: the true floor normal

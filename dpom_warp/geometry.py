@@ -10,8 +10,12 @@ import math
 import warnings
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import Literal
 
 import numpy as np
+from pydantic import Field
+
+from .values import Node, Num
 
 
 def pose_from_angles(height_m: float, pitch_deg: float, roll_deg: float = 0.0,
@@ -167,8 +171,7 @@ class Grid:
         return np.stack([xx.ravel(), yy.ravel(), zz.ravel()], axis=1)
 
 
-@dataclass(frozen=True)
-class ObjectBox:
+class ObjectBox(Node):  # the config's `object` section
     """Object size in metres (`depth` defaults to `width`) and its shape model.
 
     Attributes:
@@ -197,17 +200,27 @@ class ObjectBox:
             the body's radius); None: a circle of `radius`.
     """
 
-    width: float
-    height: float
-    depth: float | None = None
-    shape: str = "solid"
-    radius: float | None = None
-    head_radius: float = 0.11
-    shoulder: float = 0.8
-    height_spread: float = 0.12
-    leg_radius: float | None = None
-    hip: float = 0.45
-    depth_radius: float | None = 0.12
+    width: Num = Field(0.4, gt=0, description="metres, across the line of sight (the solid: its body's diameter)")
+    height: Num = Field(1.85, gt=0, description="metres")
+    depth: Num | None = Field(None, gt=0, description="default: = width")
+    shape: Literal["plane", "solid"] = Field(
+        "solid", description="plane: a pixel expects the depth of the plane facing the "
+        "camera (the paper); solid: the depth where its ray enters an upright body and head "
+        "(README, How it works)")
+    radius: Num | None = Field(None, gt=0, description="solid: body radius, metres (default width / 2)")
+    head_radius: Num = Field(0.11, ge=0, description="solid: head radius, metres (0: no head; ground grids)")
+    shoulder: Num = Field(0.8, gt=0, le=1, description="solid: where the head begins, share of the height")
+    height_spread: Num = Field(0.12, ge=0, description="solid: spread of the heights of its tops, metres")
+    leg_radius: Num | None = Field(None, gt=0, description="solid, ground grids: the legs' radius below hip x "
+                                                           "height, metres (null: the body reaches the floor)")
+    hip: Num = Field(0.45, gt=0, lt=1, description="solid: where the legs end, share of the height")
+    depth_radius: Num | None = Field(0.12, gt=0,
+                                     description="solid, ground grids: the body's half-depth along the line of sight, "
+                                                 "metres (an ellipse facing the camera; null: = radius)")
+
+    def __init__(self, *size, **values):
+        """ObjectBox(width, height, **others) as well as by name."""
+        super().__init__(**dict(zip(("width", "height"), size)), **values)
 
     @property
     def body_radius(self) -> float:

@@ -11,17 +11,19 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field, model_validator
+
 from ._open3d import o3d
 
 from .geometry import Camera
+from .values import Int, Node, Num, Pair, Up, _fail
 
 
 class GroundFitError(ValueError):
     """No floor plane could be found; the message says why in one line."""
 
 
-@dataclass(frozen=True)
-class GroundOptions:
+class GroundOptions(Node):  # the config's `camera.ground` section (config.camera adds its frames)
     """How to look for the floor.
 
     Attributes:
@@ -39,15 +41,26 @@ class GroundOptions:
         noise: (a, b) of the depth noise sigma(z) = a + b z^2 used by the refinement, metres.
     """
 
-    up: tuple[float, float, float] | str = "auto"
-    max_angle_deg: float = 45.0
-    distance_threshold: float = 0.03
-    depth_max: float = 6.0
-    min_inliers: int = 300
-    max_planes: int = 6
-    voxel: float = 0.04
-    stride: int = 2
-    noise: tuple[float, float] = (0.002, 0.0015)
+    up: Up = Field(
+        "auto", description="up direction in the camera frame (the floor normal's prior); "
+                            "auto: the floor of any camera from level to looking straight "
+                            "down (a recording's accelerometer gives it where it has one)")
+    max_angle_deg: Num = Field(45.0, gt=0, le=90,
+                               description="largest angle between the floor normal and `up` (auto: the "
+                                           "largest roll)")
+    distance_threshold: Num = Field(0.03, gt=0, description="RANSAC inlier distance, metres")
+    depth_max: Num = Field(6.0, gt=0, description="readings beyond are not used, metres")
+    min_inliers: Int = Field(300, ge=3, description="a floor candidate needs this many downsampled points")
+    max_planes: Int = Field(6, ge=1, description="planes peeled off, largest first")
+    voxel: Num = Field(0.04, gt=0, description="downsampling voxel, metres")
+    stride: Int = Field(2, ge=1, description="every stride-th pixel")
+    noise: Pair = Field((0.002, 0.0015), description="depth noise a + b z^2 of the refinement, metres")
+
+    @model_validator(mode="after")
+    def _up(self):
+        if not isinstance(self.up, str) and np.linalg.norm(self.up) == 0:
+            raise _fail(f"expected a non-zero direction, found {list(self.up)}", "up")
+        return self
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import difflib
 import re
-from dataclasses import fields
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
@@ -222,11 +221,6 @@ class Node(BaseModel):
                 named.append(f"{key} (did you mean {close[0]}?)" if close else key)
             raise _fail(f"unknown keys {', '.join(named)}; expected keys among {', '.join(known)}")
         return raw
-
-
-def _d(cls, name):
-    """The default of a domain dataclass's field: one place for every default."""
-    return next(f.default for f in fields(cls) if f.name == name)
 
 
 def _read_yaml(path: Path, what: str):

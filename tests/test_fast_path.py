@@ -401,7 +401,7 @@ def test_mask_index_option_gives_the_same_results(tmp_path):
     assert results["auto"].entries > 1000
     for index in ("table", "tiles"):
         np.testing.assert_array_equal(results[index].rho_star, results["auto"].rho_star)
-    plane = dataclasses.replace(cfg, obj=dataclasses.replace(cfg.obj, shape="plane"))
+    plane = dataclasses.replace(cfg, obj=cfg.obj.model_copy(update={"shape": "plane"}))
     assert not make_engine(plane, cfg.camera, "cpu", 1).use_table
     with pytest.raises(ConfigError) as e:
         load_config(small_config(tmp_path), ["engine.mask_index=grid"])

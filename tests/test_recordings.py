@@ -469,7 +469,7 @@ def test_a_wall_faced_is_not_taken_for_a_floor_seen_from_above(tmp_path, capsys)
         refuse_low_view_from_above(run, Fit(95.0, 1.5), "f")
     refuse_low_view_from_above(run, Fit(90.0, 2.6), "f")  # a ceiling camera
     refuse_low_view_from_above(run, Fit(75.0, 1.5), "f")  # a camera tilted down, not from above
-    refuse_low_view_from_above(dataclasses.replace(run, ground=dataclasses.replace(run.ground, up=(0.0, 0.0, -1.0))),
+    refuse_low_view_from_above(dataclasses.replace(run, ground=run.ground.model_copy(update={"up": (0.0, 0.0, -1.0)})),
                                Fit(90.0, 1.5), "f")  # up given: the user says it is a floor
     refuse_low_view_from_above(dataclasses.replace(run, grid=dataclasses.replace(run.grid, mode="voxel")),
                                Fit(90.0, 1.5), "f")  # voxels (drones): no object height to stand below

@@ -15,12 +15,11 @@ recording is `dpom_warp.loading`'s (it opens the recording; this package opens n
 
 from .camera import CameraFile, load_camera_file
 from .read import apply_overrides, camera_from_file, camera_shorthand, read_config, resolve_paths
-from .run import (Detection, EngineOptions, Evaluation, Inputs, Output, RunConfig, config_key, parse_config, source_of,
-                  vars_of)
+from .run import Detection, EngineOptions, Evaluation, Inputs, Output, RunConfig, config_key, parse_config, source_of
 from .schema import ConfigFile, json_schema, path_keys
 from ..values import ConfigError, Node, check_device
 
 __all__ = ["CameraFile", "ConfigError", "ConfigFile", "Detection", "EngineOptions", "Evaluation", "Inputs", "Node",
            "Output", "RunConfig", "apply_overrides", "camera_from_file", "camera_shorthand", "check_device",
            "config_key", "json_schema", "load_camera_file", "parse_config", "path_keys", "read_config", "resolve_paths",
-           "source_of", "vars_of"]
+           "source_of"]

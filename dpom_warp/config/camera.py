@@ -26,9 +26,6 @@ from ..values import (
     Lens,
     Node,
     Num,
-    Pair,
-    Up,
-    _d,
     _fail,
     _first_error,
     _fmt,
@@ -109,32 +106,14 @@ Extrinsics = Annotated[
     BeforeValidator(_extrinsics)]
 
 
-class GroundSection(Node):
+class GroundSection(GroundOptions):
     """Floor fitting for `extrinsics: auto`."""
 
     frames: Int = Field(5, ge=1, description="first frames used when there are no background frames")
-    up: Up = Field(
-        _d(GroundOptions, "up"), description="up direction in the camera frame (the floor normal's prior); "
-                                             "auto: the floor of any camera from level to looking straight "
-                                             "down (a recording's accelerometer gives it where it has one)")
-    max_angle_deg: Num = Field(_d(GroundOptions, "max_angle_deg"), gt=0, le=90,
-                               description="largest angle between the floor normal and `up` (auto: the "
-                                           "largest roll)")
-    distance_threshold: Num = Field(_d(GroundOptions, "distance_threshold"), gt=0,
-                                    description="RANSAC inlier distance, metres")
-    depth_max: Num = Field(_d(GroundOptions, "depth_max"), gt=0, description="readings beyond are not used, metres")
-    min_inliers: Int = Field(_d(GroundOptions, "min_inliers"), ge=3,
-                             description="a floor candidate needs this many downsampled points")
-    stride: Int = Field(_d(GroundOptions, "stride"), ge=1, description="every stride-th pixel")
-    max_planes: Int = Field(_d(GroundOptions, "max_planes"), ge=1, description="planes peeled off, largest first")
-    voxel: Num = Field(_d(GroundOptions, "voxel"), gt=0, description="downsampling voxel, metres")
-    noise: Pair = Field(_d(GroundOptions, "noise"), description="depth noise a + b z^2 of the refinement, metres")
 
-    @model_validator(mode="after")
-    def _up(self):
-        if not isinstance(self.up, str) and np.linalg.norm(self.up) == 0:
-            raise _fail(f"expected a non-zero direction, found {list(self.up)}", "up")
-        return self
+    def options(self) -> GroundOptions:
+        """How to look for the floor (the section without the frames it is fitted on)."""
+        return GroundOptions(**self.model_dump(exclude={"frames"}))
 
 
 def _inside_image(camera):

@@ -4,11 +4,11 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ValidationError
+from pydantic import ValidationError
 
 from ..detect import EDGE_RADIUS
 from ..geometry import Camera, Grid, ObjectBox, pose_from_angles
@@ -93,12 +93,6 @@ def source_of(key: str, overrides, file: str) -> str:
     return file
 
 
-def _fill(cls, section: BaseModel, **changes):
-    """A domain dataclass from a validated section (the fields they share)."""
-    names = {f.name for f in fields(cls)} - set(changes)
-    return cls(**{k: v for k, v in section.model_dump().items() if k in names}, **changes)
-
-
 def parse_config(raw: dict[str, Any]) -> RunConfig:
     """Validate a config mapping into a RunConfig. No file is read: the camera keys a camera file
     or a recording gives are filled in before (loading.config_from_mapping; a run folder's
@@ -120,9 +114,9 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         pose = pose_from_angles(ext.height, ext.pitch_deg, ext.roll_deg, ext.yaw_deg, ext.x, ext.y)
     i = cam.intrinsics
     camera = Camera(cam.width, cam.height, i.fx, i.fy, i.cx, i.cy, pose, cam.distortion)
-    ground = _fill(GroundOptions, cam.ground)
+    ground = cam.ground.options()
     grid = Grid(x=c.grid.x, y=c.grid.y, mode=c.grid.mode, z=c.grid.z)
-    obj = _fill(ObjectBox, c.object)
+    obj = c.object
     model = c.model.build(c.grid.mode, c.object.shape, c.object.height, c.input.background is not None,
                           c.engine.exact)
     edge_radius = (c.detection.edge_radius if c.detection.edge_radius is not None else
@@ -145,9 +139,9 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
                    "intrinsics": {"fx": i.fx, "fy": i.fy, "cx": i.cx, "cy": i.cy},
                    "extrinsics": pose_resolved,
                    "distortion": list(cam.distortion) if cam.distortion else None,
-                   "ground": {"frames": cam.ground.frames, **{k: plain(v) for k, v in vars_of(ground).items()}}},
+                   "ground": {"frames": cam.ground.frames, **{k: plain(v) for k, v in ground.model_dump().items()}}},
         "grid": {"mode": grid.mode, "x": list(grid.x), "y": list(grid.y), **({"z": list(grid.z)} if grid.z else {})},
-        "object": vars_of(obj),
+        "object": obj.model_dump(),
         "model": {k: plain(v) for k, v in model.model_dump().items()},
         "detection": detection.model_dump(), "evaluation": evaluation.model_dump(),
         "tracking": {**tracking.model_dump(), "regions": [list(r) for r in tracking.regions]},
@@ -158,6 +152,3 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     return RunConfig(c.device, inputs, camera, grid, obj, model, detection, evaluation, output,
                      engine, synthetic, cache, resolved, pose_auto, ground, cam.ground.frames, tracking)
 
-
-def vars_of(dc) -> dict:
-    return {f.name: getattr(dc, f.name) for f in fields(dc)}

@@ -24,7 +24,6 @@ from ..values import (
     Str,
     Stride,
     Switch,
-    _d,
     _fail,
 )
 
@@ -84,31 +83,7 @@ class GridSection(Node):
         return self
 
 
-class ObjectSection(Node):
-    """The object's size and shape model, metres."""
-
-    width: Num = Field(0.4, gt=0, description="metres, across the line of sight (the solid: its body's diameter)")
-    height: Num = Field(1.85, gt=0, description="metres")
-    depth: Num | None = Field(None, gt=0, description="default: = width")
-    shape: Literal["plane", "solid"] = Field(
-        _d(ObjectBox, "shape"), description="plane: a pixel expects the depth of the plane facing the "
-        "camera (the paper); solid: the depth where its ray enters an upright body and head "
-        "(README, How it works)")
-    radius: Num | None = Field(None, gt=0, description="solid: body radius, metres (default width / 2)")
-    head_radius: Num = Field(_d(ObjectBox, "head_radius"), ge=0,
-                             description="solid: head radius, metres (0: no head; ground grids)")
-    shoulder: Num = Field(_d(ObjectBox, "shoulder"), gt=0, le=1,
-                          description="solid: where the head begins, share of the height")
-    height_spread: Num = Field(_d(ObjectBox, "height_spread"), ge=0,
-                               description="solid: spread of the heights of its tops, metres")
-    leg_radius: Num | None = Field(_d(ObjectBox, "leg_radius"), gt=0,
-                                   description="solid, ground grids: the legs' radius below hip x "
-                                               "height, metres (null: the body reaches the floor)")
-    hip: Num = Field(_d(ObjectBox, "hip"), gt=0, lt=1,
-                     description="solid: where the legs end, share of the height")
-    depth_radius: Num | None = Field(_d(ObjectBox, "depth_radius"), gt=0,
-                                     description="solid, ground grids: the body's half-depth along the line of sight, "
-                                                 "metres (an ellipse facing the camera; null: = radius)")
+ObjectSection = ObjectBox  # declared by its owner (geometry.py)
 
 
 class DetectionSection(Node):
