@@ -13,9 +13,9 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import ConfigDict, Field, model_validator
 
-from .values import Node, Num
+from .values import Axis, Node, Num, _fail
 
 
 def pose_from_angles(height_m: float, pitch_deg: float, roll_deg: float = 0.0,
@@ -127,20 +127,24 @@ def axis_cells(lo: float, hi: float, step: float) -> np.ndarray:
     return lo + (np.arange(n) + 0.5) * step
 
 
-@dataclass(frozen=True)
-class Grid:
-    """Locations k: cells of a ground grid (mode 'ground') or voxels of a 3D grid ('voxel').
+class Grid(Node):  # the config's `grid` section
+    """The locations: cells of a ground grid or voxels of a 3D grid."""
 
-    Attributes:
-        x, y: (min, max, step) in metres; z likewise for voxel grids.
-        mode: 'ground' (objects stand on the floor at the cell centre) or 'voxel' (objects
-            are centred on the voxel centre).
-    """
+    mode: Literal["ground", "voxel"] = Field("ground", description="ground: objects standing on cells "
+                                                                   "of the floor; voxel: objects centred "
+                                                                   "on voxels")
+    x: Axis = Field(description="[min, max, step] metres; cells tile [min, max]")
+    y: Axis = Field(description="[min, max, step] metres")
+    z: Axis | None = Field(None, description="[min, max, step] metres; voxel mode only")
 
-    x: tuple[float, float, float]
-    y: tuple[float, float, float]
-    mode: str = "ground"
-    z: tuple[float, float, float] | None = None
+    @model_validator(mode="after")
+    def _z(self):
+        if self.mode == "ground" and self.z is not None:
+            raise _fail("expected no z axis in ground mode (objects stand on the floor); use mode: "
+                        "voxel for a 3D grid", "z")
+        if self.mode == "voxel" and self.z is None:
+            raise _fail("required key is missing", "z")
+        return self
 
     @property
     def xs(self) -> np.ndarray:
@@ -172,7 +176,7 @@ class Grid:
 
 
 class ObjectBox(Node):  # the config's `object` section
-    """Object size in metres (`depth` defaults to `width`) and its shape model.
+    """The object's size and shape model, metres (`depth` defaults to `width`).
 
     Attributes:
         shape: 'plane': each pixel of the silhouette rectangle expects the object's depth on
@@ -199,6 +203,9 @@ class ObjectBox(Node):  # the config's `object` section
             and the visible front of a person seen from any side is nearer its centre than
             the body's radius); None: a circle of `radius`.
     """
+
+    model_config = ConfigDict(**Node.model_config,
+                              json_schema_extra={"description": __doc__.splitlines()[0]})
 
     width: Num = Field(0.4, gt=0, description="metres, across the line of sight (the solid: its body's diameter)")
     height: Num = Field(1.85, gt=0, description="metres")

@@ -471,7 +471,7 @@ def test_a_wall_faced_is_not_taken_for_a_floor_seen_from_above(tmp_path, capsys)
     refuse_low_view_from_above(run, Fit(75.0, 1.5), "f")  # a camera tilted down, not from above
     refuse_low_view_from_above(dataclasses.replace(run, ground=run.ground.model_copy(update={"up": (0.0, 0.0, -1.0)})),
                                Fit(90.0, 1.5), "f")  # up given: the user says it is a floor
-    refuse_low_view_from_above(dataclasses.replace(run, grid=dataclasses.replace(run.grid, mode="voxel")),
+    refuse_low_view_from_above(dataclasses.replace(run, grid=run.grid.model_copy(update={"mode": "voxel"})),
                                Fit(90.0, 1.5), "f")  # voxels (drones): no object height to stand below
 
 

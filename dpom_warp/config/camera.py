@@ -17,7 +17,7 @@ from pydantic import (
     model_validator,
 )
 
-from ..geometry import Camera
+from ..geometry import Camera, pose_from_angles
 from ..ground import GroundOptions
 from ..values import (
     ConfigError,
@@ -148,6 +148,20 @@ class CameraSection(Node):
     @model_validator(mode="after")
     def _principal_point(self):
         return _inside_image(self)
+
+    def build(self) -> tuple[Camera, dict | str]:
+        """The camera (identity pose with `extrinsics: auto`, fitted later) and its extrinsics as
+        the resolved config writes them."""
+        ext, i = self.extrinsics, self.intrinsics
+        if ext == "auto":
+            pose, resolved = np.eye(4), "auto"
+        elif isinstance(ext, PoseMatrix):
+            pose = np.array(ext.T_world_from_camera, dtype=np.float64)
+            resolved = {"T_world_from_camera": pose.tolist()}
+        else:
+            resolved = ext.model_dump()
+            pose = pose_from_angles(ext.height, ext.pitch_deg, ext.roll_deg, ext.yaw_deg, ext.x, ext.y)
+        return Camera(self.width, self.height, i.fx, i.fy, i.cx, i.cy, pose, self.distortion), resolved
 
 
 class CameraFile(Node):

@@ -7,16 +7,13 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 from pydantic import ValidationError
 
-from ..detect import EDGE_RADIUS
-from ..geometry import Camera, Grid, ObjectBox, pose_from_angles
+from ..geometry import Camera, Grid, ObjectBox
 from ..ground import GroundOptions
 from ..model import ModelParams
 from ..synthetic import SceneSpec
 from ..tracking import TrackingOptions
-from .camera import PoseMatrix
 from .schema import ConfigFile
 from .sections import DetectionSection, EngineSection, EvaluationSection, InputSection, OutputSection
 from ..values import ConfigError, _first_error
@@ -102,26 +99,14 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     except ValidationError as e:
         raise ConfigError(_first_error(e)) from None
     inputs = c.input
-    cam, ext = c.camera, c.camera.extrinsics
-    pose_auto = ext == "auto"
-    if pose_auto:
-        pose, pose_resolved = np.eye(4), "auto"
-    elif isinstance(ext, PoseMatrix):
-        pose = np.array(ext.T_world_from_camera, dtype=np.float64)
-        pose_resolved = {"T_world_from_camera": pose.tolist()}
-    else:
-        pose_resolved = ext.model_dump()
-        pose = pose_from_angles(ext.height, ext.pitch_deg, ext.roll_deg, ext.yaw_deg, ext.x, ext.y)
-    i = cam.intrinsics
-    camera = Camera(cam.width, cam.height, i.fx, i.fy, i.cx, i.cy, pose, cam.distortion)
+    cam = c.camera
+    camera, pose_resolved = cam.build()
     ground = cam.ground.options()
-    grid = Grid(x=c.grid.x, y=c.grid.y, mode=c.grid.mode, z=c.grid.z)
+    grid = c.grid
     obj = c.object
     model = c.model.build(c.grid.mode, c.object.shape, c.object.height, c.input.background is not None,
                           c.engine.exact)
-    edge_radius = (c.detection.edge_radius if c.detection.edge_radius is not None else
-                   EDGE_RADIUS if c.grid.mode == "ground" else 0.0)
-    detection = c.detection.model_copy(update={"edge_radius": edge_radius})
+    detection = c.detection.build(c.grid.mode)
     evaluation, output, engine = c.evaluation, c.output, c.engine
     tracking = c.tracking
     if engine.exact:  # the exact path: full resolution, every pass full, no warm start
@@ -136,7 +121,7 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
         "device": c.device,
         "input": inputs.model_dump(),
         "camera": {"width": cam.width, "height": cam.height,
-                   "intrinsics": {"fx": i.fx, "fy": i.fy, "cx": i.cx, "cy": i.cy},
+                   "intrinsics": cam.intrinsics.model_dump(),
                    "extrinsics": pose_resolved,
                    "distortion": list(cam.distortion) if cam.distortion else None,
                    "ground": {"frames": cam.ground.frames, **{k: plain(v) for k, v in ground.model_dump().items()}}},
@@ -150,5 +135,5 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     if synthetic is not None:
         resolved["synthetic"] = {"cache": cache, **{k: plain(v) for k, v in synthetic.model_dump().items()}}
     return RunConfig(c.device, inputs, camera, grid, obj, model, detection, evaluation, output,
-                     engine, synthetic, cache, resolved, pose_auto, ground, cam.ground.frames, tracking)
+                     engine, synthetic, cache, resolved, cam.extrinsics == "auto", ground, cam.ground.frames, tracking)
 

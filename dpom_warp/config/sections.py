@@ -5,16 +5,15 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Union
 
-from pydantic import Field, model_validator
+from pydantic import Field
 
 from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
-from ..geometry import ObjectBox
+from ..geometry import Grid, ObjectBox
 from ..model import AutoBackground
 from ..resolution import REDUCERS
 from ..synthetic import SceneSpec
 from ..tracking import TrackingOptions
 from ..values import (
-    Axis,
     Batch,
     Bool,
     FilePath,
@@ -24,7 +23,6 @@ from ..values import (
     Str,
     Stride,
     Switch,
-    _fail,
 )
 
 
@@ -63,26 +61,7 @@ class InputSection(Node):
         return self.background == "auto"
 
 
-class GridSection(Node):
-    """The locations: cells of a ground grid or voxels of a 3D grid."""
-
-    mode: Literal["ground", "voxel"] = Field("ground", description="ground: objects standing on cells "
-                                                                   "of the floor; voxel: objects centred "
-                                                                   "on voxels")
-    x: Axis = Field(description="[min, max, step] metres; cells tile [min, max]")
-    y: Axis = Field(description="[min, max, step] metres")
-    z: Axis | None = Field(None, description="[min, max, step] metres; voxel mode only")
-
-    @model_validator(mode="after")
-    def _z(self):
-        if self.mode == "ground" and self.z is not None:
-            raise _fail("expected no z axis in ground mode (objects stand on the floor); use mode: "
-                        "voxel for a 3D grid", "z")
-        if self.mode == "voxel" and self.z is None:
-            raise _fail("required key is missing", "z")
-        return self
-
-
+GridSection = Grid  # declared by its owner (geometry.py)
 ObjectSection = ObjectBox  # declared by its owner (geometry.py)
 
 
@@ -101,6 +80,12 @@ class DetectionSection(Node):
     min_log_odds: Num = Field(MIN_LOG_ODDS, ge=0, description=(
         "the joint test: a detection whose log posterior odds, with the other detections present and nothing "
         "else, is under this (nats) leaves the map (README, How it works); 0: off"))
+
+    def build(self, grid_mode: str) -> DetectionSection:
+        """The section with edge_radius chosen for the grid where it is null."""
+        if self.edge_radius is not None:
+            return self
+        return self.model_copy(update={"edge_radius": EDGE_RADIUS if grid_mode == "ground" else 0.0})
 
 
 class EvaluationSection(Node):
