@@ -17,9 +17,9 @@ from .sources import open_source
 
 def camera_from_recording(raw: dict) -> dict:
     """A config whose input.frames is a recording or a live camera, with the camera keys it leaves out
-    (camera.width, height, intrinsics, distortion, input.depth_scale, and with extrinsics:
-    auto camera.ground.up from its accelerometer) taken from the recording (the keys it gives
-    win: the run says where they differ)."""
+    (camera.width, height, intrinsics, distortion, input.depth_scale, and with extrinsics
+    auto, written or left out, camera.ground.up from its accelerometer) taken from the
+    recording (the keys it gives win: the run says where they differ)."""
     inp, cam = raw.get("input"), raw.get("camera", {})
     if isinstance(inp, dict) and isinstance(inp.get("frames"), str) and unknown_format(inp["frames"]):
         raise ConfigError(f"input.frames: {unknown_format(inp['frames'])}")  # before the camera keys it lacks
@@ -28,7 +28,8 @@ def camera_from_recording(raw: dict) -> dict:
         return raw
     missing = [k for k in ("width", "height", "intrinsics", "distortion") if k not in cam]
     ground = cam.get("ground") if isinstance(cam.get("ground"), dict) else {}
-    wants_up = cam.get("extrinsics") == "auto" and ground.get("up", "auto") == "auto"
+    # extrinsics left out are auto (CameraSection's default): the floor fit then takes the IMU's up too
+    wants_up = cam.get("extrinsics", "auto") == "auto" and ground.get("up", "auto") == "auto"
     if not missing and "depth_scale" in inp and not wants_up:
         return raw
     try:

@@ -36,6 +36,42 @@ def floor_words(floor_xy) -> str:
     return f"floor in view x {x0:g} to {x1:g} m, y {y0:g} to {y1:g} m"
 
 
+# a fitted floor that puts the camera outside these is worth a word (a wall or a desk taken for
+# the floor, or a grid placed beside the view): mounted depth cameras are level in roll within
+# a few degrees, between knee and ceiling height, and look down or level
+POSE_ROLL_DEG = 30.0
+POSE_HEIGHT_M = (0.3, 6.0)
+POSE_PITCH_DEG = -15.0
+GRID_IN_VIEW = 0.5  # the share of the grid's locations at least partly in the image
+
+
+def pose_warnings(report: dict, in_view: float, cells: int, floor_xy=None) -> list[str]:
+    """What is implausible about a fitted floor (`report`: the fit's camera_height, pitch_deg and
+    roll_deg) or the grid it leaves in view (`in_view`: the share of the grid's `cells` whose
+    silhouette is at least partly in the image): one line each, naming what was found and the
+    key that fixes it."""
+    h, pitch, roll = report["camera_height"], report["pitch_deg"], report["roll_deg"]
+    pose = f"camera {h:.2f} m above it, pitch {pitch:.1f} deg, roll {roll:.1f} deg"
+    odd = []
+    if abs(roll) > POSE_ROLL_DEG:
+        odd.append(f"a roll of {roll:.1f} deg (mounted cameras are level within {POSE_ROLL_DEG:g})")
+    if not POSE_HEIGHT_M[0] <= h <= POSE_HEIGHT_M[1]:
+        odd.append(f"a camera {h:.2f} m above the floor (expected {POSE_HEIGHT_M[0]:g} to {POSE_HEIGHT_M[1]:g} m)")
+    if pitch < POSE_PITCH_DEG:
+        odd.append(f"a camera looking {-pitch:.1f} deg up")
+    out = []
+    if odd:
+        out.append(f"camera.extrinsics: auto: the floor found ({pose}) means {' and '.join(odd)}; if the camera "
+                   f"is not mounted so, the plane taken for the floor is a wall or a desk: give camera.extrinsics "
+                   f"(or camera.ground.up)")
+    if in_view < GRID_IN_VIEW:
+        seen = f" ({floor_words(floor_xy)})" if floor_xy is not None else ""
+        out.append(f"grid: with the floor found ({pose}) {100 * (1 - in_view):.0f} % of its {cells} locations are "
+                   f"out of the camera's view{seen}; expected grid.x and grid.y over the floor in view, or "
+                   f"camera.extrinsics if that plane is not the floor")
+    return out
+
+
 def posed(cfg: RunConfig, fit, fitted_on: str, frames, t0: float, log):
     """The camera posed by a floor fit and summary.json's ground_fit report, the fit logged
     ("ground plane from `fitted_on`: ..."); `frames`: what the report says it was fitted on."""
@@ -162,6 +198,12 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
             f"grid: none of its {len(geometry.rect)} locations is in the camera's view (the camera "
             f"{'fitted ' if ground else ''}at x {c[0]:.2f} m, y {c[1]:.2f} m, {c[2]:.2f} m up); expected "
             f"grid.x and grid.y{' and grid.z' if cfg.grid.mode == 'voxel' else ''} over what the camera sees{seen}")
+    if ground is not None:  # a floor fit that cannot be wrong quietly
+        warned = pose_warnings(ground, float(np.mean(geometry.rect_area > 0)), len(geometry.rect), ground.get("floor_xy"))
+        for line in warned:
+            log(f"warning: {line}")
+        if warned:
+            ground["warnings"] = warned
     if parallel and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers or --ray with it")

@@ -222,6 +222,46 @@ def test_run_with_auto_pose_on_the_real_frame(tmp_path, capsys):
     assert len(xy) >= 5  # five people stand 1.8 to 3 m away
     assert ((xy[:, 1] > 1.5) & (xy[:, 1] < 3.2)).sum() >= 5
     assert (tmp_path / "out" / "images" / "depth_mm.png").stat().st_size > 20_000
+    assert "warnings" not in summary["ground_fit"]  # a plausible floor, the corridor grid in view
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "readme"),  # the README's grid
+                 "--set", "grid.x=[-2, 2, 0.1]", "--set", "grid.y=[1, 6, 0.1]"]) == 0
+    assert "warnings" not in json.load(open(tmp_path / "readme" / "summary.json"))["ground_fit"]
+    # the grid moved 2.5 m to the right, beside the corridor: said in one line, kept in summary.json
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "beside"),
+                 "--set", "grid.x=[1.0, 7.0, 0.1]"]) == 0
+    said = [x for x in capsys.readouterr().out.splitlines() if x.startswith("warning: grid:")]
+    (warned,) = json.load(open(tmp_path / "beside" / "summary.json"))["ground_fit"]["warnings"]
+    assert said == [f"warning: {warned}"] and "locations are out of the camera's view" in warned
+    assert "expected grid.x and grid.y over the floor in view" in warned and "floor in view x -1.6" in warned
+
+
+def test_implausible_floor_fits_are_said():
+    """pose_warnings: the Azure Kinect's wall taken for a floor (pitch 75.4, roll 38.4, as the
+    issue found it) is said with the key that fixes it; a camera above 6 m or below 0.3 m, or
+    looking up more than 15 deg, too; a grid more than half out of view too. Each limit itself
+    passes."""
+    from dpom_warp.session import pose_warnings
+
+    def fit(h, pitch, roll):
+        return {"camera_height": h, "pitch_deg": pitch, "roll_deg": roll}
+
+    (wall,) = pose_warnings(fit(0.9, 75.4, 38.4), 0.9, 100)
+    assert wall.startswith("camera.extrinsics: auto: the floor found (camera 0.90 m above it, pitch 75.4 deg, "
+                           "roll 38.4 deg) means a roll of 38.4 deg") and wall.endswith("give camera.extrinsics "
+                                                                                         "(or camera.ground.up)")
+    assert pose_warnings(fit(1.3, 4.9, -0.3), 0.9, 100) == []
+    assert pose_warnings(fit(6.0, 90.0, -30.0), 0.5, 100) == []  # every limit itself
+    assert pose_warnings(fit(0.3, -15.0, 30.0), 0.5, 100) == []
+    (high,) = pose_warnings(fit(6.5, 60.0, 0.0), 0.9, 100)
+    assert "means a camera 6.50 m above the floor (expected 0.3 to 6 m)" in high
+    (up,) = pose_warnings(fit(1.0, -20.0, 0.0), 0.9, 100)
+    assert "means a camera looking 20.0 deg up" in up
+    both = pose_warnings(fit(0.1, -40.0, 45.0), 0.9, 100)
+    assert len(both) == 1 and " and a camera 0.10 m above the floor" in both[0] and " and a camera looking" in both[0]
+    (grid,) = pose_warnings(fit(1.3, 4.9, -0.3), 0.25, 3000, (-1.6, 1.5, 2.3, 5.5))
+    assert grid.startswith("grid: with the floor found (camera 1.30 m above it, pitch 4.9 deg, roll -0.3 deg) "
+                           "75 % of its 3000 locations are out of the camera's view (floor in view x -1.6 to 1.5 m, "
+                           "y 2.3 to 5.5 m)")
 
 
 def test_auto_pose_with_synthetic_scene_is_refused(tmp_path):

@@ -395,7 +395,8 @@ def test_azure_kinect_recording_reads_right_and_runs(tmp_path):
 def test_azure_kinect_accelerometer_gives_up(tmp_path):
     """The IMU's gravity, turned into the depth camera's frame, is perpendicular to the
     recording's walls (its largest planes, found by Open3D in the depth frame), and becomes
-    the floor fit's camera.ground.up when extrinsics are auto and the config gives no up."""
+    the floor fit's camera.ground.up when extrinsics are auto, written or left out (the
+    default), and the config gives no up; a pose given leaves it alone."""
     import open3d as o3d
 
     from dpom_warp.loading import load_config
@@ -424,15 +425,22 @@ def test_azure_kinect_accelerometer_gives_up(tmp_path):
     path = tmp_path / "az.yaml"
     path.write_text(yaml.safe_dump(cfg))
     assert np.allclose(load_config(path).ground.up, up, atol=1e-6)
-    cfg["camera"]["ground"] = {"up": [0, -1, 0]}  # the config's own up wins
+    del cfg["camera"]["extrinsics"]  # left out: auto, the IMU's up as when written
+    path.write_text(yaml.safe_dump(cfg))
+    assert np.allclose(load_config(path).ground.up, up, atol=1e-6)
+    cfg["camera"]["extrinsics"] = {"height": 1.0, "pitch_deg": 10.0}  # a pose given: no floor fit, no up taken
+    path.write_text(yaml.safe_dump(cfg))
+    assert load_config(path).ground.up == "auto"
+    cfg["camera"] = {"extrinsics": "auto", "ground": {"up": [0, -1, 0]}}  # the config's own up wins
     path.write_text(yaml.safe_dump(cfg))
     assert tuple(load_config(path).ground.up) == (0, -1, 0)
 
 
-def run_auto_pose_fails(tmp_path, capsys, recording) -> tuple:
-    """`dpom-warp run` on `recording` with extrinsics auto, which must exit 2: (the config's
-    path, the one error line)."""
-    cfg = {"device": "cpu", "input": {"frames": str(recording)}, "camera": {"extrinsics": "auto"},
+def run_auto_pose_fails(tmp_path, capsys, recording, camera=None) -> tuple:
+    """`dpom-warp run` on `recording` with extrinsics auto (or the `camera` section given), which
+    must exit 2: (the config's path, the one error line)."""
+    cfg = {"device": "cpu", "input": {"frames": str(recording)},
+           "camera": {"extrinsics": "auto"} if camera is None else camera,
            "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]}, "output": {"dir": str(tmp_path / "out")}}
     path = tmp_path / "auto.yaml"
     path.write_text(yaml.safe_dump(cfg))
@@ -508,11 +516,14 @@ def test_fit_ground_on_a_recording_takes_its_camera_frames_and_up(tmp_path, caps
 def test_a_recording_with_no_floor_in_view_is_named_in_the_error(tmp_path, capsys):
     """The Azure Kinect recording looks at a desk: extrinsics auto finds no floor near its
     IMU's up, and the one-line error names the recording and its frame (not the cache's file)
-    and the up it looked along; nothing is written."""
-    _, line = run_auto_pose_fails(tmp_path, capsys, AZURE)
-    assert line.startswith(f"dpom-warp: error: {AZURE} (frame 000000): no floor plane found")
-    assert "of up [0.022, -0.982, 0.187]" in line and ".cache" not in line
-    assert not (tmp_path / "out").exists()
+    and the up it looked along; nothing is written. The same with the extrinsics left out
+    (auto by default: it used to fit the wall behind the desk, 89 deg from the IMU's up, and
+    run)."""
+    for camera in (None, {}):
+        _, line = run_auto_pose_fails(tmp_path, capsys, AZURE, camera)
+        assert line.startswith(f"dpom-warp: error: {AZURE} (frame 000000): no floor plane found")
+        assert "of up [0.022, -0.982, 0.187]" in line and ".cache" not in line
+        assert not (tmp_path / "out").exists()
 
 
 def test_realsense_sdk_db3_gives_the_png_run(tmp_path, scene):
