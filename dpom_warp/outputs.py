@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import ConfigError, RunConfig
+from .drift import summary as drift_summary
 from .evaluate import score_frames
 from .io import TEMP_MARK, write_json_atomic
 from .writers import TRACK_FILES, jsonable
@@ -151,6 +152,9 @@ def summarise(cfg, done, records, skipped, truth, geometry, dev, background, gro
                         p.get("kept_entries") is not None for p in per_frame) else None},
         "per_frame": per_frame,
     }
+    drifts = {p["frame"]: p["drift"] for p in per_frame if "drift" in p}
+    if drifts:  # each frame's estimate is in its record (and per_frame); here their range
+        summary["drift"] = drift_summary(drifts)
     if truth is not None and done:
         dims = 3 if cfg.grid.mode == "voxel" else 2
         det_xy = {f.name: np.array(records[f.name]["xy"]).reshape(-1, dims) for f in done}

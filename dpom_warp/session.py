@@ -219,7 +219,10 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
             raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
     auto_report, given = None, None
     if bg_frames:
-        engine.set_background_frames(engine.resolution.frames(np.stack(bg_frames)))
+        frames = engine.resolution.frames(np.stack(bg_frames))
+        if cfg.inputs.drift.correct and len(frames) > 1:  # drifting background frames brought to their median scale
+            frames = frames / frame_scales([frames], cfg.inputs.drift)[:, None, None].astype(np.float32)
+        engine.set_background_frames(frames)
         given = (engine.background(0), None) if parallel else None
         background = f"{len(bg_files)} background frames"
     elif auto_bg:
@@ -253,12 +256,46 @@ def estimate_background(cfg: RunConfig, files: list[Path], height: int, width: i
     `resolution` (None: full resolution). Returns the estimator and a report."""
     t = time.perf_counter()
     estimator = BackgroundEstimator(height, width, cfg.model, cfg.inputs.background_auto, device)
-    for i in range(0, len(files), chunk):
-        batch = np.stack([read_frame(cfg, f) for f in files[i:i + chunk]])
-        estimator.add(resolution.frames(batch) if resolution else batch)
-    return estimator, {"frames": len(files), "pixels": height * width,
-                       "memory_bytes": estimator.memory_bytes(),
-                       "estimate_s": time.perf_counter() - t}
+
+    def chunks():
+        for i in range(0, len(files), chunk):
+            batch = np.stack([read_frame(cfg, f) for f in files[i:i + chunk]])
+            yield resolution.frames(batch) if resolution else batch
+
+    scales = frame_scales(chunks(), cfg.inputs.drift) if cfg.inputs.drift.correct else None
+    done = 0
+    for batch in chunks():
+        if scales is not None:  # each frame brought to the frames' median scale before the clusters
+            batch = batch / scales[done:done + len(batch), None, None].astype(np.float32)
+        estimator.add(batch)
+        done += len(batch)
+    report = {"frames": len(files), "pixels": height * width, "memory_bytes": estimator.memory_bytes(),
+              "estimate_s": time.perf_counter() - t}
+    if scales is not None:
+        report["drift_aligned"] = {"scale_min": round(float(scales.min()), 6),
+                                   "scale_max": round(float(scales.max()), 6),
+                                   "corrected": int(np.sum(scales != 1.0))}
+    return estimator, report
+
+
+def frame_scales(chunks, options) -> np.ndarray:
+    """Each frame's depth scale against the frames' median one, for `auto` to estimate the
+    background from aligned frames (drift.py): each frame's scale against the first frame's
+    readings, then over their median; 1 where untrusted or within the dead band."""
+    from .drift import background_sample, estimate_scale
+
+    first, at, found = None, None, []
+    for batch in chunks:
+        for frame in batch:
+            if first is None:
+                first = frame.ravel()
+                at = background_sample(first, first > 0)
+            found.append(estimate_scale(frame.ravel()[at], first[at], options))
+    trusted = [e.scale for e in found if e.trusted]
+    middle = float(np.median(trusted)) if trusted else 1.0
+    scales = np.array([e.scale / middle if e.trusted else 1.0 for e in found])
+    scales[np.abs(scales - 1.0) <= options.deadband] = 1.0
+    return scales
 
 
 def refuse_low_view_from_above(cfg: RunConfig, fit, where: str) -> None:

@@ -10,81 +10,15 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field
 
 from ._open3d import o3d
 from .geometry import Camera
 from .io import write_depth_png, write_json_atomic
-from .values import Int, Node, Num, Pair, _numbers
+from .scene_spec import SceneSpec, drift_scales
 
 GENERATOR_VERSION = 3  # 2: objects with no visible pixel are left out of the ground truth; 3: objects carry ids
-
-
-class SceneSpec(Node):  # the config's `synthetic` section (config.sections adds its cache folder)
-    """What to generate.
-
-    Attributes:
-        seed: random seed of the whole sequence.
-        frames: number of frames with people.
-        background_frames: number of frames of the empty room.
-        people: number of people walking, or of drones flying (fixed for the sequence).
-        kind: 'people' or 'drones'.
-        area: (x_min, x_max, y_min, y_max) where people walk or drones fly, world metres.
-        altitude: (z_min, z_max) of the drones' centres, metres.
-        obstacles: free-standing cabinets (1.6-1.9 m high) inside `area`, for drones to hide behind.
-        room: (x_min, x_max, y_min, y_max, height) of the room's walls.
-        furniture: number of furniture pieces placed in the room.
-        step_m: distance a person walks between frames.
-        pair_gap: > 0: people walk in pairs, side by side, this far apart (centre to centre,
-            across their heading): person 2i + 1 at the left of person 2i.
-        min_gap: people keep at least this far apart, centre to centre (crowds: 0.45).
-        tables: free-standing tables (0.72-0.76 m high) inside `area`, which people walk around
-            (a ceiling camera sees them from above).
-        in_view: 'body': a person's feet and head are both in the image (a camera at eye
-            level); 'head': the top of the head is (a ceiling camera, which sees the floor at a
-            person's feet only far from below it).
-        motion: 'random': a random walk of step_m a frame that keeps everyone in view;
-            'paths': people walk straight to waypoints at about step_m a frame, stop at some
-            for 8 to 20 frames, wait or step aside for each other, and walk behind obstacles
-            (tracking scenes: crossings, people standing still, hidden ones).
-        leave: 'paths': waypoints may lie this far (metres) outside `area`, where a person
-            may leave the camera's view and come back later.
-        noise: (a, b) of the depth noise sigma(z) = a + b z^2, metres.
-        dropout: share of pixels with no reading, at random.
-        edge_holes: probability that a pixel at a depth edge has no reading.
-        range_m: (near, far) sensor range; outside it there is no reading.
-    """
-
-    seed: Int = Field(0, ge=0, description="seed of the whole sequence")
-    frames: Int = Field(20, ge=1, description="frames with people")
-    background_frames: Int = Field(10, ge=0, description="frames of the empty room")
-    people: Int = Field(5, ge=0, description="people walking, or drones flying")
-    kind: Literal["people", "drones"] = Field("people", description="what is rendered")
-    area: Annotated[tuple[float, float, float, float], _numbers(4)] = Field(
-        (-2.7, 2.7, 1.5, 6.7), description="x_min, x_max, y_min, y_max where they move, metres")
-    altitude: Pair = Field((0.6, 2.1), description="drones' heights, metres")
-    obstacles: Int = Field(0, ge=0, description="free-standing cabinets")
-    room: Annotated[tuple[float, float, float, float, float], _numbers(5)] = Field(
-        (-3.6, 3.6, -0.5, 8.0, 3.0), description="x_min, x_max, y_min, y_max, height of the walls, metres")
-    furniture: Int = Field(4, ge=0, description="furniture pieces placed in the room")
-    step_m: Num = Field(0.3, ge=0, description="walk per frame, metres")
-    pair_gap: Num = Field(0.0, ge=0, description="> 0: people walk in pairs this far apart")
-    min_gap: Num = Field(0.6, gt=0, description="people keep this far apart, metres")
-    tables: Int = Field(0, ge=0, description="free-standing tables inside the area")
-    in_view: Literal["body", "head"] = Field("body", description="what of a person must be in "
-                                             "the image: body (eye level) or head (ceiling cameras)")
-    motion: Literal["random", "paths"] = Field("random", description="random: a random walk in view; "
-                                               "paths: straight walks to waypoints with stops (tracking scenes)")
-    leave: Num = Field(0.0, ge=0, description="paths: waypoints up to this far outside the area "
-                                                       "(people leave the view and come back), metres")
-    noise: Pair = Field((0.002, 0.0015), description="depth noise a + b z^2, metres")
-    dropout: Num = Field(0.01, ge=0, le=1, description="share of pixels with no reading")
-    edge_holes: Num = Field(0.5, ge=0, le=1,
-                            description="probability of no reading at a depth edge")
-    range_m: Pair = Field((0.5, 8.0), description="near, far sensor range, metres")
 
 
 def _cylinder(radius, length, p0, p1=None, resolution=12):
@@ -507,7 +441,10 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
         The scene description written to scene.json.
     """
     out = Path(out_dir)
-    desc = {"version": GENERATOR_VERSION, "spec": spec.model_dump(),
+    described = spec.model_dump()
+    if not any(spec.drift):  # no drift: the key of scenes rendered before it existed
+        del described["drift"]
+    desc = {"version": GENERATOR_VERSION, "spec": described,
             "camera": {"width": camera.width, "height": camera.height, "fx": camera.fx,
                        "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
                        "T_world_from_camera": np.asarray(camera.T_world_from_camera).tolist()}}
@@ -542,8 +479,10 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
             old.unlink()  # (not a concurrent render's hidden temporary files)
     static, _ = _scene(room)
     t_static, _ = render(static, camera)
+    scales = drift_scales(spec)
     for f in range(spec.background_frames):
-        write_depth_png(out / "background" / f"{f:04d}.png", sensor_noise(t_static, spec, rng))
+        write_depth_png(out / "background" / f"{f:04d}.png",
+                        sensor_noise(t_static, spec, rng) * scales["background"][f])
     truth = []
     if spec.kind == "people":
         sequence = (stroll if spec.motion == "paths" else walk)(spec, camera, footprints, rng)
@@ -559,7 +498,7 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
         scene, ids = _scene(room + meshes)
         t, gid = render(scene, camera)
         name = f"{f:04d}.png"
-        write_depth_png(out / "frames" / name, sensor_noise(t, spec, rng))
+        write_depth_png(out / "frames" / name, sensor_noise(t, spec, rng) * scales["frames"][f])
         objects = []
         for n, (m, p, pid) in enumerate(zip(meshes, people, ids[len(room):])):
             alone, _ = _scene([m])
@@ -577,5 +516,11 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
                             "visibility": round(visible / float(full.sum()), 4)})
         truth.append({"frame": name, "objects": objects})
     write_json_atomic(out / "ground_truth.json", truth)
+    drift_file = out / "drift.json"
+    if any(spec.drift):
+        write_json_atomic(drift_file, {"background": scales["background"],
+                                       "frames": {f"{f:04d}.png": s for f, s in enumerate(scales["frames"])}})
+    else:
+        drift_file.unlink(missing_ok=True)
     write_json_atomic(meta, desc)
     return desc

@@ -100,7 +100,8 @@ def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engi
                     graph={"auto": None, "on": True, "off": False}[cfg.engine.graph],
                     table={"auto": None, "table": True, "tiles": False}[cfg.engine.mask_index],
                     resolution=resolution,
-                    background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None)
+                    background_auto=cfg.inputs.background_auto if cfg.inputs.auto_background else None,
+                    drift=cfg.inputs.drift)
     if cfg.detection.min_log_odds > 0:  # results carry the joint test's lists (joint.JointLists)
         engine.joint_threshold = cfg.detection.threshold
     return engine
@@ -208,6 +209,8 @@ class FrameWorker:
                       "infer_s": infer_s, "detect_s": t2 - t1, "render_s": t3 - t2,
                       "worker": self.name, **{f"engine_{k}": v for k, v in res.timings.items()}},
         }
+        if res.drift is not None:  # the frame's depth scale against the background (drift.py)
+            record["stats"]["drift"] = res.drift.record()
         return f.name, FrameOutput(f.name, f.stem, rho_map, files, record,
                                    list(grown)), None
 

@@ -12,7 +12,7 @@ from pydantic import ValidationError
 from ..geometry import Camera, Grid, ObjectBox
 from ..ground import GroundOptions
 from ..model import ModelParams
-from ..synthetic import SceneSpec
+from ..scene_spec import SceneSpec
 from ..tracking import TrackingOptions
 from .schema import ConfigFile
 from .sections import DetectionSection, EngineSection, EvaluationSection, InputSection, OutputSection

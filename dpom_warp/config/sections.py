@@ -8,10 +8,11 @@ from typing import Annotated, Literal, Union
 from pydantic import Field
 
 from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
+from ..drift import DriftOptions
 from ..geometry import Grid, ObjectBox
 from ..model import AutoBackground
 from ..resolution import REDUCERS
-from ..synthetic import SceneSpec
+from ..scene_spec import SceneSpec
 from ..tracking import TrackingOptions
 from ..values import (
     Batch,
@@ -55,6 +56,7 @@ class InputSection(Node):
                                           "the others dropped, tracks online (live mode tried without a "
                                           "camera; --play)")
     background_auto: BackgroundAutoSection = BackgroundAutoSection()
+    drift: DriftOptions = DriftOptions()
 
     @property
     def auto_background(self) -> bool:

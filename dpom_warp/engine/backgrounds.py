@@ -22,6 +22,7 @@ class BackgroundMixin:
         self.floor_pixels.fill_(1)
         self.floor_mode, self.fallback_pixels = True, self.n_pixels
         self._floor_background(0)
+        self._sample_background()
 
     def _floor_background(self, outside_is_static: int):
         wp.launch(K.floor_background, dim=self.depth.shape, device=self.device,
@@ -47,6 +48,7 @@ class BackgroundMixin:
             wp.launch(K.background_from_frames, dim=(self.height, self.width),
                       inputs=[f, self.pm, scratch, self.batch, self.bg])
         self.floor_mode, self.fallback_pixels, self.bg_fresh = False, 0, True
+        self._sample_background()
 
     def set_background(self, bg: Background, fallback: np.ndarray | None = None):
         """Use a given per-pixel background distribution (arrays of shape (H, W)); pixels
@@ -61,6 +63,7 @@ class BackgroundMixin:
         self.floor_mode = self.fallback_pixels > 0
         if self.floor_mode:
             self._floor_background(0)
+        self._sample_background()
         return self.fallback_pixels
 
     def background_state(self) -> tuple | None:

@@ -10,6 +10,7 @@ import numpy as np
 import warp as wp
 
 from .. import kernels as K
+from ..drift import DriftEstimate
 from ..joint import JointLists
 from ..model import (
     ModelParams,
@@ -111,3 +112,4 @@ class FrameResult:
     # with Engine.joint_threshold: what the detections' joint test needs of the frame, for the
     # locations whose rho* reaches that threshold (joint.JointLists; detect.joint_detections)
     joint: JointLists | None = None
+    drift: DriftEstimate | None = None  # the frame's depth scale (Engine.drift; None: not estimated)

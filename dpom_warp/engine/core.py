@@ -12,6 +12,7 @@ import warp as wp
 
 from .. import kernels as K
 from ..geometry import Geometry, neighbour_lists
+from ..drift import DriftOptions
 from ..model import (
     AutoBackground,
     ModelParams,
@@ -19,6 +20,7 @@ from ..model import (
 from ..resolution import Resolution
 from ..warp_setup import init_warp
 from .backgrounds import BackgroundMixin
+from .drift import DriftMixin
 from .base import (
     BEHIND_POINT_BYTES,
     ENTRY_BYTES,
@@ -37,7 +39,7 @@ from .threshold import ThresholdMixin
 INT32_MAX = 2**31 - 1  # list offsets are int32
 
 
-class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, ThresholdMixin):
+class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMixin, ThresholdMixin):
     """DPOM inference for one camera and grid on one Warp device.
 
     Buffers (per-pixel lists, accumulators) are allocated up front; the list capacity grows
@@ -71,19 +73,22 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
             the caller: the engine's own arrays are at the geometry's resolution).
         background_auto: the run estimates its background (background.BackgroundEstimator at
             this resolution): its state counts in the memory budget and memory_bytes.
+        drift: each frame's depth scale estimated against the background and divided out
+            before inference (drift.py; None: frames as given).
     """
 
     def __init__(self, geometry: Geometry, params: ModelParams, device: str = "cpu",
                  entries_per_pixel: float = 8.0, max_entries: int | None = None,
                  memory_gb: float | None = None, tile: int = 8, batch: int = 1,
                  graph: bool | None = None, resolution: Resolution | None = None,
-                 background_auto: AutoBackground | None = None, table: bool | None = None):
+                 background_auto: AutoBackground | None = None, table: bool | None = None,
+                 drift: DriftOptions | None = None):
         init_warp()
         if min(params.sensor_noise) < 0:
             raise ValueError(f"sensor_noise: expected [a, b] >= 0, found {list(params.sensor_noise)}")
         if batch < 1 or tile < 1:
             raise ValueError(f"batch and tile: expected integers >= 1, found {batch} and {tile}")
-        self.geometry, self.params, self.device = geometry, params, device
+        self.geometry, self.params, self.device, self.drift = geometry, params, device, drift
         # results carry the joint test's lists of the locations whose rho* reaches this (None: none)
         self.joint_threshold: float | None = None
         self.resolution = resolution or Resolution()
@@ -268,6 +273,7 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
         dev = self.device
         n = len(depths_m)
         t0 = time.perf_counter()
+        depths_m, drift = self._correct_drift(depths_m)
         self.build_lists(depths_m)
         self.tallies.zero_()  # (the entries counted now: the bound's pruning changes the counts)
         self._launch(K.frame_tally, self.batch * self.n_pixels,
@@ -307,7 +313,7 @@ class Engine(StaticsMixin, BackgroundMixin, ListsMixin, IterationsMixin, Thresho
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
                             live=int(live[f]), converged=bool(done[f]),
                             kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]),
-                            joint=joint[f])
+                            joint=joint[f], drift=drift[f])
                 for f in range(n)]
 
 
