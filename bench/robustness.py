@@ -30,6 +30,7 @@ from pathlib import Path
 PLANE = ["object.shape=plane", "object.width=0.5", "model.top_support=0.05"]  # the paper's model, its own defaults
 CEILING_90 = ["camera.extrinsics.pitch_deg=90", "camera.extrinsics.y=4.0", "grid.x=[-1.8, 1.8, 0.1]",
               "grid.y=[2.4, 5.6, 0.1]", "synthetic.in_view=head"]
+DRIFT = "synthetic.drift=[0.012, 0.2, 0.025, 0.035]"
 VARIANTS = {
     "seed 1": [],
     "seed 2": [],
@@ -60,6 +61,12 @@ VARIANTS = {
         "synthetic.in_view=head", "camera.extrinsics.height=3.2", "camera.extrinsics.pitch_deg=45",
         "camera.extrinsics.yaw_deg=-40", "camera.extrinsics.x=-3.0", "synthetic.people=8",
         "synthetic.tables=2", "synthetic.area=[-2.5, 2.5, 1.5, 6.5]"],
+    # frame-wide depth drift (issue 60): every frame's depths, the empty room's too, x 1 + N(0, 1.2 %),
+    # a fifth of them jumping 2.5 to 3.5 % either way (a time-of-flight camera's temperature steps)
+    "drift 1.2 %, jumps 3 %": [DRIFT],
+    "drift, camera 1.8 m, pitch 15": [DRIFT, "camera.extrinsics.height=1.8", "camera.extrinsics.pitch_deg=15"],
+    "drift, ceiling 3.0 m, pitch 90": [DRIFT, *CEILING_90, "camera.extrinsics.height=3.0", "synthetic.people=3",
+                                       "synthetic.area=[-1.2, 1.2, 3.0, 5.0]"],
 }
 
 BACKGROUNDS = {"frames": "background frames", "auto": "background estimated from the frames (auto)",
