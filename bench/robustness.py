@@ -61,6 +61,11 @@ VARIANTS = {
         "synthetic.in_view=head", "camera.extrinsics.height=3.2", "camera.extrinsics.pitch_deg=45",
         "camera.extrinsics.yaw_deg=-40", "camera.extrinsics.x=-3.0", "synthetic.people=8",
         "synthetic.tables=2", "synthetic.area=[-2.5, 2.5, 1.5, 6.5]"],
+    # walls, two cabinets and a table inside the grid (issue 60: without empty-room frames, structure
+    # is what floor-only and auto must not take for people)
+    "walls, cabinets, table in the grid": ["synthetic.room=[-2.6, 2.6, -0.5, 6.6, 3.0]",
+                                           "synthetic.area=[-2.0, 2.0, 1.5, 6.0]", "synthetic.obstacles=2",
+                                           "synthetic.tables=1"],
     # frame-wide depth drift (issue 60): every frame's depths, the empty room's too, x 1 + N(0, 1.2 %),
     # a fifth of them jumping 2.5 to 3.5 % either way (a time-of-flight camera's temperature steps)
     "drift 1.2 %, jumps 3 %": [DRIFT],

@@ -9,6 +9,7 @@ from pydantic import Field
 
 from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
 from ..drift import DriftOptions
+from ..structure import StructureOptions
 from ..geometry import Grid, ObjectBox
 from ..model import AutoBackground
 from ..resolution import REDUCERS
@@ -57,6 +58,7 @@ class InputSection(Node):
                                           "camera; --play)")
     background_auto: BackgroundAutoSection = BackgroundAutoSection()
     drift: DriftOptions = DriftOptions()
+    structure: StructureOptions = StructureOptions()
 
     @property
     def auto_background(self) -> bool:
