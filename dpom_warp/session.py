@@ -224,7 +224,7 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
         structure = static_structure(cfg, engine, camera, frames[:cfg.inputs.structure.frames], log)
         if structure["pixels"]:
             background += f"; {len(structure['planes'])} static planes ({structure['pixels']} pixels)"
-            given = engine.background_state() if parallel else None
+            given = engine.background_state()  # what other workers (--workers, Ray, live helpers) take
     del bg_frames
     r = engine.resolution
     inference = {"stride": r.stride, "reduce": r.reduce, "image": [engine.width, engine.height],
