@@ -36,9 +36,9 @@ def rendered(people=PEOPLE, seed=0):
     return sensor_noise(t, SceneSpec(), np.random.default_rng(seed)).astype(np.float32)
 
 
-def run(tmp_path, name, frames, **input_changes):
-    """`dpom-warp run` floor-only on `frames` (written as PNGs), the pose given: (detections
-    (n, 2), summary)."""
+def run(tmp_path, name, frames, workers=1, **input_changes):
+    """`dpom-warp run` floor-only on `frames` (written as PNGs), the pose given, in `workers`
+    processes: (detections (n, 2), summary)."""
     folder = tmp_path / name
     (folder / "frames").mkdir(parents=True)
     for i, depth in enumerate(frames):
@@ -48,7 +48,7 @@ def run(tmp_path, name, frames, **input_changes):
            "grid": {"x": [-2.5, 2.5, 0.1], "y": [1.5, 5.0, 0.1]},
            "output": {"dir": str(folder / "out"), "images": False}, "tracking": {"method": "off"}}
     (folder / "c.yaml").write_text(yaml.safe_dump(cfg))
-    assert main(["run", str(folder / "c.yaml"), "--no-progress"]) == 0
+    assert main(["run", str(folder / "c.yaml"), "--no-progress", "--workers", str(workers)]) == 0
     rows = list(csv.reader(open(folder / "out" / "detections.csv")))[1:]
     dets = np.array([[float(r[1]), float(r[2])] for r in rows]).reshape(-1, 2)
     return dets, json.loads((folder / "out" / "summary.json").read_text())
@@ -76,6 +76,11 @@ def test_a_wall_in_the_grid_is_background_and_people_by_it_are_found(tmp_path):
     plain, _ = run(tmp_path, "plain", frames, structure={"planes": False})
     extra = [d for d in plain if not any(np.hypot(*(d - p)) < 0.5 for p in PEOPLE)]
     assert len(extra) >= 1, plain  # what the planes remove
+    # --workers 2: the helper process is handed the background with the planes, the same maps
+    pooled, _ = run(tmp_path, "pooled", frames, workers=2)
+    for i in range(len(frames)):
+        name = f"maps/{i:04d}.npy"
+        assert (tmp_path / "pooled" / "out" / name).read_bytes() == (tmp_path / "planes" / "out" / name).read_bytes()
 
 
 def test_no_wall_is_no_plane_and_the_same_run(tmp_path):
