@@ -225,3 +225,25 @@ def test_solid_depth_of_an_elliptic_body_facing_the_camera():
         d = np.array([p]) - centre
         assert solid_depth(centre, d, at, solid)[0][0] == pytest.approx(want, abs=1e-9), p
         assert solid_depth(centre, d, at, circle)[0][0] == pytest.approx(want_circle, abs=1e-9), p
+
+
+def test_the_iteration_schedule_by_hand():
+    """The schedule the engine and the NumPy reference share (ModelParams.full_pass, damping_at),
+    against values written by hand, so a bug in it cannot hide behind their agreement (issue 63).
+    Sparse iterations with check_every 5 and 12 iterations: full passes at the first, at each
+    check (iterations 5 and 10, 0-based 4 and 9) and at the last (11); the exact path
+    (sparse_epsilon 0): every pass full. lambda = 0.1 x 1.03^i up to 0.4: 1.03^46 = 3.8950, so
+    0.38950 at i = 46, and 1.03^47 = 4.0119 passes the cap at i = 47; without a cap (damping_max
+    null in ModelParams) lambda stays at damping."""
+    from dpom_warp.model import ModelParams
+
+    p = ModelParams(max_iterations=12, check_every=5, sparse_epsilon=1e-4)
+    assert [i for i in range(12) if p.full_pass(i)] == [0, 4, 9, 11]
+    assert all(p.replace(sparse_epsilon=0.0).full_pass(i) for i in range(12))
+    assert [i for i in range(10) if ModelParams(max_iterations=10, check_every=3).full_pass(i)] == [0, 2, 5, 8, 9]
+    p = ModelParams(damping=0.1, damping_growth=1.03, damping_max=0.4)
+    assert p.damping_at(0) == pytest.approx(0.1, abs=1e-15)
+    assert p.damping_at(1) == pytest.approx(0.103, abs=1e-15)
+    assert p.damping_at(46) == pytest.approx(0.38950, abs=5e-5)
+    assert p.damping_at(47) == 0.4 and p.damping_at(90) == 0.4
+    assert ModelParams(damping=0.1, damping_max=None).damping_at(30) == 0.1
