@@ -101,14 +101,14 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
             break
         inl = np.asarray(cloud.points)[idx]
         cloud = cloud.select_by_index(idx, invert=True)
-        plane = _rectangle(np.asarray(model, np.float64), inl, options, voxel, grid_xy, taller)
+        plane = _rectangle(np.asarray(model, np.float64), inl, options, grid_xy, taller)
         if plane is not None:
             planes.append(plane)
     return planes
 
 
-def _rectangle(model: np.ndarray, inliers: np.ndarray, options: StructureOptions, voxel: float,
-               grid_xy, taller: float, cell: float = 0.1) -> StaticPlane | None:
+def _rectangle(model: np.ndarray, inliers: np.ndarray, options: StructureOptions, grid_xy, taller: float,
+               cell: float = 0.1) -> StaticPlane | None:
     """The plane of `model` (a, b, c, d) with the rectangle of its largest connected patch of
     inliers (on a `cell` grid along two in-plane axes: horizontal, and up the plane where it is
     not level), or None where that patch is no structure: narrower than min_extent either way
@@ -146,8 +146,6 @@ def _rectangle(model: np.ndarray, inliers: np.ndarray, options: StructureOptions
     a0, a1 = np.percentile(patch[:, 0], [1, 99])
     b0, b1 = np.percentile(patch[:, 1], [1, 99])
     filled = len(np.unique(ij[keep], axis=0)) * cell ** 2
-    import os
-    if os.environ.get("DBG"): print("PLANE", round(min(a1 - a0, b1 - b0), 2), round(filled / ((a1 - a0) * (b1 - b0)), 3), n.round(2))
     if min(a1 - a0, b1 - b0) < options.min_extent or filled < options.min_fill * (a1 - a0) * (b1 - b0):
         return None
     return StaticPlane(n, float(d), origin, u, v, (float(a0), float(a1), float(b0), float(b1)), int(keep.sum()))
