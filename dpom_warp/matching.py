@@ -18,8 +18,8 @@ def assign(cost: np.ndarray, gate: float) -> list[tuple[int, int]]:
 
 
 def match(det_xy: np.ndarray, gt_xy: np.ndarray, max_distance: float) -> list[tuple[int, int]]:
-    """Pairs (detection, ground truth) of a minimum-total-distance assignment, each pair closer
-    than `max_distance` (ground-plane metres)."""
+    """Pairs (detection, ground truth) of a minimum-total-distance assignment, each pair at most
+    `max_distance` apart (ground-plane metres: "within 0.5 m" includes 0.5 m)."""
     if len(det_xy) == 0 or len(gt_xy) == 0:
         return []
     return assign(np.linalg.norm(det_xy[:, None, :] - gt_xy[None, :, :], axis=2), max_distance)

@@ -148,3 +148,21 @@ def test_view_part_is_the_share_of_the_silhouette_rectangle_in_the_image():
         assert geom.view_part[k] == pytest.approx(geom.rect_area[k] / whole)
         edge += geom.view_part[k] < 1
     assert 0 < edge < len(seen) and np.all(geom.view_part[seen] > 0)
+
+
+def test_the_match_gate_includes_its_distance():
+    """"Within 0.5 m" includes 0.5 m (issue 63, boundaries): a detection exactly at the gate is
+    matched, one a hair beyond is not (distances exact in binary: 0.5 = 0.3-0.4-0.5 triangle's
+    hypotenuse), in the assignment and in MODA alike."""
+    from dpom_warp.evaluate import score_frames
+    from dpom_warp.matching import assign, match
+
+    gt = np.array([[0.0, 0.0]])
+    assert match(np.array([[0.3, 0.4]]), gt, 0.5) == [(0, 0)]  # 0.3^2 + 0.4^2 = 0.25 exactly in float64
+    assert match(np.array([[0.3, 0.4000001]]), gt, 0.5) == []
+    assert assign(np.array([[0.5, 0.7], [0.9, 0.5]]), 0.5) == [(0, 0), (1, 1)]
+    truth = {"f": [{"x": 0.0, "y": 0.0, "visibility": 1.0}]}
+    at = score_frames({"f": np.array([[0.5, 0.0]])}, truth, 0.5, 0.1, np.zeros(2))
+    beyond = score_frames({"f": np.array([[0.5000001, 0.0]])}, truth, 0.5, 0.1, np.zeros(2))
+    assert (at["tp"], at["fp"], at["moda"]) == (1, 0, 1.0)
+    assert (beyond["tp"], beyond["fp"], beyond["fn"], beyond["moda"]) == (0, 1, 1, -1.0)
