@@ -560,3 +560,29 @@ def test_the_cache_folder_is_dpom_warp_cache_itself_and_the_fit_names_the_record
     assert len(read) == 1 and read[0].name.startswith("walk-"), sorted(cache.iterdir())
     fit = json.loads((tmp_path / "out" / "summary.json").read_text())["ground_fit"]
     assert fit["frames"] == [f"{bag} (frame 000000)", f"{bag} (frame 000001)"]
+
+
+def test_the_configs_camera_wins_over_the_recordings_and_the_run_says_so(tmp_path, capsys):
+    """README: camera keys the config gives win over the recording's, and the run says where they
+    differ (one line each, naming the key, both values and which is used); the run's resolved
+    config holds the config's. The RealSense recording's fx and depth scale given otherwise."""
+    from dpom_warp.sources import open_source
+
+    info = open_source(RS_BAG).info()
+    i = dict(info.intrinsics)
+    fx = round(i["fx"] * 1.1, 3)
+    cfg = {"device": "cpu", "input": {"frames": str(RS_BAG), "depth_scale": 0.002},
+           "camera": {"intrinsics": {**i, "fx": fx}, "extrinsics": {"height": 1.2, "pitch_deg": 0.0}},
+           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]},
+           "output": {"dir": str(tmp_path / "out"), "images": False}}
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(tmp_path / "c.yaml"), "--no-progress"]) == 0
+    said = [x for x in capsys.readouterr().out.splitlines() if "differs from the recording's" in x]
+    assert any(f"camera.intrinsics.fx: the config's {fx:g} differs from the recording's {i['fx']:g} "
+               "(the config's is used)" in x for x in said), said
+    assert any(f"input.depth_scale: the config's 0.002 differs from the recording's {info.depth_scale:g}" in x
+               for x in said), said
+    assert not any("intrinsics.fy" in x or "intrinsics.cx" in x for x in said)  # those agree
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["config"]["camera"]["intrinsics"]["fx"] == fx
+    assert summary["config"]["input"]["depth_scale"] == 0.002
