@@ -414,3 +414,20 @@ def test_bench_ground_fits_a_robustness_ceiling_scene():
     assert abs(auto["height_error_m"]) < 0.001 and auto["normal_error_deg"] < 0.1 and not auto["ambiguity"]
     image_up = fit_scene(name, VARIANTS[name], tuning=False, up=(0.0, -1.0, 0.0))
     assert "no floor plane found" in image_up["error"]
+
+
+def test_fit_ground_max_angle_and_depth_max(capsys):
+    """fit-ground's --max-angle and --depth-max (README promises): on the real frame the floor is
+    4.9 deg from the image's up (the camera's pitch) and seen from 2.3 m on; with --up 0,-1,0 it is
+    found within 10 deg and not within 3; with --depth-max 2 (every floor reading farther) there
+    is no floor, with 6 there is (the up given: with auto a wall would do for a floor there)."""
+    frame, camera_file = str(REAL / "depth_mm.png"), str(REAL / "camera.yaml")
+    base = ["fit-ground", frame, "--camera", camera_file, "--up", "0,-1,0"]
+    assert main(base + ["--max-angle", "10"]) == 0
+    assert "pitch 4.91 deg" in capsys.readouterr().out
+    assert main(base + ["--max-angle", "3"]) == 2
+    assert "no floor plane found" in capsys.readouterr().err
+    assert main(base + ["--depth-max", "6"]) == 0
+    assert "pitch 4.91 deg" in capsys.readouterr().out
+    assert main(base + ["--depth-max", "2"]) == 2
+    assert "no floor plane found" in capsys.readouterr().err
