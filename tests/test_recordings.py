@@ -586,3 +586,27 @@ def test_the_configs_camera_wins_over_the_recordings_and_the_run_says_so(tmp_pat
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["config"]["camera"]["intrinsics"]["fx"] == fx
     assert summary["config"]["input"]["depth_scale"] == 0.002
+
+
+def test_a_changed_recording_is_read_again(tmp_path, scene):
+    """README: the cache is keyed by the recording's path, size and modification time, so a
+    recording written again at the same path (here 4 frames, then its first 2) is read again:
+    the second run reads 2 frames, from a new cache folder, and the first's folder is left as it
+    was."""
+    import os
+
+    from dpom_warp.sources import expand
+
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))
+    bag = tmp_path / "same.bag"
+    write_bag(bag, "ros1", messages(typestore(True), frames, "16UC1", camera_of(cfg)))
+    first = expand(str(bag), "input.frames")
+    assert len(first) == 4
+    bag.unlink()
+    write_bag(bag, "ros1", messages(typestore(True), frames[:2], "16UC1", camera_of(cfg)))
+    os.utime(bag, ns=(bag.stat().st_atime_ns, bag.stat().st_mtime_ns + 1_000_000_000))  # (coarse clocks)
+    second = expand(str(bag), "input.frames")
+    assert len(second) == 2 and second[0].parent != first[0].parent
+    assert all(f.exists() for f in first)
+    np.testing.assert_array_equal(np.load(second[1]), np.load(first[1]))  # the same frame, read again
