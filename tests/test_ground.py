@@ -431,3 +431,20 @@ def test_fit_ground_max_angle_and_depth_max(capsys):
     assert "pitch 4.91 deg" in capsys.readouterr().out
     assert main(base + ["--depth-max", "2"]) == 2
     assert "no floor plane found" in capsys.readouterr().err
+
+
+def test_a_runs_summary_says_what_the_floor_was_fitted_on_and_its_doubt(tmp_path, capsys):
+    """README: summary.json's ground_fit names the frames the floor was fitted on (the first
+    camera.ground.frames of them, here 1 of 2) and keeps the fit's ambiguity, which the run also
+    prints as a warning (the camera 1 degree short of straight down beside a wall)."""
+    back_wall_frames(89.0, tmp_path)
+    cfg = {"device": "cpu", "input": {"frames": str(tmp_path / "*.npy")},
+           "camera": {"file": str(tmp_path / "camera.yaml"), "ground": {"frames": 1}},
+           "grid": {"x": [-1.0, 1.0, 0.1], "y": [-1.0, 1.0, 0.1]},
+           "output": {"dir": str(tmp_path / "out"), "images": False}}
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(tmp_path / "c.yaml"), "--no-progress"]) == 0
+    ground = json.loads((tmp_path / "out" / "summary.json").read_text())["ground_fit"]
+    assert ground["frames"] == [str(tmp_path / "0.npy")]
+    assert ground["ambiguity"].startswith("camera.ground.up: auto took the floor 2.90 m below the camera")
+    assert f"warning: {ground['ambiguity']}" in capsys.readouterr().out.splitlines()
