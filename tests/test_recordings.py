@@ -63,8 +63,10 @@ def make(ts, msgtype, **values):
     return cls(**{names[k.lower()]: v for k, v in values.items()})
 
 
-def messages(ts, frames: list[Path], encoding: str, camera: dict | None, compressed=False, truncate=None):
-    """(topic, msgtype, message) in order: the camera info, then the depth frames."""
+def messages(ts, frames: list[Path], encoding: str, camera: dict | None, compressed=False, truncate=None,
+             no_reading=np.nan):
+    """(topic, msgtype, message) in order: the camera info, then the depth frames (32FC1: the
+    pixels without a reading hold `no_reading`)."""
     out = []
     for i, f in enumerate(frames):
         mm = np.asarray(Image.open(f)).astype(np.uint16)
@@ -90,7 +92,7 @@ def messages(ts, frames: list[Path], encoding: str, camera: dict | None, compres
             continue
         if encoding == "32FC1":
             m = mm.astype(np.float32) / 1000.0
-            m[mm == 0] = np.nan  # REP 118: no reading
+            m[mm == 0] = no_reading  # REP 118: NaN (or 0, or inf) is no reading
             data, step = np.frombuffer(m.tobytes(), np.uint8), 4 * mm.shape[1]
         else:
             data, step = np.frombuffer(mm.tobytes(), np.uint8), 2 * mm.shape[1]
@@ -610,3 +612,21 @@ def test_a_changed_recording_is_read_again(tmp_path, scene):
     assert len(second) == 2 and second[0].parent != first[0].parent
     assert all(f.exists() for f in first)
     np.testing.assert_array_equal(np.load(second[1]), np.load(first[1]))  # the same frame, read again
+
+
+@pytest.mark.parametrize("no_reading", [0.0, np.inf, -np.inf])
+def test_32fc1_zeros_and_infinities_are_no_reading(tmp_path, scene, no_reading):
+    """README: in a 32FC1 depth image 0 and +-inf are no reading, as NaN is (REP 118): the frames
+    read from such a bag are the PNG frames' millimetres, 0 where they have none."""
+    from dpom_warp.sources import expand
+
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))[:2]
+    bag = write_bag(tmp_path / "f.bag", "ros1", messages(typestore(True), frames, "32FC1", camera_of(cfg),
+                                                          no_reading=no_reading))
+    got = expand(str(bag), "input.frames")
+    for cached, png in zip(got, frames):
+        mm = np.asarray(Image.open(png)).astype(np.int64)
+        assert (mm == 0).sum() > 100
+        read = np.load(cached).astype(np.int64)
+        assert np.array_equal(read == 0, mm == 0) and np.abs(read - mm).max() <= 1
