@@ -431,6 +431,22 @@ def test_track_command_retracks_without_inferring(tracked_run, tmp_path, capsys)
     off = json.loads((run / "summary.json").read_text())["tracking"]
     assert (off["method"], off["why"], off["settings"]["set"]) == ("off", "tracking.method: off", ["tracking.method=off"])
     assert (run / "run.json").read_bytes() == made
+    # input.fps (README: `track --set input.fps=...`): at 100 frames/s a track may move max_speed / 100 +
+    # jitter = 0.22 m between consecutive frames, where at the run's 5 (0.6 m) the tracks step
+    # farther (the rendered people walk 0.3 m a frame)
+
+    def longest_step(folder):
+        rows = [r.split(",") for r in (folder / "tracks.csv").read_text().splitlines()[1:]]
+        by = {}
+        for r in rows:
+            by.setdefault(r[1], []).append((int(r[0][:4]), float(r[2]), float(r[3])))
+        return max((np.hypot(b[1] - a[1], b[2] - a[2]) for t in by.values() for a, b in zip(t, t[1:])
+                    if b[0] == a[0] + 1), default=0.0)
+
+    assert longest_step(tracked_run[0]) > 0.22 + 1e-9
+    assert main(["track", str(run), "--set", "input.fps=100"]) == 0
+    assert json.loads((run / "summary.json").read_text())["tracking"]["fps"] == 100
+    assert longest_step(run) <= 2.0 / 100 + 0.2 + 1e-9
     assert main(["track", str(run), "--set", "model.alpha=1"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("dpom-warp: error: --set model.alpha: expected a tracking.* key") and "\n" not in err
