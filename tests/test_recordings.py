@@ -64,7 +64,7 @@ def make(ts, msgtype, **values):
 
 
 def messages(ts, frames: list[Path], encoding: str, camera: dict | None, compressed=False, truncate=None,
-             no_reading=np.nan):
+             no_reading=np.nan, distortion=("plumb_bob", np.zeros(5))):
     """(topic, msgtype, message) in order: the camera info, then the depth frames (32FC1: the
     pixels without a reading hold `no_reading`)."""
     out = []
@@ -78,7 +78,8 @@ def messages(ts, frames: list[Path], encoding: str, camera: dict | None, compres
                        do_rectify=False)
             out.append(("/cam/depth/camera_info", "sensor_msgs/msg/CameraInfo", make(
                 ts, "sensor_msgs/msg/CameraInfo", header=head, height=mm.shape[0], width=mm.shape[1],
-                distortion_model="plumb_bob", d=np.zeros(5), k=k, r=np.eye(3).ravel(), p=np.zeros(12),
+                distortion_model=distortion[0], d=np.asarray(distortion[1], float), k=k, r=np.eye(3).ravel(),
+                p=np.zeros(12),
                 binning_x=0, binning_y=0, roi=roi)))
         if compressed:
             import io
@@ -630,3 +631,23 @@ def test_32fc1_zeros_and_infinities_are_no_reading(tmp_path, scene, no_reading):
         assert (mm == 0).sum() > 100
         read = np.load(cached).astype(np.int64)
         assert np.array_equal(read == 0, mm == 0) and np.abs(read - mm).max() <= 1
+
+
+def test_a_bags_rational_polynomial_lens_is_read(tmp_path, scene, capsys):
+    """README: a CameraInfo's D in plumb_bob (5) or rational_polynomial (8 coefficients) becomes
+    camera.distortion; another model is a one-line error naming the bag, the topic, the model and
+    what is expected."""
+    from dpom_warp.sources import open_source
+
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))[:1]
+    d8 = [0.1, -0.05, 0.001, 0.002, 0.01, 0.2, -0.03, 0.005]
+    bag = write_bag(tmp_path / "rp.bag", "ros1", messages(typestore(True), frames, "16UC1", camera_of(cfg),
+                                                           distortion=("rational_polynomial", d8)))
+    assert list(open_source(bag).info().distortion) == pytest.approx(d8)
+    bad = write_bag(tmp_path / "eq.bag", "ros1", messages(typestore(True), frames, "16UC1", camera_of(cfg),
+                                                           distortion=("equidistant", [0.1, 0.0, 0.0, 0.0])))
+    assert main(["info", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "distortion model 'equidistant' with 4 coefficients; expected plumb_bob (5) or rational_polynomial (8)" in err
+    assert str(bad) in err and "\n" not in err
