@@ -651,3 +651,42 @@ def test_a_bags_rational_polynomial_lens_is_read(tmp_path, scene, capsys):
     err = capsys.readouterr().err.strip()
     assert "distortion model 'equidistant' with 4 coefficients; expected plumb_bob (5) or rational_polynomial (8)" in err
     assert str(bad) in err and "\n" not in err
+
+
+def imu_messages(ts, n: int, acc, frame_id: str) -> list:
+    """`n` sensor_msgs/Imu messages at rest reading `acc` (m/s^2) in `frame_id`."""
+    out = []
+    for i in range(n):
+        stamp = make(ts, "builtin_interfaces/msg/Time", sec=100, nanosec=i * 1_000_000)
+        vec = [make(ts, "geometry_msgs/msg/Vector3", x=float(v[0]), y=float(v[1]), z=float(v[2]))
+               for v in ((0, 0, 0), acc)]
+        out.append(("/cam/imu", "sensor_msgs/msg/Imu", make(
+            ts, "sensor_msgs/msg/Imu", header=make(ts, "std_msgs/msg/Header", stamp=stamp, frame_id=frame_id),
+            orientation=make(ts, "geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=np.zeros(9), angular_velocity=vec[0], angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=vec[1], linear_acceleration_covariance=np.zeros(9))))
+    return out
+
+
+def test_gravity_from_a_ros_imu_in_the_depth_frame(tmp_path, scene):
+    """README: a ROS bag's sensor_msgs/Imu in the depth image's own frame gives the floor fit its
+    up (the mean acceleration at rest, normalised: an accelerometer reads +g upwards), which
+    extrinsics auto takes as camera.ground.up; an IMU in another frame is not used (its
+    transform is not read)."""
+    from dpom_warp.loading import load_config
+    from dpom_warp.sources import open_source
+
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))[:2]
+    acc = (0.3, -9.7, 1.2)
+    want = np.array(acc) / np.linalg.norm(acc)
+    ts = typestore(True)
+    bag = write_bag(tmp_path / "imu.bag", "ros1",
+                    messages(ts, frames, "16UC1", camera_of(cfg)) + imu_messages(ts, 5, acc, "depth"))
+    assert np.allclose(open_source(bag).info().gravity_up, want, atol=1e-9)
+    run = {"device": "cpu", "input": {"frames": str(bag)}, "grid": {"x": [-2, 2, 0.2], "y": [1, 6, 0.2]}}
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(run))
+    assert np.allclose(load_config(tmp_path / "c.yaml").ground.up, want, atol=1e-6)
+    other = write_bag(tmp_path / "other.bag", "ros1",
+                      messages(ts, frames, "16UC1", camera_of(cfg)) + imu_messages(ts, 5, acc, "imu_link"))
+    assert open_source(other).info().gravity_up is None
