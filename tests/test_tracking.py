@@ -517,3 +517,37 @@ def test_peaks_drop_a_persons_edge_beside_them_as_the_detections_do():
     assert list(peaks(m, edge, 0.3)) == sorted([cell(0.9, 1.0), cell(3.0, 2.0)])
     m[10, 9] = 0.5
     assert list(peaks(m, edge, 0.3)) == sorted([cell(0.5, 1.0), cell(0.9, 1.0), cell(3.0, 2.0)])
+
+
+def test_entry_cells_of_a_run_by_hand():
+    """Cells.of (issue 63, entry cells): a seen cell is an entry where it lies on the grid's
+    border, beside a cell the camera does not see (8-neighbourhood), where its silhouette leaves
+    the image, or inside a tracking.regions rectangle; each rule checked on its own cells against
+    a plain loop over the seen mask, and the region's cells are entries only with the region."""
+    from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
+
+    cam = Camera(160, 120, 114.0, 114.0, 79.5, 59.5, pose_from_angles(2.2, 20.0))
+    grid = Grid(x=(-3.0, 3.0, 0.2), y=(0.5, 7.0, 0.2))
+    geom = build_geometry(cam, grid, ObjectBox(0.4, 1.8))
+    ny, nx = grid.shape
+    seen = (geom.rect_area > 0).reshape(ny, nx)
+    r = geom.rect.reshape(ny, nx, 4)
+    want = np.zeros((ny, nx), bool)
+    for j in range(ny):
+        for i in range(nx):
+            if not seen[j, i]:
+                continue
+            border = j in (0, ny - 1) or i in (0, nx - 1)
+            beside = any(not seen[jj, ii] for jj in range(max(0, j - 1), min(ny, j + 2))
+                         for ii in range(max(0, i - 1), min(nx, i + 2)))
+            leaves = r[j, i, 0] <= 0 or r[j, i, 1] <= 0 or r[j, i, 2] >= 159 or r[j, i, 3] >= 119
+            want[j, i] = border or beside or leaves
+    plain = Cells.of(geom, grid, (160, 120))
+    assert np.array_equal(plain.entry.reshape(ny, nx), want)
+    assert want.sum() > 0 and (seen & ~want).sum() > 0  # both kinds present
+    region = (0.8, 1.4, 3.1, 3.5)  # edges between cell centres (x 0.9, 1.1, 1.3; y 3.2, 3.4)
+    ok = Cells.of(geom, grid, (160, 120), regions=[region]).entry.reshape(ny, nx)
+    xs, ys = grid.xs, grid.ys
+    inside = (xs[None, :] > 0.8) & (xs[None, :] < 1.4) & (ys[:, None] > 3.1) & (ys[:, None] < 3.5)
+    assert inside.sum() == 3 * 2 and not want[inside].any()  # none an entry without the region
+    assert np.array_equal(ok, want | inside)
