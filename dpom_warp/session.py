@@ -217,8 +217,8 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
                 cfg = with_batch(cfg, cfg.engine.batch // 2)
                 continue
             raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
-    background, given, auto_report = set_background(cfg, engine, bg_frames, len(bg_files), sample, dev, parallel,
-                                                    log)
+    background, given, auto_report = set_up_background(cfg, engine, bg_frames, len(bg_files), sample, dev,
+                                                       parallel, log)
     structure = None
     if not bg_frames and cfg.inputs.structure.planes and frames:  # walls, cupboards, desks: background
         structure = static_structure(cfg, engine, camera, frames[:cfg.inputs.structure.frames], log)
@@ -239,8 +239,8 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
                  inference, engine, time.perf_counter() - t)
 
 
-def set_background(cfg: RunConfig, engine, bg_frames: list, n_files: int, sample: list[Path], dev: str,
-                   parallel: bool, log=print) -> tuple[str, tuple | None, dict | None]:
+def set_up_background(cfg: RunConfig, engine, bg_frames: list, n_files: int, sample: list[Path], dev: str,
+                      parallel: bool, log=print) -> tuple[str, tuple | None, dict | None]:
     """The engine's background from the background frames (brought to their median scale when
     they drift), `auto` from `sample`, or the floor; returns (the run's words for it, what other
     workers take: WorkerSpec.background, auto's report)."""
