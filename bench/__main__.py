@@ -129,7 +129,7 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
     engine.set_background_frames(reduce(bg))
     setup = time.perf_counter() - t
     warm = engine.infer(depth)
-    lengths = engine.lists.counts.numpy()  # after the bound: what the passes walk
+    lengths = engine.views[0].lists.counts.numpy()  # after the bound: what the passes walk
     median_list = float(np.median(lengths[lengths > 0])) if (lengths > 0).any() else 0.0
     small = reduce(depth)
 
@@ -156,14 +156,14 @@ def time_scene(cfg, depth, bg, device, repeats, batch=1, sequence=None):
         stages["whole frame, graph"] = float("nan")
         engine.graph = False
     r = engine.resolution
-    result = {"image": [engine.width, engine.height], "stride": r.stride, "reduce": r.reduce,
+    result = {"image": [engine.views[0].width, engine.views[0].height], "stride": r.stride, "reduce": r.reduce,
               "sparse_epsilon": cfg.model.sparse_epsilon, "grid": list(cfg.grid.shape),
               "locations": int(cfg.grid.size), "mask_entries": warm.entries,
               "entries_after_bound": warm.kept_entries, "pruned_locations": warm.pruned,
               "live_locations_at_end": warm.live, "iterations": warm.iterations,
               "median_list_entries": median_list,
               "engine_setup_s": setup, "engine_memory_mb": engine.memory_bytes() / 2**20,
-              "mask_index": "table" if engine.use_table else "tiles",
+              "mask_index": "table" if engine.views[0].use_table else "tiles",
               "median_s": stages, "graph_error": graph_error}
     if batch > 1:
         del engine
@@ -293,7 +293,7 @@ def kernel_times(cfg, depth, bg, device, repeats, batch=1):
     row "rest of the call" is the call's median time less its launches' (host work and copies)."""
     import warp as wp
 
-    from dpom_warp import engine as E
+    from dpom_warp.engine.launch import Launcher
     from dpom_warp.worker import make_engine
 
     cfg = dataclasses.replace(cfg, engine=cfg.engine.model_copy(update={"graph": "off"}))
@@ -310,9 +310,9 @@ def kernel_times(cfg, depth, bg, device, repeats, batch=1):
         acc.setdefault(key, []).append(time.perf_counter() - t)
         return out
 
-    launch, recorded = wp.launch, E.Engine._launch
+    launch, recorded = wp.launch, Launcher.__call__
     wp.launch = lambda kernel, *x, **k: timed(kernel.key, lambda: launch(kernel, *x, **k))
-    E.Engine._launch = lambda self, kernel, *x: timed(kernel.key, lambda: recorded(self, kernel, *x))
+    Launcher.__call__ = lambda self, kernel, *x: timed(kernel.key, lambda: recorded(self, kernel, *x))
     try:
         for _ in range(repeats):
             acc = {}
@@ -321,7 +321,7 @@ def kernel_times(cfg, depth, bg, device, repeats, batch=1):
             calls.append(time.perf_counter() - t)
             frames.append(acc)
     finally:
-        wp.launch, E.Engine._launch = launch, recorded
+        wp.launch, Launcher.__call__ = launch, recorded
     keys = sorted({k for f in frames for k in f}, key=lambda k: -statistics.median(sum(f.get(k, [0])) for f in frames))
     out = {k: (1000 * statistics.median(sum(f.get(k, [0])) for f in frames) / batch,
                statistics.median(len(f.get(k, [])) for f in frames)) for k in keys}

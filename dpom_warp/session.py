@@ -217,58 +217,59 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
                 cfg = with_batch(cfg, cfg.engine.batch // 2)
                 continue
             raise ConfigError(f"engine.memory_gb: {e}; coarsen grid.x/grid.y or raise the budget") from None
-    background, given, auto_report = set_up_background(cfg, engine, bg_frames, len(bg_files), sample, dev,
+    view = engine.views[0]  # the run's camera (one camera today)
+    background, given, auto_report = set_up_background(cfg, view, bg_frames, len(bg_files), sample, dev,
                                                        parallel, log)
     structure = None
     if not bg_frames and cfg.inputs.structure.planes and frames:  # walls, cupboards, desks: background
-        structure = static_structure(cfg, engine, camera, frames[:cfg.inputs.structure.frames], log)
+        structure = static_structure(cfg, view, camera, frames[:cfg.inputs.structure.frames], log)
         if structure["pixels"]:
             background += f"; {len(structure['planes'])} static planes ({structure['pixels']} pixels)"
-            given = engine.background_state()  # what other workers (--workers, Ray, live helpers) take
+            given = view.background_state()  # what other workers (--workers, Ray, live helpers) take
     del bg_frames
     r = engine.resolution
-    inference = {"stride": r.stride, "reduce": r.reduce, "image": [engine.width, engine.height],
+    inference = {"stride": r.stride, "reduce": r.reduce, "image": [view.width, view.height],
                  "sparse_epsilon": cfg.model.sparse_epsilon, "bound_rounds": cfg.model.bound_rounds,
                  "warm_start": cfg.model.warm_start, "exact": cfg.engine.exact, "batch": cfg.engine.batch}
     if structure is not None:
         inference["structure"] = structure
     if parallel:  # an empty frame compiles every kernel into the cache the workers are given
-        engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))
+        engine.infer_batch(np.zeros((1, view.height, view.width), np.float32))
         engine = engine if keep_engine else None
     return Setup(dev, WorkerSpec(cfg, camera, dev, given), geometry, ground, background, auto_report,
                  inference, engine, time.perf_counter() - t)
 
 
-def set_up_background(cfg: RunConfig, engine, bg_frames: list, n_files: int, sample: list[Path], dev: str,
+def set_up_background(cfg: RunConfig, view, bg_frames: list, n_files: int, sample: list[Path], dev: str,
                       parallel: bool, log=print) -> tuple[str, tuple | None, dict | None]:
-    """The engine's background from the background frames (brought to their median scale when
+    """A camera's background (its view.view.CameraView) from the background frames (brought to their median scale when
     they drift), `auto` from `sample`, or the floor; returns (the run's words for it, what other
     workers take: WorkerSpec.background, auto's report)."""
     auto_report, given = None, None
     if bg_frames:
-        stack = engine.resolution.frames(np.stack(bg_frames))
+        stack = view.resolution.frames(np.stack(bg_frames))
         if cfg.inputs.drift.correct and len(stack) > 1:  # drifting background frames brought to their median scale
             stack = stack / frame_scales([stack], cfg.inputs.drift)[:, None, None].astype(np.float32)
-        engine.set_background_frames(stack)
-        given = (engine.background(0), None) if parallel else None
+        view.set_background_frames(stack)
+        given = (view.background(0), None) if parallel else None
         return f"{n_files} background frames", given, None
     if cfg.inputs.auto_background:
         if len(sample) >= cfg.inputs.background_auto.min_frames:
             log(f"estimating the background from {len(sample)} frames ...")
-        estimator, auto_report = estimate_background(cfg, sample, engine.height, engine.width, dev,
-                                                     engine.resolution)
+        estimator, auto_report = estimate_background(cfg, sample, view.height, view.width, dev,
+                                                     view.resolution)
         given = estimator.result()  # (Background, fallback): also what other workers take
-        engine.set_background(*given)
-        auto_report["fallback_pixels"] = engine.fallback_pixels
-        auto_report["fallback_share"] = engine.fallback_pixels / engine.n_pixels
-        return (f"auto from {len(sample)} of the frames ({engine.fallback_pixels} of "
-                f"{engine.n_pixels} pixels left to the floor-only model)"), given, auto_report
+        view.set_background(*given)
+        auto_report["fallback_pixels"] = view.fallback_pixels
+        auto_report["fallback_share"] = view.fallback_pixels / view.n_pixels
+        return (f"auto from {len(sample)} of the frames ({view.fallback_pixels} of "
+                f"{view.n_pixels} pixels left to the floor-only model)"), given, auto_report
     return "floor plane only", None, None
 
 
-def static_structure(cfg: RunConfig, engine, camera, files: list[Path], log=print) -> dict:
+def static_structure(cfg: RunConfig, view, camera, files: list[Path], log=print) -> dict:
     """Large planes other than the floor in the median of `files` made background (structure.py)
-    where the engine's background is the floor model (floor-only, or the pixels auto left to
+    where a camera's background (its view.view.CameraView) is the floor model (floor-only, or the pixels auto left to
     it); returns the report for summary.json's inference.structure."""
     from .model import Background
     from .structure import find_planes, median_frame, plane_depths
@@ -277,14 +278,14 @@ def static_structure(cfg: RunConfig, engine, camera, files: list[Path], log=prin
     options, p = cfg.inputs.structure, cfg.model
     seen = median_frame([read_frame(cfg, f) for f in files])
     taller = cfg.obj.height + 0.1 if cfg.grid.mode == "ground" else 0.0  # a plane no person is
-    planes = find_planes(seen, camera, options, p.z_max, tuple(engine.geometry.bounds[:4]), taller)
-    g, shape = engine.geometry, (engine.height, engine.width)
+    planes = find_planes(seen, camera, options, p.z_max, tuple(view.geometry.bounds[:4]), taller)
+    g, shape = view.geometry, (view.height, view.width)
     depth = plane_depths(planes, g.rays, g.centre, options.margin) if planes else np.full(shape, np.inf)
     # where the frames read the plane, its reading there (a real wall bends by centimetres)
-    seen = engine.resolution.frames(seen[None].astype(np.float32))[0]
+    seen = view.resolution.frames(seen[None].astype(np.float32))[0]
     on = np.isfinite(depth) & (seen > 0) & (np.abs(seen - depth) <= 3 * options.distance)
     depth = np.where(on, seen, depth)
-    state = engine.background_state()
+    state = view.background_state()
     if state is None:  # floor-only: every pixel the floor model's
         bg = Background(np.zeros(shape), np.ones(shape), np.full(shape, p.missing_prob), np.ones(shape))
         fallback = np.ones(shape, bool)
@@ -296,12 +297,12 @@ def static_structure(cfg: RunConfig, engine, camera, files: list[Path], log=prin
         bg.mu[wall] = depth[wall]
         bg.sigma[wall] = np.maximum(p.sensor_sigma(depth[wall]), options.distance / 3)
         bg.missing[wall], bg.outlier[wall] = p.missing_prob, p.outlier_prob
-        engine.set_background(bg, fallback & ~wall)
+        view.set_background(bg, fallback & ~wall)
     report = {"frames": len(files), "planes": [x.report() for x in planes], "pixels": int(wall.sum()),
               "find_s": time.perf_counter() - t}
     if planes:
         log(f"static structure: {len(planes)} plane{'s' * (len(planes) > 1)} taken for background "
-            f"({int(wall.sum())} of {engine.n_pixels} pixels): "
+            f"({int(wall.sum())} of {view.n_pixels} pixels): "
             + ", ".join(f"{x['size_m'][0]:g} x {x['size_m'][1]:g} m" for x in report["planes"]))
     return report
 

@@ -460,11 +460,12 @@ class Helpers:
 
     def __init__(self, spec, engine, n: int):
         spec = dataclasses.replace(spec, background=engine.background_state())
-        engine.infer_batch(np.zeros((1, engine.height, engine.width), np.float32))  # every kernel compiled
+        shape = (engine.views[0].height, engine.views[0].width)  # the run's camera's (one today)
+        engine.infer_batch(np.zeros((1,) + shape, np.float32))  # every kernel compiled
         self.n, self.running = n, []
         self.pool, self.start_file = helper_pool(spec, n, _helper_start)
         try:
-            warm = [self.pool.submit(_helper_infer, np.zeros((engine.height, engine.width), np.float32))
+            warm = [self.pool.submit(_helper_infer, np.zeros(shape, np.float32))
                     for _ in range(n)]
             for w in warm:  # started, engines built: the first frames do not wait for them
                 w.result()

@@ -39,16 +39,16 @@ def test_kernel_times_count_every_launch_of_a_frame(tmp_path):
     once an iteration), every one timed, and Warp's launch functions given back after."""
     import warp as wp
 
-    from dpom_warp import engine as E
+    from dpom_warp.engine.launch import Launcher
 
     cfg = load_config(small_config(tmp_path), ["input.stride=2"])
     generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
     shape = (cfg.camera.height, cfg.camera.width)
     depth = read_depth(expand(cfg.inputs.frames, "input.frames")[0], cfg.inputs.depth_scale, shape)
     bg = np.stack([read_depth(f, cfg.inputs.depth_scale, shape) for f in expand(cfg.inputs.background, "input.background")])
-    launch, recorded = wp.launch, E.Engine._launch
+    launch, recorded = wp.launch, Launcher.__call__
     times = kernel_times(cfg, depth, bg, "cpu", 3)
-    assert wp.launch is launch and E.Engine._launch is recorded
+    assert wp.launch is launch and Launcher.__call__ is recorded
     engine = make_engine(cfg, cfg.camera, "cpu", 1)
     engine.set_background_frames(engine.resolution.frames(bg))
     iterations = engine.infer(engine.resolution.frames(depth)).iterations

@@ -119,12 +119,13 @@ def test_engine_takes_full_resolution_frames(device, on_device, rng):
     frames = np.stack([full, full[:, ::-1]])
     resolution = Resolution(stride=s, reduce="median", z_max=8.0)
     engine = Engine(geom, params, device, batch=2, resolution=resolution)
-    engine.reduce_on_device = on_device if device == "cpu" else engine.reduce_on_device
-    assert engine.reduce_on_device == (on_device or device != "cpu")
+    view = engine.views[0]
+    view.reduce_on_device = on_device if device == "cpu" else view.reduce_on_device
+    assert view.reduce_on_device == (on_device or device != "cpu")
     small = resolution.frames(frames)
     assert small.shape[1:] == depth.shape and not np.array_equal(small[0], depth)
     got = engine.infer_batch(frames)
-    np.testing.assert_array_equal(engine.depth.numpy(), small)
+    np.testing.assert_array_equal(engine.views[0].depth.numpy(), small)
     want = Engine(geom, params, device, batch=2, resolution=resolution).infer_batch(small)
     for a, b in zip(got, want):
         assert a.entries == b.entries > 0
@@ -216,7 +217,7 @@ def check_bound_against_reference(device, seed, shape, step=0.3, behind_cost=0.0
         engine.local_scratch = local
         engine.set_background_frames(bg_frames)
         engine.build_lists(depth)
-        lengths = engine.lists.counts.numpy().copy()
+        lengths = engine.views[0].lists.counts.numpy().copy()
         engine.rho.assign(start)
         engine.done.zero_()
         engine.prune(math.log(params.prior) - math.log1p(-params.prior))
@@ -286,11 +287,11 @@ def test_sparse_path_matches_sparse_reference(device, seed, streak, graph):
     # the passes over the lists ran over the pixels with entries after the pruning, all of them
     # (their count as the device wrote it: a loop captured as a graph, CUDA's default, reads
     # nothing back, and launches over every pixel)
-    held = np.flatnonzero(engine.lists.counts.numpy())
-    n_listed = int(engine.n_listed_out.numpy()[0])
-    assert engine.n_listed == (None if engine.graph else n_listed)
-    listed = engine.listed.numpy()[:n_listed]
-    assert 0 < n_listed < engine.n_pixels
+    held = np.flatnonzero(engine.views[0].lists.counts.numpy())
+    n_listed = int(engine.views[0].n_listed_out.numpy()[0])
+    assert engine.views[0].n_listed == (None if engine.graph else n_listed)
+    listed = engine.views[0].listed.numpy()[:n_listed]
+    assert 0 < n_listed < engine.views[0].n_pixels
     np.testing.assert_array_equal(np.sort(listed), held)
     if device == "cpu":
         np.testing.assert_array_equal(listed, held)  # in pixel order: the sums' order
@@ -310,16 +311,17 @@ def test_direct_launches_give_warps_launches_results():
         engine = Engine(geom, params, "cpu", batch=2)
         engine.direct_launch = direct
         engine.set_background_frames(bg_frames)
-        engine._allocate_lists(16)  # grown by the first frame: the blocks see new arrays
+        engine.views[0]._allocate_lists(16)  # grown by the first frame: the blocks see new arrays
         got[direct] = [engine.infer(f) for f in frames] + engine.infer_batch(np.stack(frames[:2]))
-        used = [rec.direct is not None for rec in engine._recorded.values()]
+        used = [rec.direct is not None for launcher in engine.launchers() for rec in launcher.recorded.values()]
         assert all(used) if direct else not any(used)
         assert engine.grown
         if direct:  # the loop captured as a graph after direct launches: each launch recorded
             engine.graph = True
             got[direct].append(engine.infer(frames[0]))
             got[direct].append(engine.infer(frames[0]))  # replayed
-            assert not any(rec.direct is not None for rec in engine._recorded.values())
+            assert not any(rec.direct is not None for launcher in engine.launchers()
+                           for rec in launcher.recorded.values())
         else:
             got[direct] += [got[direct][0], got[direct][0]]
     for a, b in zip(got[True], got[False]):
@@ -396,13 +398,13 @@ def test_mask_index_option_gives_the_same_results(tmp_path):
     for index, want in [("auto", True), ("table", True), ("tiles", False)]:
         c = dataclasses.replace(cfg, engine=cfg.engine.model_copy(update={"mask_index": index}))
         engine = make_engine(c, cfg.camera, "cpu", 1)
-        assert engine.use_table == want
+        assert engine.views[0].use_table == want
         results[index] = engine.infer(engine.resolution.frames(depth))
     assert results["auto"].entries > 1000
     for index in ("table", "tiles"):
         np.testing.assert_array_equal(results[index].rho_star, results["auto"].rho_star)
     plane = dataclasses.replace(cfg, obj=cfg.obj.model_copy(update={"shape": "plane"}))
-    assert not make_engine(plane, cfg.camera, "cpu", 1).use_table
+    assert not make_engine(plane, cfg.camera, "cpu", 1).views[0].use_table
     with pytest.raises(ConfigError) as e:
         load_config(small_config(tmp_path), ["engine.mask_index=grid"])
     assert "engine.mask_index: expected one of auto, table, tiles, found 'grid'" in str(e.value)
@@ -423,3 +425,37 @@ def test_warm_start_starts_from_the_previous_frame_capped_at_the_prior(device):
     np.testing.assert_allclose(second.rho, want["rho"], rtol=0, atol=1e-6)
     cold = ref.mean_field(second_depth, geom, bg, params.replace(warm_start=False))
     assert np.abs(cold["rho"] - want["rho"]).max() > 1e-9  # the start really differs
+
+
+def test_the_engine_takes_a_list_of_cameras_and_keeps_each_cameras_launches_its_own():
+    """Engine takes a list of cameras' geometries over one grid (one today): a list of one gives
+    bit for bit what the geometry alone gives, the per-pixel state lives in the camera's view
+    and the per-location state once in the engine; a kernel given a camera's arrays is launched
+    through that camera's Launcher, the engine's own launches take none of them; two cameras are
+    refused with a one-line error until their evidence is fused."""
+    import warp as wp
+
+    geom, params, depth, bg_frames = random_scene(5, shape="solid")
+    params = params.replace(sparse_epsilon=1e-3)
+    got = []
+    for given in (geom, [geom]):
+        engine = Engine(given, params, "cpu")
+        engine.set_background_frames(bg_frames)
+        got.append(engine.infer(depth))
+    np.testing.assert_array_equal(got[0].rho, got[1].rho)
+    np.testing.assert_array_equal(got[0].rho_star, got[1].rho_star)
+    assert got[0].iterations == got[1].iterations and got[0].entries == got[1].entries > 0
+    (view,) = engine.views
+    L, P = len(geom.rect), depth.size
+    assert view.lists.counts.shape == (P,) and view.bg.shape == (P, 4) and view.depth.shape == (1,) + depth.shape
+    assert engine.rho.shape == engine.evidence.shape == engine.live.shape == (L,)
+    np.testing.assert_array_equal(engine.area.numpy(), geom.area)  # one camera: its silhouettes' area
+    owned = {id(a) for a in vars(view).values() if isinstance(a, wp.array) or hasattr(a, "_cls")}
+    owned |= {id(a) for s in (view.lists, view.compact_lists) for a in (s.counts, s.offsets, s.loc, s.delta)}
+    engine_inputs = [x for rec in engine._launch.recorded.values() for x in rec.inputs]
+    assert engine.launchers()[0].recorded and not any(id(x) in owned for x in engine_inputs)
+    assert view.launch.recorded and all(any(id(x) in owned for x in rec.inputs)
+                                        for rec in view.launch.recorded.values())
+    with pytest.raises(ValueError, match=r"^cameras: expected one camera's geometry, found 2") as err:
+        Engine([geom, geom], params, "cpu")
+    assert "\n" not in str(err.value)

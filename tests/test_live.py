@@ -337,7 +337,7 @@ def test_a_frame_handed_to_a_pool_already_broken_is_a_future_of_that_error(camer
     _, _, tmp = camera_config
     setup = set_up(load_config(tmp / "plain.yaml"), [], "cpu", log=lambda *a: None)
     helpers = Helpers(setup.spec, setup.engine, 1)
-    frame = np.zeros((setup.engine.height, setup.engine.width), np.float32)
+    frame = np.zeros((setup.engine.views[0].height, setup.engine.views[0].width), np.float32)
     try:
         pids = helper_pids()
         assert len(pids) == 1

@@ -40,11 +40,11 @@ def test_rho_matches_reference(device, seed, path, shape):
 
 def lists_as_entries(engine):
     """(pixel, loc, mu, delta) of the engine's lists, in list order."""
-    counts, offsets = engine.lists.counts.numpy(), engine.lists.offsets.numpy()
+    counts, offsets = engine.views[0].lists.counts.numpy(), engine.views[0].lists.offsets.numpy()
     order = np.concatenate([np.arange(o, o + c) for o, c in zip(offsets, counts) if c])
     pixel = np.repeat(np.arange(len(counts)), counts)
-    return (pixel, engine.lists.loc.numpy()[order], engine.lists.mu.numpy()[order],
-            engine.lists.delta.numpy()[order])
+    return (pixel, engine.views[0].lists.loc.numpy()[order], engine.views[0].lists.mu.numpy()[order],
+            engine.views[0].lists.delta.numpy()[order])
 
 
 def distorted_voxel_scene(seed, shape="plane"):
@@ -73,7 +73,7 @@ def test_sorted_lists_match_reference(device, tile, one_pass):
                                     random_scene(11 + seed, shape="solid")[:3] + (None,),
                                     distorted_voxel_scene(seed, "solid") + (None,)]:
         engine = Engine(geom, params, device, tile=8 if table else tile, table=table)
-        assert engine.use_table == table and (engine.n_table > 0) == table
+        assert engine.views[0].use_table == table and (engine.views[0].n_table > 0) == table
         engine.one_pass_lists = one_pass
         if params.background_occludes:
             frames = np.stack([np.roll(depth, 3 * i, axis=1) for i in range(3)])
@@ -94,7 +94,7 @@ def test_pixel_table_window_matches_reference(device):
     test lies inside the window the keys give, so the walk misses no entry."""
     geom, params, depth, _ = random_scene(7, shape="solid")
     engine = Engine(geom, params, device, table=True)
-    t = engine.table
+    t = engine.views[0].table
     start, pair, key = t.start.numpy(), t.pair.numpy(), t.key.numpy()
     assert len(pair) > 1000
     np.testing.assert_array_equal(key, ref.table_window(start, pair["mu"], pair["half"]))
@@ -120,7 +120,7 @@ def test_background_kernels_match_reference(device):
         np.testing.assert_allclose(getattr(got, name), getattr(want, name), rtol=1e-6, atol=1e-6,
                                    err_msg=name)
     assert np.all(got.outlier[:5, :5] == 1.0)
-    np.testing.assert_allclose(engine.delta_bg.numpy().size, depth.size)
+    np.testing.assert_allclose(engine.views[0].delta_bg.numpy().size, depth.size)
 
 
 @pytest.mark.parametrize("outside", [False, True])  # the floor-only model completed from each frame or not
@@ -147,7 +147,7 @@ def test_background_delta_follows_every_change_of_background(device, outside):
             engine.set_background(given)
         for frame in (depth, np.roll(depth, 5, axis=1) * 1.1):
             engine.build_lists(frame)
-            got = engine.delta_bg.numpy().copy()  # (on the CPU a view of the engine's array)
+            got = engine.views[0].delta_bg.numpy().copy()  # (on the CPU a view of the engine's array)
             want = ref.background_delta(frame, engine.background(), params).ravel()
             np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
             assert before is None or not np.array_equal(got, before)
@@ -187,15 +187,17 @@ def test_static_index_choice_and_memory(device):
 
     geom, params, depth, _ = random_scene(2, shape="solid")
     table = Engine(geom, params, device)
-    assert table.use_table and 0 < table.n_table < geom.rect_area.sum()
+    t = table.views[0]
+    assert t.use_table and 0 < t.n_table < geom.rect_area.sum()
     tiles = Engine(geom, params, device, table=False)
-    assert not tiles.use_table and tiles.n_table == 0 and tiles.n_pairs > 0
-    held = table.n_table * TABLE_BYTES + table.n_pixels * TABLE_PIXEL_BYTES
-    assert table.memory_bytes() - held == tiles.memory_bytes() - tiles.n_pairs * memory_estimate(0, 0, 0, 1)
+    s = tiles.views[0]
+    assert not s.use_table and s.n_table == 0 and s.n_pairs > 0
+    held = t.n_table * TABLE_BYTES + t.n_pixels * TABLE_PIXEL_BYTES
+    assert table.memory_bytes() - held == tiles.memory_bytes() - s.n_pairs * memory_estimate(0, 0, 0, 1)
     # a budget the lists and the tile index fit, but not the pixel table at its largest
     need = tiles.memory_bytes() + geom.rect_area.sum() * TABLE_BYTES // 2
     small = Engine(geom, params, device, memory_gb=need / 2**30)
-    assert not small.use_table
+    assert not small.views[0].use_table
     a, b = table.infer(depth), small.infer(depth)
     assert a.entries == b.entries > 100 and a.iterations == b.iterations
     assert_same_sums(a.rho, b.rho, device)
@@ -207,11 +209,11 @@ def test_list_capacity_grows_and_is_reported(device, one_pass):
     geom, params, depth, _ = random_scene(5)
     engine = Engine(geom, params, device, entries_per_pixel=0.01)
     engine.one_pass_lists = one_pass
-    small = engine.capacity
+    small = engine.views[0].capacity
     want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
     assert want["entries"] > small
     got = engine.infer(depth)
-    assert engine.grown == [want["entries"]] and engine.capacity >= want["entries"]
+    assert engine.grown == [want["entries"]] and engine.views[0].capacity >= want["entries"]
     np.testing.assert_allclose(got.rho, want["rho"], atol=1e-6)
 
 
@@ -305,7 +307,7 @@ def test_evidence_scratch_on_stack_or_global_agree(device):
         got = engine.infer(depth)
         assert got.iterations == want["iterations"]
         np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
-    lengths = engine.lists.counts.numpy()
+    lengths = engine.views[0].lists.counts.numpy()
     tiers = np.digitize(lengths[lengths > 0], [LOCAL_SHORT + 1, LOCAL_MEDIUM + 1, LOCAL_ENTRIES + 1])
     assert set(tiers) == {0, 1, 2, 3}, np.bincount(tiers)  # every stack size and the global scratch
 
@@ -389,9 +391,9 @@ def test_behind_table_serves_every_frame_and_counts_in_memory(device, seed):
         want = ref.behind_count(frame, geom, params, everyone)
         np.testing.assert_array_equal(engine.n_behind.numpy()[listed], want[listed])
         assert want[listed].max() > 0, "no reading behind any listed location: the count is not exercised"
-    assert engine.behind_table == len(engine.behind_mu) > 0
+    assert engine.views[0].behind_table == len(engine.views[0].behind_mu) > 0
     plain = Engine(geom, params.replace(behind_cost=0.0), device)
-    assert engine.memory_bytes() - plain.memory_bytes() == BEHIND_POINT_BYTES * engine.behind_table
+    assert engine.memory_bytes() - plain.memory_bytes() == BEHIND_POINT_BYTES * engine.views[0].behind_table
 
 
 def test_behind_count_at_the_mask_tests_edge(device):
@@ -402,7 +404,7 @@ def test_behind_count_at_the_mask_tests_edge(device):
     params = params.replace(sparse_epsilon=0.0, behind_cost=3.0, behind_low=0.3, behind_step=1)
     engine = Engine(geom, params, device)
     engine.set_background_frames(bg_frames)
-    pixel, mu, half = (a.numpy() for a in (engine.behind_pixel, engine.behind_mu, engine.behind_half))
+    pixel, mu, half = (a.numpy() for a in (engine.views[0].behind_pixel, engine.views[0].behind_mu, engine.views[0].behind_half))
     rng = np.random.default_rng(1)
     frame = depth.copy().reshape(-1)
     pick = rng.permutation(len(pixel))

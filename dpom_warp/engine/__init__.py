@@ -1,4 +1,5 @@
-"""The Warp inference engine (see core.Engine), one file per step."""
+"""The Warp inference engine (see core.Engine) over a list of cameras (view.CameraView), one
+file per step."""
 
 from .base import (
                    BEHIND_POINT_BYTES,
@@ -18,7 +19,8 @@ from .base import (
                    tile_pairs,
 )
 from .core import Engine
+from .view import CameraView
 
-__all__ = ["BEHIND_POINT_BYTES", "ENTRY_BYTES", "LOCATION_BYTES", "PAIR_BYTES", "PIXEL_BYTES", "TABLE_BUDGET",
+__all__ = ["BEHIND_POINT_BYTES", "CameraView", "ENTRY_BYTES", "LOCATION_BYTES", "PAIR_BYTES", "PIXEL_BYTES", "TABLE_BUDGET",
            "TABLE_BYTES", "TABLE_PIXEL_BYTES", "Engine", "FrameResult", "ListOverflow", "MemoryBudgetError",
            "memory_estimate", "pixel_model", "resolve_device", "tile_pairs"]

@@ -1,4 +1,4 @@
-"""An engine's background model: from the floor plane, from background frames, or the estimate
+"""A camera's background model (engine.view): from the floor plane, from background frames, or the estimate
 `input.background: auto` keeps (background.BackgroundEstimator); per frame of a batch."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from ..model import (
 
 
 class BackgroundMixin:
-    """Engine: the background distributions the pixels are judged against."""
+    """CameraView: the background distributions its pixels are judged against."""
 
     # -- background ----------------------------------------------------------------------
     def set_floor_background(self):
@@ -67,7 +67,7 @@ class BackgroundMixin:
         return self.fallback_pixels
 
     def background_state(self) -> tuple | None:
-        """What another engine of this camera and grid needs to hold this one's background
+        """What another engine of this camera and grid needs to hold this camera's background
         (worker.WorkerSpec.background): None for the floor-only model, else (Background,
         the pixels left to the floor model or None)."""
         if self.floor_mode and self.fallback_pixels == self.n_pixels:

@@ -1,46 +1,41 @@
-"""The Warp inference engine: buffers allocated once per camera and grid, one call per frame
+"""The Warp inference engine: buffers allocated once per grid and camera, one call per frame
 (or per batch of frames). The class is put together from one part per step, each in its own
-file of this package: statics (the static arrays and buffers), backgrounds, lists (a frame's
-per-pixel lists), iterations (the mean field) and threshold (what the joint test needs)."""
+file of this package: the cameras (view: each one's static arrays, background, drift and
+per-pixel lists), the sparse bookkeeping, the iterations (the mean field) and the threshold
+(what the joint test needs)."""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 import warp as wp
 
 from .. import kernels as K
-from ..geometry import Geometry, neighbour_lists
 from ..drift import DriftOptions
+from ..geometry import Geometry, neighbour_lists
 from ..model import (
     AutoBackground,
+    Background,
     ModelParams,
 )
 from ..resolution import Resolution
 from ..warp_setup import init_warp
-from .backgrounds import BackgroundMixin
-from .drift import DriftMixin
 from .base import (
-    BEHIND_POINT_BYTES,
-    ENTRY_BYTES,
-    TABLE_BUDGET,
+    LOCATION_BYTES,
     FrameResult,
-    MemoryBudgetError,
-    memory_estimate,
     pixel_model,
-    tile_pairs,
 )
 from .iterations import IterationsMixin
-from .lists import ListsMixin
-from .statics import StaticsMixin
+from .launch import Launcher
+from .sparse import SparseMixin
 from .threshold import ThresholdMixin
+from .view import CameraView
 
-INT32_MAX = 2**31 - 1  # list offsets are int32
 
-
-class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMixin, ThresholdMixin):
-    """DPOM inference for one camera and grid on one Warp device.
+class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
+    """DPOM inference over one grid seen by a list of cameras (one today), on one Warp device.
 
     Buffers (per-pixel lists, accumulators) are allocated up front; the list capacity grows
     (and says so in `grown`) only when a frame needs more entries than it holds, up to
@@ -55,7 +50,9 @@ class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMi
     for every frame or batch: max_iterations launches, no host sync, converged frames skipped.
 
     Args:
-        geometry: silhouettes, facing planes and rays (geometry.build_geometry).
+        geometry: silhouettes, facing planes and rays (geometry.build_geometry), or a list of
+            them, one a camera, over the same locations (`views`: each camera's CameraView).
+            One camera today: evidence fused over several is the multi-camera issue's.
         params: model and inference parameters.
         device: Warp device name ('cpu', 'cuda:0').
         entries_per_pixel: initial list capacity per pixel.
@@ -77,55 +74,47 @@ class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMi
             before inference (drift.py; None: frames as given).
     """
 
-    def __init__(self, geometry: Geometry, params: ModelParams, device: str = "cpu",
+    def __init__(self, geometry: Geometry | Sequence[Geometry], params: ModelParams, device: str = "cpu",
                  entries_per_pixel: float = 8.0, max_entries: int | None = None,
                  memory_gb: float | None = None, tile: int = 8, batch: int = 1,
                  graph: bool | None = None, resolution: Resolution | None = None,
                  background_auto: AutoBackground | None = None, table: bool | None = None,
                  drift: DriftOptions | None = None):
         init_warp()
+        geometries = [geometry] if isinstance(geometry, Geometry) else list(geometry)
+        if len(geometries) != 1:
+            raise ValueError(f"cameras: expected one camera's geometry, found {len(geometries)} "
+                             f"(several cameras on one map are not supported yet)")
         if min(params.sensor_noise) < 0:
             raise ValueError(f"sensor_noise: expected [a, b] >= 0, found {list(params.sensor_noise)}")
         if batch < 1 or tile < 1:
             raise ValueError(f"batch and tile: expected integers >= 1, found {batch} and {tile}")
-        self.geometry, self.params, self.device, self.drift = geometry, params, device, drift
+        self.params, self.device, self.drift = params, device, drift
         # results carry the joint test's lists of the locations whose rho* reaches this (None: none)
         self.joint_threshold: float | None = None
         self.resolution = resolution or Resolution()
-        self.height, self.width = geometry.rays.shape[:2]
-        self.n_pixels = self.height * self.width
-        self.n_locations = len(geometry.rect)
+        self.n_locations = len(geometries[0].rect)
         self.batch = batch
+        self.grown: list[int] = []  # every camera's list growth, in order
+        self._launch = Launcher(device)  # the kernels over the locations alone
+        self.views: list[CameraView] = []
         self._device_policy(device, graph)
         self.n_live = None  # live locations gathered for the sparse updates (None: every one)
-        self.n_active = None  # pixels with live entries, for the sparse evidence passes (None: every one)
         self.sparse_on_lists = False  # the sparse passes walk the lists (nothing has died yet)
         self.n_kept = None  # locations neither pruned nor idle, for the full passes' updates
-        self.n_listed = None  # pixels with entries after the pruning, for the passes over the lists
-        self.tile, tiles_x = tile, -(-self.width // tile)
-        self.n_tiles = tiles_x * -(-self.height // tile)
-        P, L = batch * self.n_pixels, batch * self.n_locations
-        # the optical axis: every ray's parameter is its z-depth, d . forward = 1
-        rays = geometry.rays.reshape(-1, 3)
-        self.forward = wp.vec3d(*(float(x) for x in np.linalg.lstsq(rays, np.ones(len(rays)), rcond=None)[0]))
-        self.extra_bytes = background_auto.state_bytes(self.n_pixels) if background_auto else 0
-        with wp.ScopedDevice(device):
-            self.geo = self._geometry_arrays(geometry)
         self.pm = pixel_model(params)
-        behind_points = self._count_behind_points()  # counted first: the table is in the budget
-        self.behind_table = int(behind_points.sum())
-        self.extra_bytes += BEHIND_POINT_BYTES * self.behind_table + 4 * (self.n_locations + 1)  # and its starts
-        start, nbrs = neighbour_lists(geometry.locations, params.exclusion_radius if params.exclusion > 0 else 0.0)
-        self.extra_bytes += 4 * (len(start) + len(nbrs))  # model.exclusion's neighbour lists
-        pair_loc, pair_tile = self._index_and_capacity(geometry, table, memory_gb, entries_per_pixel,
-                                                       max_entries, P, L, tiles_x)
-        self.grown: list[int] = []
-        self._allocate_arrays(geometry, params, P, L, start, nbrs)
-        self._fill_behind_table(behind_points)
-        self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
-        self.table = self._pixel_table(self.use_table)
-        self._allocate_lists(int(entries_per_pixel * P))
-        self.set_floor_background()
+        start, nbrs = neighbour_lists(geometries[0].locations,
+                                      params.exclusion_radius if params.exclusion > 0 else 0.0)
+        self.extra_bytes = 4 * (len(start) + len(nbrs))  # model.exclusion's neighbour lists
+        state = background_auto.state_bytes if background_auto else (lambda pixels: 0)
+        for g in geometries:
+            self.views.append(CameraView(
+                g, params, self.pm, device, batch, self.grown, self.resolution, entries_per_pixel, max_entries,
+                memory_gb, tile, table, state(g.rays.shape[0] * g.rays.shape[1]), drift,
+                self.extra_bytes + sum(v.memory_bytes() for v in self.views), self.one_pass_lists,
+                self.reduce_on_device))
+        self.graph = self._graph_on  # every camera's launches follow the policy
+        self._allocate_arrays(geometries, params, batch * self.n_locations, start, nbrs)
 
     def _device_policy(self, device: str, graph: bool | None) -> None:
         """What differs between the CPU and a GPU: the captured graph, the passes' scratch, how
@@ -138,7 +127,6 @@ class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMi
         self._last_rho = None  # the last frame's rho, for params.warm_start
         # full-resolution frames are reduced on a GPU (kernels.frames), by NumPy on the CPU
         self.reduce_on_device = wp.get_device(device).is_cuda
-        self._full = None  # their buffer, made at the first such frame
         # the joint test's lists copied out in pixel order by count, scan and fill on a GPU
         # (compact_once's atomics leave them in any order, which the host then sorted: with
         # the per-frame work since batched, half a batched frame's time on an H200), in one
@@ -150,54 +138,13 @@ class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMi
         # the tallest rectangle's rows times longer for nothing)
         self.top_band_by_row = wp.get_device(device).is_cuda
 
-    def _index_and_capacity(self, geometry: Geometry, table: bool | None, memory_gb: float | None,
-                            entries_per_pixel: float, max_entries: int | None, P: int, L: int, tiles_x: int):
-        """The static mask index (the pixel table, or the tiles' (location, tile) pairs, returned)
-        and the lists' capacity cap within the memory budget; MemoryBudgetError where the first
-        buffers already exceed it."""
-        tile, batch = self.tile, self.batch
-        most = int(geometry.rect_area.sum())  # the pixel table's pairs at most
-        table_bytes = memory_estimate(0, 0, 0, table_pairs=most, table_pixels=self.n_pixels)
-        if table is None:
-            table = geometry.solid[0] > 0 and table_bytes <= TABLE_BUDGET and (
-                memory_gb is None or memory_estimate(P, L, max(1024, int(entries_per_pixel * P)))
-                + self.extra_bytes + table_bytes <= memory_gb * 2**30)
-        self.use_table = bool(table)
-        pair_loc, pair_tile = (np.zeros(0, np.int32),) * 2 if table else tile_pairs(geometry.rect, tile, tiles_x)
-        index_bytes = table_bytes if table else memory_estimate(0, 0, 0, len(pair_loc))
-        cap = INT32_MAX if max_entries is None else min(max_entries, INT32_MAX)
-        if memory_gb is not None:
-            fixed = memory_estimate(P, L, 0) + index_bytes + self.extra_bytes
-            cap = min(cap, max(0, int((memory_gb * 2**30 - fixed) // ENTRY_BYTES)))
-            first = memory_estimate(P, L, max(1024, int(entries_per_pixel * P))) + index_bytes + self.extra_bytes
-            if first > memory_gb * 2**30:
-                raise MemoryBudgetError(
-                    f"the engine needs at least {first / 2**30:.2f} GiB for {self.n_locations} "
-                    f"locations and {self.width}x{self.height} pixels "
-                    f"({entries_per_pixel:g} list entries per pixel"
-                    f"{f', {batch} frames a batch' if batch > 1 else ''}), above the budget of "
-                    f"{memory_gb:g} GiB")
-        self.max_entries = cap
-        return pair_loc, pair_tile
-
-    def _allocate_arrays(self, geometry: Geometry, params: ModelParams, P: int, L: int, start, nbrs) -> None:
-        """Every per-pixel and per-location array of a batch, allocated once (the lists apart:
-        _allocate_lists)."""
+    def _allocate_arrays(self, geometries: list[Geometry], params: ModelParams, L: int, start, nbrs) -> None:
+        """Every per-location array of a batch, allocated once (the cameras' per-pixel arrays:
+        engine.view)."""
         batch = self.batch
         with wp.ScopedDevice(self.device):
-            self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
-            self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
-            self.centre = wp.vec3d(*(float(c) for c in geometry.centre))
-            self.depth = wp.zeros((batch, self.height, self.width), dtype=wp.float32)
-            # the per-pixel lists (kernels.PixelLists: their entries' arrays by _allocate_lists)
-            self.lists, self.compact_lists = K.PixelLists(), K.PixelLists()
-            self.lists.counts = wp.zeros(P, dtype=wp.int32)
-            self.lists.offsets = wp.zeros(P, dtype=wp.int32)
-            self.delta_bg = wp.zeros(P, dtype=wp.float64)
-            self.bg = wp.zeros((P, 4), dtype=wp.float64)
-            self.bg_logs = wp.zeros(P, dtype=wp.vec4d)  # its logarithms (kernels.background_delta)
-            self.bg_fresh = True  # bg changed since bg_logs were written
-            self.floor_pixels = wp.ones(self.n_pixels, dtype=wp.int32)  # floor-only model here
+            # each location's silhouette area, in pixels, over the cameras
+            self.area = wp.array(sum(g.area.astype(np.float64) for g in geometries), dtype=wp.float64)
             self.rho = wp.zeros(L, dtype=wp.float64)
             self.upper = wp.zeros(L, dtype=wp.float64)  # the pruning bound (kernels.sparse)
             self.evidence = wp.zeros(L, dtype=wp.float64)
@@ -208,11 +155,8 @@ class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMi
             self.top_hidden = wp.zeros(L, dtype=wp.int32)
             self.top_missing = wp.zeros(L, dtype=wp.int32)  # no reading where the object would be read
             self.top_seen = wp.zeros(L, dtype=wp.int32)  # the band's pixels in the image (-1: not counted)
-            # a shorter solid's band (params.top_heights): its GeometryArrays and counts
-            self.shorter_top = [(h, self._geometry_arrays(geometry.shorter(h), self.geo)) for h in params.top_heights
-                                if geometry.height > 0]
-            self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(5 if self.shorter_top else 0)]
-            self.top_rows = int((geometry.rect[:, 3] - geometry.rect[:, 1]).max(initial=-1)) + 1  # (shared)
+            # a shorter solid's band counts (params.top_heights)
+            self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(5 if self.views[0].shorter_top else 0)]
             self.all_support = wp.zeros(L, dtype=wp.int32)  # the same counts, whole silhouette
             self.all_against = wp.zeros(L, dtype=wp.int32)
             self.all_hidden = wp.zeros(L, dtype=wp.int32)
@@ -225,22 +169,14 @@ class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMi
             self.live = wp.ones(L, dtype=wp.int32)
             self.streak = wp.zeros(L, dtype=wp.int32)  # per-location damping runs (update_rho)
             self.n_behind = wp.zeros(L, dtype=wp.int32)  # silhouette pixels read behind (behind_count)
-            self.compact_lists.counts = wp.zeros(P, dtype=wp.int32)  # the lists compacted (kernels.sparse)
-            self.compact_lists.offsets = wp.zeros(P, dtype=wp.int32)
             self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
             self.kept_index = wp.zeros(L, dtype=wp.int32)
             self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.prune_lists
             # each frame's entries, live, pruned and kept entries (kernels.sparse.frame_tally)
             self.tallies = wp.zeros((4, batch), dtype=wp.int32)
-            self.listed = wp.zeros(P, dtype=wp.int32)  # pixels whose list keeps an entry (prune_lists)
-            self.n_listed_out = wp.zeros(1, dtype=wp.int32)
-            self.live_count = wp.zeros(3, dtype=wp.int32)  # live locations, compact entries, active pixels
-            self.active = wp.zeros(P, dtype=wp.int32)  # pixels with live entries (kernels.sparse.compact_once)
+            self.live_count = wp.zeros(3, dtype=wp.int32)  # live locations (gather_live)
             self.live_changed = wp.zeros(2, dtype=wp.int32)  # live set changed, a location revived
-            self.active_next = wp.zeros(P, dtype=wp.int32)  # kernels.sparse.compact_again's output
             self.no_index = wp.zeros(0, dtype=wp.int32)
-            self.reserved = wp.zeros(2, dtype=wp.int32)  # kernels.masks.pixel_entries_once
-            self.no_reserved = wp.zeros(0, dtype=wp.int32)
             self.candidate = wp.zeros(L, dtype=wp.int32)  # the joint test's locations (joint_lists)
             self.candidate_behind = wp.zeros(L, dtype=wp.int32)  # and their readings behind
             self.not_done = wp.zeros(batch, dtype=wp.int32)
@@ -255,11 +191,25 @@ class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMi
 
     @graph.setter
     def graph(self, on: bool):
-        # Engine._launch calls the CPU kernels' entry points itself, which a capture would not
+        # a Launcher calls the CPU kernels' entry points itself, which a capture would not
         # record: with a graph every launch is Warp's, and the launches recorded before are dropped
         self._graph_on = bool(on)
-        self.direct_launch = not self._graph_on
-        self._recorded = {}
+        for launcher in self.launchers():
+            launcher.reset(direct=not self._graph_on)
+
+    def launchers(self) -> list[Launcher]:
+        """The engine's launcher (kernels over the locations alone), then each camera's."""
+        return [self._launch] + [v.launch for v in self.views]
+
+    @property
+    def direct_launch(self) -> bool:
+        """Whether CPU replays call the kernels' entry points (launch.Launcher.direct)."""
+        return self._launch.direct
+
+    @direct_launch.setter
+    def direct_launch(self, on: bool):
+        for launcher in self.launchers():
+            launcher.reset(direct=bool(on))
 
     def infer(self, depth_m: np.ndarray, start: np.ndarray | None = None) -> FrameResult:
         """Occupancy probabilities of one depth frame (metres, 0 = no reading); `start`:
@@ -273,11 +223,14 @@ class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMi
         dev = self.device
         n = len(depths_m)
         t0 = time.perf_counter()
-        depths_m, drift = self._correct_drift(depths_m)
-        self.build_lists(depths_m)
         self.tallies.zero_()  # (the entries counted now: the bound's pruning changes the counts)
-        self._launch(K.frame_tally, self.batch * self.n_pixels,
-                     [self.lists.counts, self.n_pixels, K.TALLY_SUM, self.tallies, 0])
+        drift = []
+        for v, frames in zip(self.views, [depths_m]):  # (one camera's frames: one camera today)
+            frames, estimates = v.correct_drift(frames)
+            drift.append(estimates)
+            v.build_lists(frames)
+            v.launch(K.frame_tally, self.batch * v.n_pixels,
+                     [v.lists.counts, v.n_pixels, K.TALLY_SUM, self.tallies, 0])
         wp.synchronize_device(dev)
         t1 = time.perf_counter()
         logit_prior, bound = self._start(n, start)
@@ -313,7 +266,40 @@ class Engine(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin, IterationsMi
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
                             live=int(live[f]), converged=bool(done[f]),
                             kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]),
-                            joint=joint[f], drift=drift[f])
+                            joint=joint[f], drift=drift[0][f])
                 for f in range(n)]
 
+    # -- the cameras' backgrounds and lists (engine.view), camera 0 unless told ------------
+    def build_lists(self, depth_m: np.ndarray, camera: int = 0) -> int:
+        """A camera's lists of a frame or batch (CameraView.build_lists); its entries."""
+        return self.views[camera].build_lists(depth_m)
+
+    def set_floor_background(self, camera: int = 0):
+        """The floor-only background for a camera (CameraView.set_floor_background)."""
+        self.views[camera].set_floor_background()
+
+    def set_background_frames(self, frames_m: np.ndarray, camera: int = 0):
+        """A camera's background from (N, H, W) frames in metres (CameraView.set_background_frames)."""
+        self.views[camera].set_background_frames(frames_m)
+
+    def set_background(self, bg: Background, fallback: np.ndarray | None = None, camera: int = 0) -> int:
+        """A camera's given background (CameraView.set_background); the pixels left to the floor."""
+        return self.views[camera].set_background(bg, fallback)
+
+    def set_background_estimate(self, estimator, camera: int = 0) -> int:
+        """A camera's auto background (CameraView.set_background_estimate)."""
+        return self.views[camera].set_background_estimate(estimator)
+
+    def background_state(self, camera: int = 0) -> tuple | None:
+        """What another engine needs to hold a camera's background (CameraView.background_state)."""
+        return self.views[camera].background_state()
+
+    def background(self, frame: int = 0, camera: int = 0) -> Background:
+        """A camera's background distribution of frame `frame` of the last batch (arrays (H, W))."""
+        return self.views[camera].background(frame)
+
+    def memory_bytes(self) -> int:
+        """Bytes the engine's buffers hold now: the cameras' and the locations' (base.memory_estimate)."""
+        return (sum(v.memory_bytes() for v in self.views) + self.batch * self.n_locations * LOCATION_BYTES
+                + self.extra_bytes)
 

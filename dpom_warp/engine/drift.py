@@ -1,4 +1,4 @@
-"""An engine's drift correction (drift.py): a fixed sample of the background's pixels taken
+"""A camera's drift correction (drift.py, engine.view): a fixed sample of the background's pixels taken
 whenever a background is set, and each frame's depth scale estimated on it and divided out
 before the frame's lists are built."""
 
@@ -10,7 +10,7 @@ from ..drift import DriftEstimate, DriftOptions, background_sample, estimate_sca
 
 
 class DriftMixin:
-    """Engine: each frame's depth scale against the background (Engine.drift; None: off)."""
+    """CameraView: each frame's depth scale against its background (drift; None: off)."""
 
     drift: DriftOptions | None = None
     _drift_at = None  # the sampled pixels (flat, this engine's resolution) and their depths
@@ -25,7 +25,7 @@ class DriftMixin:
         self._drift_at = background_sample(b[:, 0], (b[:, 3] < 1.0) & (b[:, 2] < 0.5))
         self._drift_mu = b[self._drift_at, 0]
 
-    def _correct_drift(self, depths_m) -> tuple:
+    def correct_drift(self, depths_m) -> tuple:
         """The frames (n, H', W') with each one's drift divided out where it is trusted and beyond
         the dead band, and each frame's DriftEstimate (None each without drift correction)."""
         d = np.asarray(depths_m, dtype=np.float32)

@@ -3,47 +3,12 @@ the convergence check, launched from Python or replayed as a captured graph."""
 
 from __future__ import annotations
 
-import ctypes
 import math
 
 import numpy as np
 import warp as wp
 
 from .. import kernels as K
-
-
-def _direct(cmd):
-    """(entry point, argument block, field names, its address) of a recorded CPU launch that
-    Warp invokes with a ctypes block of its arguments (warp's `invoke`, whose block type it
-    caches per kernel at the first launch), for Engine._launch to call the entry point with
-    a block it keeps; None where the launch is not such (a GPU, tiles, another Warp)."""
-    try:
-        if not cmd.device.is_cpu or cmd.block_dim > 1 or cmd.adjoint:
-            return None
-        cached = cmd.kernel._invoke_cache.get((tuple(type(p) for p in cmd.params[1:]), False))
-        if cached is None:
-            return None
-        block_type, fields = cached
-        block = block_type()
-        names = [f[0] for f in fields]
-        for i, name in enumerate(names):
-            setattr(block, name, cmd.params[1 + i])
-        return cmd.hooks.forward, block, names, ctypes.byref(block)
-    except (AttributeError, TypeError, ValueError):
-        return None
-
-
-class _Recorded:
-    """Engine._launch's record of one kernel: Warp's recorded command, the dim and inputs of
-    its last launch, its direct call (_direct's tuple; None: Warp's Launch.launch) and, for a
-    direct call, the bounds of the current dim and those of each dim seen (ctypes refs)."""
-
-    __slots__ = ("cmd", "dim", "inputs", "direct", "bounds", "bounds_of")
-
-    def __init__(self, cmd, dim: int, inputs: list, direct):
-        self.cmd, self.dim, self.inputs, self.direct = cmd, dim, list(inputs), direct
-        self.bounds = ctypes.byref(cmd.params[0])
-        self.bounds_of = {dim: self.bounds}
 
 
 class IterationsMixin:
@@ -53,18 +18,19 @@ class IterationsMixin:
         """One mean-field iteration: evidence pass, then damped update (recording
         max |rho_new - rho| as max_change[frame, it]) of the frames not done. A full pass
         walks every list and updates every location; otherwise the compact lists of the live
-        locations (see `compact`) and only those move (kernels.sparse)."""
+        locations (engine.sparse) and only those move (kernels.sparse)."""
         full_lists = full or self.sparse_on_lists
-        lists = self.lists if full_lists else self.compact_lists
-        pixels, active = self.batch * self.n_pixels, self.no_index
-        if not full_lists and self.n_active is not None:  # the pixels with live entries alone
-            pixels, active = self.n_active, self.active
-        elif full_lists and self.n_listed is not None:  # the pixels with entries alone
-            pixels, active = self.n_listed, self.listed
         launch, p = self._launch, self.params
-        if pixels:
-            launch(K.evidence_pass, pixels, [lists, self.delta_bg, self.rho, self.behind, self.evidence,
-                                             self.n_pixels, self.done, self.local_scratch, active])
+        for v in self.views:  # every camera's pixels add to each location's evidence
+            lists = v.lists if full_lists else v.compact_lists
+            pixels, active = self.batch * v.n_pixels, self.no_index
+            if not full_lists and v.n_active is not None:  # the pixels with live entries alone
+                pixels, active = v.n_active, v.active
+            elif full_lists and v.n_listed is not None:  # the pixels with entries alone
+                pixels, active = v.n_listed, v.listed
+            if pixels:
+                v.launch(K.evidence_pass, pixels, [lists, v.delta_bg, self.rho, v.behind, self.evidence, v.n_pixels,
+                                                   self.done, self.local_scratch, active])
         index, dim = self.no_index, self.batch * self.n_locations
         if not full and self.n_live is not None:  # the live locations alone (gather_live)
             index, dim = self.live_index, self.n_live
@@ -83,47 +49,6 @@ class IterationsMixin:
                                    self.live, index, self.live_changed, self.streak, p.damping_streak,
                                    p.damping_streak_max, p.behind_cost, self.n_behind, p.sparse_drop])
 
-    def _launch(self, kernel, dim: int, inputs: list):
-        """wp.launch of one of a frame's kernels, recorded at its first launch (one record a
-        kernel) and replayed after with only the arguments that changed: a launch from Python
-        takes ~15 to 30 us on the CPU, and a frame makes ~200. On the CPU outside a capture a
-        replay calls the kernel's entry point with an argument block kept between launches (its
-        changed fields rewritten, its bounds kept per dim) instead of Warp's Launch.launch,
-        which builds the block anew each time (`_direct`)."""
-        rec = self._recorded.get(kernel)
-        if rec is None:
-            cmd = wp.launch(kernel, dim=dim, inputs=inputs, device=self.device, record_cmd=True)
-            cmd.launch()
-            self._recorded[kernel] = _Recorded(cmd, dim, inputs, _direct(cmd) if self.direct_launch else None)
-            return
-        cmd, last, direct = rec.cmd, rec.inputs, rec.direct
-        for i, v in enumerate(inputs):
-            if v is not last[i] and not (type(v) is type(last[i]) and type(v) in (int, float) and v == last[i]):
-                last[i] = v
-                if direct is None:
-                    cmd.set_param_at_index(i, v)
-                elif type(v) in (int, float):  # (the iteration, the damping: the block's field takes it)
-                    setattr(direct[1], direct[2][i], v)
-                else:
-                    cmd.set_param_at_index(i, v)
-                    setattr(direct[1], direct[2][i], cmd.params[1 + i])
-        if dim != rec.dim:
-            rec.dim = dim
-            if direct is None:
-                cmd.set_dim(dim)
-            else:  # the bounds of a dim seen before are reused (a few dims recur each frame)
-                bounds = rec.bounds_of.get(dim)
-                if bounds is None:
-                    if len(rec.bounds_of) > 64:
-                        rec.bounds_of.clear()
-                    cmd.set_dim(dim)
-                    bounds = rec.bounds_of[dim] = ctypes.byref(cmd.params[0])
-                rec.bounds = bounds
-        if direct is None:
-            cmd.launch()
-        else:
-            direct[0](rec.bounds, direct[3])
-
     def _check(self, it: int):
         self._launch(K.check_converged, self.batch, [it, self.params.tolerance, self.max_change, self.done])
 
@@ -133,7 +58,9 @@ class IterationsMixin:
         sparse iterations the checked iterations are full passes, so a frame stops only when
         a pass over every location has found nothing to revive."""
         p = self.params
-        full, self.n_live, self.n_active, self.sparse_on_lists = True, None, None, False
+        full, self.n_live, self.sparse_on_lists = True, None, False
+        for v in self.views:
+            v.n_active = None
         self.live_changed.zero_()
         for it in range(p.max_iterations):
             was_full, full = full, p.full_pass(it)
@@ -149,7 +76,7 @@ class IterationsMixin:
         if not self.graph:
             self._iterate_all(logit_prior)
             return
-        lists = (self.lists.loc.ptr, self.capacity)
+        lists = tuple((v.lists.loc.ptr, v.capacity) for v in self.views)
         if self._graph is None or self._graph_lists != lists:  # new list buffers: new graph
             with wp.ScopedCapture(device=self.device) as capture:
                 self._iterate_all(logit_prior)
@@ -177,13 +104,16 @@ class IterationsMixin:
         self.done.assign(np.arange(self.batch, dtype=np.int32) >= n)  # padding frames: done
         logit_prior = math.log(p.prior) - math.log1p(-p.prior)
         bound = p.sparse_epsilon > 0 and p.bound_rounds > 0
-        self.n_kept = self.n_listed = None
+        self.n_kept = None
+        for v in self.views:
+            v.n_listed = None
         if p.sparse_epsilon > 0:  # the bound, then locations in no list stay where they start
             self.prune(logit_prior)
             if not self.graph:  # full passes update all but the pruned and idle ones, and the
                 # passes over the lists run over the pixels with entries (read after one sync)
                 self.n_kept = self._gather(self.kept_index)
-                self.n_listed = int(self.n_listed_out.numpy()[0])
+                for v in self.views:
+                    v.n_listed = int(v.n_listed_out.numpy()[0])
         if p.behind_cost > 0 and not bound:  # (with the bound, prune counted them first)
             self._count_behind()
         return logit_prior, bound

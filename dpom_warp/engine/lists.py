@@ -1,6 +1,6 @@
-"""A frame's per-pixel lists: the frames reduced and uploaded, the masks M_k and Delta_ki
-(eq. 12) listed per pixel in depth order, grown when a frame needs more, pruned by the bound
-and compacted to the live locations (sparse iterations)."""
+"""A camera's per-pixel lists (engine.view): its frames reduced and uploaded, the masks M_k and
+Delta_ki (eq. 12) listed per pixel in depth order, grown when a frame needs more, and compacted
+to the live locations (sparse iterations; the engine's sparse step drives that)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from .base import ENTRY_BYTES, ListOverflow
 
 
 class ListsMixin:
-    """Engine: the per-pixel lists of the frames in flight."""
+    """CameraView: the per-pixel lists of its frames in flight."""
 
     # -- one frame or one batch ----------------------------------------------------------
     def _frames(self, depth_m: np.ndarray) -> np.ndarray:
@@ -51,7 +51,7 @@ class ListsMixin:
             # the pinned transfer saved)
             wp.copy(self._full, wp.array(d, dtype=wp.float32, device="cpu", copy=False))
             r = self.resolution
-            self._launch(K.reduce_frames, self.depth.shape, [self._full, r.stride, K.frames.HOW[r.reduce],
+            self.launch(K.reduce_frames, self.depth.shape, [self._full, r.stride, K.frames.HOW[r.reduce],
                                                              float(r.z_max), min_readings(r.stride), self.depth])
 
     def build_lists(self, depth_m: np.ndarray) -> int:
@@ -61,7 +61,7 @@ class ListsMixin:
         self._set_depth(depth_m)
         if self.floor_mode and self.params.background_outside_grid:
             self._floor_background(1)
-        self._launch(K.background_delta, self.depth.shape, [self.depth, self.pm, self.bg, int(self.bg_fresh),
+        self.launch(K.background_delta, self.depth.shape, [self.depth, self.pm, self.bg, int(self.bg_fresh),
                                                             self.bg_logs, self.delta_bg])
         self.bg_fresh = False
         lists = [self.lists, self.capacity]
@@ -69,7 +69,7 @@ class ListsMixin:
         if self.one_pass_lists:  # CPU: each mask test once (kernels.masks.pixel_entries_once)
             def one_pass():
                 self.reserved.zero_()
-                self._launch(K.pixel_entries_once, self.depth.shape, inputs + lists + [self.reserved])
+                self.launch(K.pixel_entries_once, self.depth.shape, inputs + lists + [self.reserved])
                 return (int(x) for x in self.reserved.numpy())
 
             total, long_lists = one_pass()
@@ -78,15 +78,15 @@ class ListsMixin:
                 lists = [self.lists, self.capacity]
                 total, long_lists = one_pass()
             if long_lists:  # lists longer than its stack buffer: filled as on a GPU, alone
-                self._launch(K.pixel_entries, self.depth.shape, inputs + [1] + lists + [self.reserved])
+                self.launch(K.pixel_entries, self.depth.shape, inputs + [1] + lists + [self.reserved])
             return total
-        self._launch(K.pixel_entries, self.depth.shape, inputs + [0] + lists + [self.no_reserved])
+        self.launch(K.pixel_entries, self.depth.shape, inputs + [0] + lists + [self.no_reserved])
         wp.utils.array_scan(self.lists.counts, self.lists.offsets, inclusive=False)
         total = int(self.lists.offsets[-1:].numpy()[0]) + int(self.lists.counts[-1:].numpy()[0])
         if total > self.capacity:
             self._grow(total)
             lists = [self.lists, self.capacity]
-        self._launch(K.pixel_entries, self.depth.shape, inputs + [1] + lists + [self.no_reserved])
+        self.launch(K.pixel_entries, self.depth.shape, inputs + [1] + lists + [self.no_reserved])
         return total
 
     def _grow(self, total: int):
@@ -100,93 +100,10 @@ class ListsMixin:
         self.grown.append(total)
         self._allocate_lists(int(total * 1.25))
 
-    def compact(self, live=None, done=None):
-        """Copy each pixel's list, in order, keeping the live locations (count, scan, fill):
-        those of self.live of the frames not self.done, or of `live` of the frames not `done`."""
+    def compact(self, live, done):
+        """Copy each pixel's list, in order, keeping the live locations (count, scan, fill): those
+        of `live` of the frames not `done`."""
         dim = self.batch * self.n_pixels
-        live = self.live if live is None else live
-        self._launch(K.count_live, dim, [self.lists, live, self.n_pixels, self.done if done is None else done,
-                                         self.compact_lists])
+        self.launch(K.count_live, dim, [self.lists, live, self.n_pixels, done, self.compact_lists])
         wp.utils.array_scan(self.compact_lists.counts, self.compact_lists.offsets, inclusive=False)
-        self._launch(K.fill_live, dim, [self.lists, live, self.compact_lists])
-
-    def prune(self, logit_prior: float):
-        """The pruning bound from the current rho (the start): params.bound_rounds rounds,
-        then every location whose bound is below sparse_epsilon leaves the lists for the
-        frame (kernels.sparse; no host sync). Without rounds nothing is pruned. Either way a
-        location left in no list is marked idle."""
-        p, dim = self.params, self.batch * self.n_pixels
-        if p.bound_rounds > 0:
-            if p.behind_cost > 0:  # a fixed part of each location's evidence: the bound's too
-                self._count_behind()
-            self.upper.fill_(1.0)
-            self.evidence.zero_()
-            for _ in range(p.bound_rounds):
-                self._launch(K.bound_pass, dim, [self.lists, self.delta_bg, self.rho, self.upper, self.behind,
-                                                 self.evidence, self.n_pixels, self.done, self.local_scratch,
-                                                 p.sparse_epsilon])
-                self._launch(K.update_bound, len(self.upper),
-                             [logit_prior, p.behind_cost, self.n_behind, self.evidence, self.upper,
-                              p.sparse_epsilon, self.rho])
-            self._launch(K.prune, len(self.upper), [p.sparse_epsilon, self.upper, self.rho, self.live])
-        self.per_location.zero_()
-        self.n_listed_out.zero_()
-        self._launch(K.prune_lists, dim, [self.lists, self.live, self.per_location, self.listed, self.n_listed_out])
-        self._launch(K.mark_idle, len(self.live), [self.per_location, self.live])
-
-    def _count_behind(self):
-        """n_behind: what the lists leave out, the readings behind each listed location's
-        object (kernels.behind_count), after counting each location's entries in the lists
-        (before the pruning, or after it: the pruned ones are in no list)."""
-        self.per_location.zero_()
-        self._launch(K.count_entries, self.batch * self.n_pixels,
-                     [self.lists, self.per_location])
-        p = self.params
-        self._launch(K.behind_count, len(self.live), [self.depth, self.pm, self.behind_first, self.behind_pixel,
-                                                      self.behind_mu, self.behind_var, self.behind_half,
-                                                      p.behind_step, self.per_location, self.n_behind])
-
-    def _gather(self, index, compact: str | None = None) -> int:
-        """The live locations of the frames not done into `index` (kernels.sparse.gather_live);
-        returns how many (a host sync). With `compact`, the compact lists first: "lists" from
-        the lists in one pass (kernels.sparse.compact_once), "again" from the compact lists
-        themselves (compact_again: only deaths since); n_active, the pixels with live
-        entries, is read back in the same sync."""
-        self.live_count.zero_()
-        if compact == "lists":
-            self._launch(K.compact_once, self.batch * self.n_pixels,
-                         [self.lists, self.live, self.n_pixels, self.done, self.compact_lists, self.active,
-                          self.live_count])
-        elif compact == "again" and self.n_active:
-            self._launch(K.compact_again, self.n_active, [self.active, self.compact_lists, self.live,
-                                                          self.n_pixels, self.done, self.active_next,
-                                                          self.live_count])
-            self.active, self.active_next = self.active_next, self.active
-        self._launch(K.gather_live, len(self.live), [self.live, self.n_locations, self.done, index,
-                                                     self.live_count])
-        counts = self.live_count.numpy()
-        if compact:
-            self.n_active = int(counts[2])
-        return int(counts[0])
-
-    def _compact_if_changed(self):
-        """Before a sparse pass: the compact lists. Driven from the host (no graph), they are
-        rebuilt only when the full pass changed which locations are live (update_rho's
-        `live_changed`), and the sparse updates then run over the live locations alone (their
-        count read back with the flag: one sync, where the loop syncs for its check anyway)."""
-        if self.graph:
-            self.compact()
-            return
-        changed, revived = (int(x) for x in self.live_changed.numpy())
-        if self.n_live is not None and not changed:
-            return  # the same live locations: the compact lists and the index still hold
-        self.live_changed.zero_()
-        if self.n_live is None and not changed and self.n_kept is not None:
-            # the first full pass killed nothing: the compact lists would be the lists, copied
-            self.sparse_on_lists = True
-            wp.copy(self.live_index, self.kept_index, count=self.n_kept)
-            self.n_live = self.n_kept
-            return
-        again = self.n_live is not None and not revived and not self.sparse_on_lists
-        self.sparse_on_lists = False
-        self.n_live = self._gather(self.live_index, compact="again" if again else "lists")
+        self.launch(K.fill_live, dim, [self.lists, live, self.compact_lists])

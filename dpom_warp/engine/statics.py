@@ -1,4 +1,4 @@
-"""What an engine builds once for its camera and grid: the geometry's arrays, the static mask
+"""What an engine builds once for each of its cameras over the grid: the geometry's arrays, the static mask
 index (image tiles or the pixel table), the behind-cost lattice and the list buffers."""
 
 from __future__ import annotations
@@ -11,11 +11,10 @@ from ..geometry import Geometry
 from ..model import (
     BAND_ALL,
 )
-from .base import memory_estimate
 
 
 class StaticsMixin:
-    """Engine: the static arrays and the buffers (allocated up front)."""
+    """CameraView: the static arrays and the list buffers (allocated up front)."""
 
     @staticmethod
     def _geometry_arrays(geometry: Geometry, first: K.GeometryArrays | None = None) -> K.GeometryArrays:
@@ -146,9 +145,9 @@ class StaticsMixin:
         return t
 
     def _allocate_lists(self, capacity: int):
-        self._recorded = {}  # Engine._launch: the launches recorded with the old lists
+        self.launch.reset()  # the launches recorded with the old lists
         capacity = min(max(1024, capacity), self.max_entries)
-        # new structs (not the old ones' fields rewritten): Engine._launch knows a changed
+        # new structs (not the old ones' fields rewritten): a Launcher knows a changed
         # argument by its identity
         lists, compact = K.PixelLists(), K.PixelLists()
         lists.offsets, lists.counts = self.lists.offsets, self.lists.counts
@@ -163,10 +162,3 @@ class StaticsMixin:
             compact.delta = wp.zeros(capacity, dtype=wp.float32)
         self.lists, self.compact_lists = lists, compact
         self.capacity = capacity
-
-    def memory_bytes(self) -> int:
-        """Bytes the engine's buffers hold now (memory_estimate of its sizes, with the auto
-        background's state)."""
-        return memory_estimate(self.batch * self.n_pixels, self.batch * self.n_locations,
-                               self.capacity, self.n_pairs, self.n_table,
-                               self.n_pixels if self.use_table else 0) + self.extra_bytes

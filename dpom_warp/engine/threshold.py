@@ -27,69 +27,70 @@ class ThresholdMixin:
         with entries placed in that order (kernels.sparse.place_active); on the CPU
         kernels.sparse.compact_once in one pass, its slices placed by atomic adds (in pixel
         order on one thread, sorted to be sure) and read through NumPy views of the arrays."""
+        (v,) = self.views  # the joint test reads one camera's lists (one camera today)
         n, locations = len(rho_star), self.n_locations
         marked = np.zeros((self.batch, locations), np.int32)
         marked[:n] = np.asarray(rho_star, np.float32) >= self.joint_threshold
         self.candidate.assign(marked.ravel())
         if self.ordered_joint_lists:
-            self.compact(self.candidate, self.not_done)
+            v.compact(self.candidate, self.not_done)
             # the pixels with entries in order: a flag each (into active_next), its inclusive
             # scan (into listed), then each such pixel and its count placed at its rank (into
             # active and active_next: the flags are spent), arrays the iterations are done with
-            dim = self.batch * self.n_pixels
-            self._launch(K.has_entries, dim, [self.compact_lists.counts, self.active_next])
-            wp.utils.array_scan(self.active_next, self.listed, inclusive=True)
-            self._launch(K.place_active, dim, [self.compact_lists.counts, self.listed, self.active, self.active_next])
-            pixels = int(self.listed[-1:].numpy()[0])
-            index = self.active[:pixels]
-            active, count = index.numpy(), self.active_next[:pixels].numpy()
+            dim = self.batch * v.n_pixels
+            v.launch(K.has_entries, dim, [v.compact_lists.counts, v.active_next])
+            wp.utils.array_scan(v.active_next, v.listed, inclusive=True)
+            v.launch(K.place_active, dim, [v.compact_lists.counts, v.listed, v.active, v.active_next])
+            pixels = int(v.listed[-1:].numpy()[0])
+            index = v.active[:pixels]
+            active, count = index.numpy(), v.active_next[:pixels].numpy()
             entries = int(count.sum())
-            loc, delta = self.compact_lists.loc[:entries].numpy(), self.compact_lists.delta[:entries].numpy()
-            dbg = self.delta_bg[index].numpy()
+            loc, delta = v.compact_lists.loc[:entries].numpy(), v.compact_lists.delta[:entries].numpy()
+            dbg = v.delta_bg[index].numpy()
         else:
-            self.live_count.zero_()
-            self._launch(K.compact_once, self.batch * self.n_pixels,
-                         [self.lists, self.candidate, self.n_pixels, self.not_done, self.compact_lists,
-                          self.active, self.live_count])
-            _, entries, pixels = (int(x) for x in self.live_count.numpy())
-            active = np.sort(self.active[:pixels].numpy())
-            compact = self.compact_lists
-            first, count, dbg = (a.numpy()[active] for a in (compact.offsets, compact.counts, self.delta_bg))
+            v.live_count.zero_()
+            v.launch(K.compact_once, self.batch * v.n_pixels,
+                     [v.lists, self.candidate, v.n_pixels, self.not_done, v.compact_lists, v.active, v.live_count])
+            _, entries, pixels = (int(x) for x in v.live_count.numpy())
+            active = np.sort(v.active[:pixels].numpy())
+            compact = v.compact_lists
+            first, count, dbg = (a.numpy()[active] for a in (compact.offsets, compact.counts, v.delta_bg))
             at = np.repeat(first, count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
             loc, delta = compact.loc[:entries].numpy()[at], compact.delta[:entries].numpy()[at]
         p = self.params
         if p.behind_cost > 0:  # counted for every candidate (n_behind leaves out locations in no list)
-            self._launch(K.behind_count, len(self.candidate),
-                         [self.depth, self.pm, self.behind_first, self.behind_pixel, self.behind_mu, self.behind_var,
-                          self.behind_half, p.behind_step, self.candidate, self.candidate_behind])
+            v.launch(K.behind_count, len(self.candidate),
+                     [v.depth, self.pm, v.behind_first, v.behind_pixel, v.behind_mu, v.behind_var, v.behind_half,
+                      p.behind_step, self.candidate, self.candidate_behind])
             behind = p.behind_cost * self.candidate_behind.numpy().reshape(self.batch, locations).astype(np.float64)
         else:
             behind = np.zeros((self.batch, locations))
         return JointLists.of_batch(np.flatnonzero(marked[:n]), active, count, loc, delta, dbg, behind[:n],
-                                   self.geometry.locations, p, locations, self.n_pixels)
+                                   v.geometry.locations, p, locations, v.n_pixels)
 
     def _threshold(self) -> None:
         """After the iterations: what each location's pixels show of it (transparency pass), the
         top-band counts (with shorter people's bands) and rho* (README, How it works)."""
         p = self.params
         self.visible.zero_()
-        self._launch(K.transparency_pass, self.batch * self.n_pixels,
-                     [self.lists, self.rho, self.visible])
-        top = p.top_support if self.geometry.height > 0 else 0.0
+        for v in self.views:
+            v.launch(K.transparency_pass, self.batch * v.n_pixels, [v.lists, self.rho, self.visible])
+        height = self.views[0].geometry.height  # the object's, the same seen from every camera
+        top = p.top_support if height > 0 else 0.0
         unhidden = int(p.share_of == "unhidden")
         if unhidden:
-            self._top_band(-BAND_ALL, BAND_ALL, self.rho,
-                           (self.all_support, self.all_against, self.all_hidden, self.all_missing, self.all_seen))
+            self._top_bands(-BAND_ALL, BAND_ALL, self.rho,
+                            (self.all_support, self.all_against, self.all_hidden, self.all_missing, self.all_seen))
         if top > 0:
             # counted only where rho* before the test (a factor <= 1) reaches TOP_MIN_RHO: the
             # silhouette walk is the threshold's whole cost, and most locations are far below
             if not unhidden:
                 self._soft_threshold(0.0, unhidden)
-            h, gate = self.geometry.height, self.rho if unhidden else self.rho_star
+            gate = self.rho if unhidden else self.rho_star
             counts = (self.top_support, self.top_against, self.top_hidden, self.top_missing, self.top_seen)
-            self._top_band(p.top_band * h, h, gate, counts, p.top_sigmas)
-            for short, geo in self.shorter_top:  # shorter people: the band whose factor is larger
-                self._top_band(p.top_band * short, short, gate, self.other_top, p.top_sigmas, geo)
+            self._top_bands(p.top_band * height, height, gate, counts, p.top_sigmas)
+            for i, short in enumerate(p.top_heights):  # shorter people: the band whose factor is larger
+                self._top_bands(p.top_band * short, short, gate, self.other_top, p.top_sigmas, i)
                 self._launch(K.keep_better_top, self.batch * self.n_locations,
                              [*counts, *self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
                               p.top_min_pixels, p.top_unseen, self.area, p.top_unseen_part])
@@ -105,15 +106,20 @@ class ThresholdMixin:
                       p.top_unseen_part, unhidden, self.all_support, self.all_against, self.share,
                       self.rho_star])
 
-    def _top_band(self, lo, hi, gate, counts, sigmas=0.0, geo=None) -> None:
+    def _top_bands(self, lo, hi, gate, counts, sigmas=0.0, shorter: int | None = None) -> None:
         """The band's counts between heights lo and hi of the locations whose `gate` reaches
-        TOP_MIN_RHO: a thread a row of each rectangle on a GPU, a thread a location elsewhere."""
-        args = [self.depth, self.geo if geo is None else geo, self.pm, float(self.geometry.centre[2]), lo, hi,
-                TOP_MIN_RHO, sigmas, self.bg, MISSING_READ, gate]
+        TOP_MIN_RHO, seen by each camera (with `shorter`, the solid of params.top_heights[shorter]):
+        a thread a row of each rectangle on a GPU, a thread a location elsewhere."""
+        L = self.batch * self.n_locations
         # (a thread a row while the launch's thread indices fit Warp's 32-bit tid)
-        if self.top_band_by_row and self.batch * self.n_locations * self.top_rows < 2 ** 31:
-            self._launch(K.top_band_clear, self.batch * self.n_locations, [gate, TOP_MIN_RHO, *counts])
-            self._launch(K.top_band_rows, self.batch * self.n_locations * self.top_rows,
-                         [*args, self.top_rows, *counts, self.forward])
-        else:
-            self._launch(K.top_band, self.batch * self.n_locations, [*args, *counts, self.forward])
+        by_row = self.top_band_by_row and all(L * v.top_rows < 2 ** 31 for v in self.views)
+        if by_row:
+            self._launch(K.top_band_clear, L, [gate, TOP_MIN_RHO, *counts])
+        for v in self.views:
+            geo = v.geo if shorter is None else v.shorter_top[shorter][1]
+            args = [v.depth, geo, self.pm, float(v.geometry.centre[2]), lo, hi, TOP_MIN_RHO, sigmas, v.bg,
+                    MISSING_READ, gate]
+            if by_row:
+                v.launch(K.top_band_rows, L * v.top_rows, [*args, v.top_rows, *counts, v.forward])
+            else:
+                v.launch(K.top_band, L, [*args, *counts, v.forward])
