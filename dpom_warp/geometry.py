@@ -6,16 +6,18 @@ engine and the NumPy reference, so both paths see exactly the same geometry.
 
 from __future__ import annotations
 
-import math
 import warnings
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Literal
 
 import numpy as np
-from pydantic import ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-from .values import Axis, Node, Num, _fail
+from .shapes import FacingPlane, ObjectBox, Shape
+from .values import Axis, Node, _fail
+
+__all__ = ["Camera", "Geometry", "Grid", "ObjectBox", "build_geometry", "closer", "neighbour_lists", "pose_from_angles"]
 
 
 def pose_from_angles(height_m: float, pitch_deg: float, roll_deg: float = 0.0,
@@ -175,168 +177,6 @@ class Grid(Node):  # the config's `grid` section
         return np.stack([xx.ravel(), yy.ravel(), zz.ravel()], axis=1)
 
 
-class ObjectBox(Node):  # the config's `object` section
-    """The object's size and shape model, metres (`depth` defaults to `width`).
-
-    Attributes:
-        shape: 'plane': each pixel of the silhouette rectangle expects the object's depth on
-            the plane through the location that faces the camera (the paper's model);
-            'solid': each pixel expects the depth where its ray enters the object's upright
-            solid, and pixels whose rays miss the solid are not the object's (README, "How
-            it works"). The solid is a vertical cylinder of `radius` (the body)
-            from the floor to `shoulder` x height, with a coaxial cylinder of `head_radius`
-            (the head) up to the full height; centred on its voxel in voxel mode, without a
-            head (a drone: a disc).
-        radius: body radius, metres (None: width / 2).
-        head_radius: head radius, metres (0: no head; ground mode only).
-        shoulder: where the body ends and the head begins, share of the height.
-        height_spread: standard deviation of the height of the solid's flat tops (people are
-            not all of one height), metres; a pixel whose ray enters through a top expects a
-            depth that spread / |ray's vertical share| wide (at most 1 / 0.3 of it).
-        leg_radius: ground mode: the body's cylinder stops at `hip` x height and a coaxial
-            one of this radius (the legs, metres) goes down to the floor; None (or the body
-            radius): the body reaches the floor (README, How it works: measured, off).
-        hip: where the legs end, share of the height.
-        depth_radius: ground mode: the body's half-depth along the line of sight: its
-            cross-section is an ellipse of semi-axes `radius` across the line of sight and
-            this along it, facing the camera (a torso is narrower front to back than across,
-            and the visible front of a person seen from any side is nearer its centre than
-            the body's radius); None: a circle of `radius`.
-    """
-
-    model_config = ConfigDict(**Node.model_config,
-                              json_schema_extra={"description": __doc__.splitlines()[0]})
-
-    width: Num = Field(0.4, gt=0, description="metres, across the line of sight (the solid: its body's diameter)")
-    height: Num = Field(1.85, gt=0, description="metres")
-    depth: Num | None = Field(None, gt=0, description="default: = width")
-    shape: Literal["plane", "solid"] = Field(
-        "solid", description="plane: a pixel expects the depth of the plane facing the "
-        "camera (the paper); solid: the depth where its ray enters an upright body and head "
-        "(README, How it works)")
-    radius: Num | None = Field(None, gt=0, description="solid: body radius, metres (default width / 2)")
-    head_radius: Num = Field(0.11, ge=0, description="solid: head radius, metres (0: no head; ground grids)")
-    shoulder: Num = Field(0.8, gt=0, le=1, description="solid: where the head begins, share of the height")
-    height_spread: Num = Field(0.12, ge=0, description="solid: spread of the heights of its tops, metres")
-    leg_radius: Num | None = Field(None, gt=0, description="solid, ground grids: the legs' radius below hip x "
-                                                           "height, metres (null: the body reaches the floor)")
-    hip: Num = Field(0.45, gt=0, lt=1, description="solid: where the legs end, share of the height")
-    depth_radius: Num | None = Field(0.12, gt=0,
-                                     description="solid, ground grids: the body's half-depth along the line of sight, "
-                                                 "metres (an ellipse facing the camera; null: = radius)")
-
-    def __init__(self, *size, **values):
-        """ObjectBox(width, height, **others) as well as by name."""
-        super().__init__(**dict(zip(("width", "height"), size)), **values)
-
-    @property
-    def body_radius(self) -> float:
-        return 0.5 * self.width if self.radius is None else float(self.radius)
-
-    def corners(self, centre: np.ndarray, mode: str) -> np.ndarray:
-        """(K, 8, 3) corners of the boxes at `centre` (K, 3): standing on it or centred on it.
-        A solid's box is its bounding box (2 x radius across)."""
-        if self.shape == "solid":
-            hx = hy = self.body_radius
-        else:
-            hx, hy = 0.5 * self.width, 0.5 * (self.width if self.depth is None else self.depth)
-        z0, z1 = (0.0, self.height) if mode == "ground" else (-0.5 * self.height, 0.5 * self.height)
-        offs = np.array([[sx, sy, sz] for sx in (-hx, hx) for sy in (-hy, hy) for sz in (z0, z1)])
-        return centre[:, None, :] + offs[None, :, :]
-
-    def solid(self, mode: str) -> np.ndarray:
-        """The solid as (solid, body radius, head radius, bottom, shoulder, top, height
-        spread, leg radius, hip, body depth radius): heights relative to the location centre,
-        the body from hip to shoulder, the legs below it (hip = bottom: none); solid = 0 for
-        the plane model."""
-        r, h = self.body_radius, self.height
-        if mode == "ground":
-            head = self.head_radius > 0 and self.shoulder < 1
-            z0, z1, z2 = 0.0, (self.shoulder * h if head else h), h
-            rh = self.head_radius if head else 0.0
-        else:
-            z0, z1, z2, rh = -0.5 * h, 0.5 * h, 0.5 * h, 0.0
-        rl = r if self.leg_radius is None else float(self.leg_radius)
-        legs = mode == "ground" and rl != r and 0 < self.hip * h < z1
-        rl, zh = (rl, self.hip * h) if legs else (r, z0)
-        rd = r if self.depth_radius is None or mode != "ground" else float(self.depth_radius)
-        return np.array([float(self.shape == "solid"), r, rh, z0, z1, z2, self.height_spread, rl, zh, rd])
-
-
-MIN_TOP_SLOPE = 0.3  # a top's depth spread is at most height_spread / MIN_TOP_SLOPE
-
-
-def cylinder_entry(centre, rays, axis, radius, z0, z1, spread, depth_radius=None):
-    """Where each ray enters the vertical cylinder of `radius` about `axis` (x, y) between
-    heights z0 and z1 (the camera outside it), and the variance of that depth. With
-    `depth_radius` the cross-section is an ellipse facing the camera: semi-axis `radius`
-    across the horizontal line from the axis to the camera, `depth_radius` along it (a
-    circle when the camera is right above the axis).
-
-    In the ellipse's frame scaled to the unit circle, with u the horizontal unit vector from
-    the axis to the camera, L the camera's horizontal distance and v across: the camera sits
-    at (0, L / rd), a ray d at (d.v / r, d.u / rd); a circle is rd = r (the same quadratic,
-    divided by r^2).
-
-    Args:
-        centre: camera centre (3,); rays: (..., 3) directions, ray parameter = z-depth.
-
-    Returns:
-        (t, var): (...,) entry z-depth (-1 where the ray misses) and the depth variance of
-        the hit: (spread / max(|d_z|, MIN_TOP_SLOPE |d|))^2 through a flat top or bottom, 0
-        through the side.
-    """
-    d = np.asarray(rays, np.float64)
-    dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
-    ox, oy, cz = centre[0] - axis[0], centre[1] - axis[1], centre[2]
-    dist = math.hypot(ox, oy)
-    if dist > 1e-9:
-        ux, uy, rd = ox / dist, oy / dist, radius if depth_radius is None else depth_radius
-    else:  # right above the axis: a circle
-        ux, uy, rd = 1.0, 0.0, radius
-    du, dv = (dx * ux + dy * uy) / rd, (dy * ux - dx * uy) / radius  # the ray, scaled
-    ou = dist / rd  # the camera, scaled (its v is 0)
-    a = dx * dx + dy * dy  # the ray's horizontal share, for the top's slope
-    a2 = du * du + dv * dv
-    b = ou * du
-    c = ou * ou - 1.0
-    disc = b * b - a2 * c
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ts = (-b - np.sqrt(np.maximum(disc, 0.0))) / a2
-        hs = cz + ts * dz
-        side = (c > 0) & (a > 1e-18) & (disc >= 0) & (ts > 0) & (hs >= z0) & (hs <= z1)
-        t = np.where(side, ts, np.inf)
-        var = np.zeros_like(t)
-        slope = np.maximum(np.abs(dz), MIN_TOP_SLOPE * np.sqrt(a + dz * dz))
-        for zc, facing in ((z1, cz > z1), (z0, cz < z0)):  # the top seen from above, the bottom from below
-            if not facing:
-                continue
-            tc = (zc - cz) / dz
-            pu, pv = ou + tc * du, tc * dv
-            cap = (np.abs(dz) > 1e-18) & (tc > 0) & (pu * pu + pv * pv <= 1.0) & (tc < t)
-            t = np.where(cap, tc, t)
-            var = np.where(cap, (spread / slope) ** 2, var)
-    hit = np.isfinite(t)
-    return np.where(hit, t, -1.0), np.where(hit, var, 0.0)
-
-
-def solid_depth(centre, rays, location, solid):
-    """Entry depth (-1: miss) and its variance of each ray into the solid (ObjectBox.solid)
-    standing on, or centred at, `location` (3,): the nearest of legs, body and head."""
-    _, rb, rh, z0, z1, z2, spread, rl, zh, rd = solid
-    lz = location[2]
-    t, var = cylinder_entry(centre, rays, location, rb, lz + zh, lz + z1, spread, rd)
-    if zh > z0:  # the legs, below the body
-        tl, vl = cylinder_entry(centre, rays, location, rl, lz + z0, lz + zh, spread)
-        legs = (tl > 0) & ((t < 0) | (tl < t))
-        t, var = np.where(legs, tl, t), np.where(legs, vl, var)
-    if rh > 0 and z2 > z1:
-        th, vh = cylinder_entry(centre, rays, location, rh, lz + z1, lz + z2, spread)
-        head = (th > 0) & ((t < 0) | (th < t))
-        t, var = np.where(head, th, t), np.where(head, vh, var)
-    return t, var
-
-
 @dataclass
 class Geometry:
     """Per-location quantities shared by the Warp engine and the NumPy reference.
@@ -355,8 +195,8 @@ class Geometry:
             outside can belong to no object.
         height: the height of the boxes standing on the floor (ground mode); 0 for boxes
             centred on voxels, where the top-band test of the soft threshold does not apply.
-        solid: (10,) the object's solid (ObjectBox.solid); solid[0] = 0: the facing-plane
-            model.
+        shape: the object's shape (shapes.py: the facing plane or the solid), its depth and
+            the kernels' fields.
         view_part: (K,) the share of each silhouette rectangle (before clipping) inside the
             image, 0 with none (detection.edge_radius); None: not known, every location whole.
         area: |S_k| (property): the rectangle's area for the facing plane; with a solid, the
@@ -373,12 +213,12 @@ class Geometry:
     plane: np.ndarray
     bounds: np.ndarray
     height: float = 0.0
-    solid: np.ndarray = field(default_factory=lambda: np.zeros(10))
+    shape: Shape = field(default_factory=lambda: FacingPlane(bottom=0.0, top=0.0))
     view_part: np.ndarray | None = None
 
     @cached_property
     def area(self) -> np.ndarray:
-        if self.solid[0] <= 0:
+        if not self.shape.counted_area:
             return self.rect_area
         area = np.zeros_like(self.rect_area)
         for k in np.flatnonzero(self.rect_area > 0):  # the silhouette is the solid's projection
@@ -396,28 +236,19 @@ class Geometry:
         ModelParams.top_heights)."""
         if not 0 < height <= self.height:
             raise ValueError(f"shorter: expected a height in (0, {self.height:g}], found {height:g}")
-        solid = np.array(self.solid, dtype=np.float64)
-        scale = height / self.height
-        for i in (4, 5):  # shoulder, top; bottom (3) stays
-            solid[i] = solid[3] + (solid[i] - solid[3]) * scale
-        solid[8] = min(solid[8], solid[4])  # the hip
-        return replace(self, height=float(height), solid=solid)
+        return replace(self, height=float(height), shape=self.shape.scaled(height / self.height))
 
     def object_depth(self, k: int, rays: np.ndarray):
         """(mu, var): the depth each of `rays` (..., 3) expects of location k (-1: not the
         object's) and the variance the shape adds to it (0 on a facing plane)."""
-        if self.solid[0] > 0:
-            return solid_depth(self.centre, rays, self.locations[k], self.solid)
-        denom = rays @ self.normal[k]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            mu = np.where(denom < -1e-12, self.plane[k] / denom, -1.0)
-        return mu, np.zeros_like(mu)
+        return self.shape.depth(self, k, rays)
 
 
 def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
     """Silhouette rectangles and facing planes for every location of `grid` seen by `camera`."""
     locs = grid.centres()
-    corners = obj.corners(locs, grid.mode)
+    shape = obj.build(grid.mode)
+    corners = shape.corners(locs)
     u, v, z = camera.project(corners)
     in_front = np.all(z > 1e-6, axis=1)
     with warnings.catch_warnings():  # boxes (partly) behind the camera: all-NaN rows, no silhouette
@@ -455,7 +286,7 @@ def build_geometry(camera: Camera, grid: Grid, obj: ObjectBox) -> Geometry:
         rays=camera.rays(), centre=c, locations=locs, rect=rect.astype(np.int32),
         rect_area=area.astype(np.int64), normal=normal, plane=plane,
         bounds=np.stack([corners.min(axis=(0, 1)), corners.max(axis=(0, 1))], 1).ravel(),
-        height=float(obj.height) if grid.mode == "ground" else 0.0, solid=obj.solid(grid.mode),
+        height=float(obj.height) if grid.mode == "ground" else 0.0, shape=shape,
         view_part=np.clip(view_part, 0.0, 1.0),
     )
 

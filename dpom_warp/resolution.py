@@ -35,7 +35,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from .geometry import Camera, Grid, ObjectBox
+from .geometry import Camera, Grid
+from .shapes import ObjectBox
 
 REDUCERS = ("median", "nearest", "min")
 # `auto` keeps at least this many pixels across the object's width at the farthest location

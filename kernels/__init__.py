@@ -22,13 +22,13 @@ from .masks import (PixelTable, TablePair, TileIndex, pair_depth_bounds, pixel_e
 from .mean_field import (ONE_STACK, SIZED_STACK, behind_count, behind_points, check_converged, evidence_pass, exclusion_pass,
                          keep_better_top, soft_threshold, top_band, top_band_clear, top_band_rows,
                          transparency_pass, update_rho)
-from .pixel_model import GeometryArrays, PixelLists, PixelModel
+from .pixel_model import SHAPE_FIELDS, SHAPE_PLANE, SHAPE_SOLID, GeometryArrays, PixelLists, PixelModel
 from .sparse import (IDLE, PRUNED, TALLY_SUM, bound_pass, compact_again, compact_once, count_entries, count_iteration,
                      count_live, fill_live, frame_tally, gather_live, has_entries, mark_idle, place_active, prune,
                      prune_lists, update_bound)
 
 __all__ = [
-    "GeometryArrays", "IDLE", "ONE_STACK", "PRUNED", "SIZED_STACK", "TALLY_SUM", "PixelLists", "PixelModel", "PixelTable",
+    "GeometryArrays", "IDLE", "SHAPE_FIELDS", "SHAPE_PLANE", "SHAPE_SOLID", "ONE_STACK", "PRUNED", "SIZED_STACK", "TALLY_SUM", "PixelLists", "PixelModel", "PixelTable",
     "TablePair", "TileIndex",
     "background_delta", "background_from_frames", "behind_count", "behind_points", "bound_pass", "check_converged",
     "cluster_background", "cluster_frames", "compact_again", "compact_once", "count_entries", "count_iteration",

@@ -15,7 +15,7 @@ from typing import Any
 import warp as wp
 
 from .masks import test_half_width
-from .pixel_model import (GeometryArrays, PixelLists, PixelModel, f64, is_reading, object_depth, object_log_inlier,
+from .pixel_model import (SHAPE_SOLID, GeometryArrays, PixelLists, PixelModel, f64, is_reading, object_depth, object_log_inlier,
                           object_sigma)
 
 
@@ -374,7 +374,8 @@ def behind_points(
     and the mask test's half-width there (masks.test_half_width). One thread per location.
     `forward`: the camera's optical axis (a ray's parameter is its z-depth, d . forward = 1): a
     lattice row none of whose points can lie between `low` and `high` on the solid
-    (row_may_reach) is skipped without walking it, which changes no point."""
+    (row_may_reach) is skipped without walking it, which changes no point (other shapes walk
+    every row: the bound is the solid's)."""
     k = wp.tid()
     width = geo.rays.shape[1]
     n = int(0)
@@ -383,7 +384,7 @@ def behind_points(
     v0 = (r[1] + step - 1) / step * step
     span = solid_depth_span(geo, k, forward)
     for v in range(v0, r[3] + 1, step):
-        if not row_may_reach(geo, v, u0, r[2], step, centre_z, span, low, high):
+        if geo.shape == SHAPE_SOLID and not row_may_reach(geo, v, u0, r[2], step, centre_z, span, low, high):
             continue
         first_u = int(-1)
         for u in range(u0, r[2] + 1, step):
@@ -472,7 +473,7 @@ def band_row(depth: wp.array3d(dtype=wp.float32), geo: GeometryArrays, pm: Pixel
     f = int(0)
     m = int(0)
     n = int(0)
-    if geo.solid == 1 and not row_may_reach(geo, v, r[0], r[2], 1, centre_z, span, lo, hi):
+    if geo.shape == SHAPE_SOLID and not row_may_reach(geo, v, r[0], r[2], 1, centre_z, span, lo, hi):
         return BandCounts(0, 0, 0, 0, 0)
     for u in range(r[0], r[2] + 1):
         d = geo.rays[v, u]

@@ -6,10 +6,20 @@ f64 = wp.float64
 LOG_SQRT_2PI = wp.constant(wp.float64(0.91893853320467274178))
 
 
+# the object's shapes (dpom_warp.shapes: SHAPE_PLANE, SHAPE_SOLID, the same codes): which branch of
+# object_depth gives a ray's depth
+SHAPE_PLANE = wp.constant(0)
+SHAPE_SOLID = wp.constant(1)
+# the shape's sizes in GeometryArrays (shapes.Shape.kernel_fields; 0 where a shape has none)
+SHAPE_FIELDS = ("body_radius", "head_radius", "bottom", "shoulder", "top", "height_spread", "leg_radius", "hip",
+                "depth_radius")
+
+
 @wp.struct
 class GeometryArrays:
-    """Per-pixel rays and per-location silhouettes, facing planes and solids (see
-    geometry.Geometry and geometry.ObjectBox.solid)."""
+    """Per-pixel rays and per-location silhouettes and facing planes, and the object's shape:
+    which Warp function gives a ray's depth (`shape`, object_depth) and its sizes (those of
+    shapes.Solid; 0 where a shape has none). See geometry.Geometry and shapes.py."""
 
     rays: wp.array2d(dtype=wp.vec3d)
     rect: wp.array(dtype=wp.vec4i)
@@ -17,7 +27,7 @@ class GeometryArrays:
     plane: wp.array(dtype=wp.float64)
     location: wp.array(dtype=wp.vec3d)
     centre: wp.vec3d  # camera centre
-    solid: int  # 0: facing planes; 1: the solid below
+    shape: int  # SHAPE_PLANE: facing planes; SHAPE_SOLID: the solid below
     body_radius: wp.float64
     head_radius: wp.float64  # 0: no head
     bottom: wp.float64  # heights relative to the location centre
@@ -119,7 +129,7 @@ def facing_plane_depth(d: wp.vec3d, n: wp.vec3d, plane: wp.float64) -> wp.float6
     return f64(-1.0)
 
 
-MIN_TOP_SLOPE = wp.constant(wp.float64(0.3))  # geometry.MIN_TOP_SLOPE
+MIN_TOP_SLOPE = wp.constant(wp.float64(0.3))  # shapes.MIN_TOP_SLOPE
 
 
 @wp.func
@@ -180,7 +190,7 @@ def object_depth(geo: GeometryArrays, k: int, d: wp.vec3d) -> wp.vec2d:
     """(depth pixel ray d expects of location k, -1: not the object's; variance the shape
     adds): the facing plane's (variance 0), or the entry into the solid, the nearest of legs,
     body and head (geometry.Geometry.object_depth)."""
-    if geo.solid == 0:
+    if geo.shape == SHAPE_PLANE:
         return wp.vec2d(facing_plane_depth(d, geo.normal[k], geo.plane[k]), f64(0.0))
     p = geo.location[k]
     body = cylinder_entry(geo.centre, d, p, geo.body_radius, p[2] + geo.hip, p[2] + geo.shoulder,

@@ -178,9 +178,9 @@ def test_solid_depth_of_legs_body_and_head(legs, leg_radius):
     """Where rays enter the people solid standing at (0, 3): 1.8 m high, a round body of radius 0.2 m up
     to the shoulders (0.8 x 1.8 = 1.44 m), head radius 0.11 m above; below the hip (0.45 x 1.8
     = 0.81 m) legs of `leg_radius` (None, the default, or 0.2: the body reaches the floor)."""
-    from dpom_warp.geometry import ObjectBox, solid_depth
+    from dpom_warp.shapes import ObjectBox, solid_depth
 
-    solid = ObjectBox(0.4, 1.8, leg_radius=legs, depth_radius=None).solid("ground")  # round body
+    solid = ObjectBox(0.4, 1.8, leg_radius=legs, depth_radius=None).build("ground")  # round body
     at = np.array([0.0, 3.0, 0.0])
     level = np.array([[0.0, 1.0, 0.0]])
     down = np.array([[0.0, 0.0, -1.0]])
@@ -203,10 +203,10 @@ def test_solid_depth_of_an_elliptic_body_facing_the_camera():
     level rays (s, 1, 0) meet x^2 / 0.2^2 + (y - 3)^2 / 0.12^2 = 1 where (s t)^2 / 0.04 +
     (t - 3)^2 / 0.0144 = 1 (the smaller root; the axis' ray at 3 - 0.12); s = 0.07 misses
     (inside the circle's rect). From (3, 3, 1.2), looking along -x: the same narrow depth."""
-    from dpom_warp.geometry import ObjectBox, solid_depth
+    from dpom_warp.shapes import ObjectBox, solid_depth
 
-    solid = ObjectBox(0.4, 1.8, head_radius=0.0, depth_radius=0.12).solid("ground")
-    assert ObjectBox(0.4, 1.8, depth_radius=0.12).solid("voxel")[9] == 0.2  # a drone stays a disc
+    solid = ObjectBox(0.4, 1.8, head_radius=0.0, depth_radius=0.12).build("ground")
+    assert ObjectBox(0.4, 1.8, depth_radius=0.12).build("voxel").depth_radius == 0.2  # a drone stays a disc
     at = np.array([0.0, 3.0, 0.0])
     for s in (0.0, 0.03, 0.06, 0.07):
         roots = np.roots([s * s / 0.04 + 1 / 0.0144, -6 / 0.0144, 9 / 0.0144 - 1])
@@ -220,7 +220,7 @@ def test_solid_depth_of_an_elliptic_body_facing_the_camera():
     # of sight inside the 0.2 m semi-axis (the top, at t = 1), along it beyond the 0.12 m one:
     # the ray goes on to the front side, y = 2.88, at t = 2.88 / 2.85 (the circle's top at t = 1)
     centre = np.array([0.0, 0.0, 3.0])
-    circle = ObjectBox(0.4, 1.8, head_radius=0.0, depth_radius=None).solid("ground")
+    circle = ObjectBox(0.4, 1.8, head_radius=0.0, depth_radius=None).build("ground")
     for p, want, want_circle in (((0.15, 3.0, 1.8), 1.0, 1.0), ((0.0, 2.85, 1.8), 2.88 / 2.85, 1.0)):
         d = np.array([p]) - centre
         assert solid_depth(centre, d, at, solid)[0][0] == pytest.approx(want, abs=1e-9), p
@@ -247,3 +247,42 @@ def test_the_iteration_schedule_by_hand():
     assert p.damping_at(46) == pytest.approx(0.38950, abs=5e-5)
     assert p.damping_at(47) == 0.4 and p.damping_at(90) == 0.4
     assert ModelParams(damping=0.1, damping_max=None).damping_at(30) == 0.1
+
+
+def test_a_shape_is_one_class_and_one_warp_function():
+    """shapes.py and the kernels agree on the code that picks a shape's Warp function
+    (kernels.pixel_model.object_depth) and on the shape's fields in GeometryArrays; the config's
+    object section builds the shape a geometry carries; the facing plane's depth and box by hand
+    (a plane through (0, 3, 0) facing a camera at the origin: normal (0, -1, 0), n . (P - C) = -3,
+    so a ray d with d_y = 1 meets it at z-depth 3 and a ray pointing away misses)."""
+    import typing
+    from types import SimpleNamespace
+
+    from dpom_warp import kernels as K
+    from dpom_warp.geometry import Camera, Grid, build_geometry, pose_from_angles
+    from dpom_warp.shapes import SHAPE_PLANE, SHAPE_SOLID, SHAPES, FacingPlane, ObjectBox, Solid
+
+    assert (FacingPlane.code, Solid.code) == (SHAPE_PLANE, SHAPE_SOLID) == (K.SHAPE_PLANE, K.SHAPE_SOLID)
+    assert SHAPES == {"plane": FacingPlane, "solid": Solid}
+    assert typing.get_args(ObjectBox.model_fields["shape"].annotation) == tuple(SHAPES)  # object.shape's values
+    fields = list(K.GeometryArrays.vars)
+    assert fields[fields.index("shape") + 1:] == list(K.SHAPE_FIELDS)  # the shape's fields, after its code
+    solid = ObjectBox(0.4, 1.8).build("ground")
+    assert isinstance(solid, Solid) and list(solid.kernel_fields()) == list(K.SHAPE_FIELDS)
+    assert (solid.bottom, solid.shoulder, solid.top, solid.hip) == pytest.approx((0.0, 1.44, 1.8, 0.0))
+    plane = ObjectBox(0.4, 1.8, depth=0.3, shape="plane").build("voxel")
+    assert isinstance(plane, FacingPlane) and plane.kernel_fields() == {}
+    assert plane.half_extent() == (0.2, 0.15) and (plane.bottom, plane.top) == (-0.9, 0.9)
+    corners = plane.corners(np.array([[1.0, 2.0, 3.0]]))[0]
+    np.testing.assert_allclose(corners.min(0), [0.8, 1.85, 2.1])
+    np.testing.assert_allclose(corners.max(0), [1.2, 2.15, 3.9])
+    facing = SimpleNamespace(normal=np.array([[0.0, -1.0, 0.0]]), plane=np.array([-3.0]))
+    mu, var = plane.depth(facing, 0, np.array([[0.1, 1.0, 0.0], [0.0, 1.0, 0.2], [0.0, -1.0, 0.0]]))
+    np.testing.assert_allclose(mu, [3.0, 3.0, -1.0])
+    assert not var.any()
+    cam = Camera(32, 24, 20.0, 20.0, 15.5, 11.5, pose_from_angles(2.0, 30.0))
+    for name, cls in SHAPES.items():
+        geom = build_geometry(cam, Grid(x=(-1, 1, 0.5), y=(2, 4, 0.5)), ObjectBox(0.4, 1.8, shape=name))
+        assert type(geom.shape) is cls and geom.shape == ObjectBox(0.4, 1.8, shape=name).build("ground")
+        seen = geom.rect_area > 0
+        assert (geom.area[seen] < geom.rect_area[seen]).any() == cls.counted_area  # a solid misses corners

@@ -9,7 +9,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from ..geometry import Camera, Grid, ObjectBox
+from ..geometry import Camera, Grid
+from ..shapes import ObjectBox
 from ..ground import GroundOptions
 from ..model import ModelParams
 from ..scene_spec import SceneSpec

@@ -10,7 +10,8 @@ from pydantic import Field
 from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
 from ..drift import DriftOptions
 from ..structure import StructureOptions
-from ..geometry import Grid, ObjectBox
+from ..geometry import Grid
+from ..shapes import ObjectBox
 from ..model import AutoBackground
 from ..resolution import REDUCERS
 from ..scene_spec import SceneSpec

@@ -19,7 +19,7 @@ class StaticsMixin:
     @staticmethod
     def _geometry_arrays(geometry: Geometry, first: K.GeometryArrays | None = None) -> K.GeometryArrays:
         """The kernels' view of `geometry`; with `first`, the view of a geometry that differs
-        from it only in the solid (Geometry.shorter), sharing its arrays."""
+        from it only in the shape (Geometry.shorter), sharing its arrays."""
         g = K.GeometryArrays()
         if first is None:
             g.rays = wp.array(geometry.rays, dtype=wp.vec3d)
@@ -31,10 +31,10 @@ class StaticsMixin:
             g.rays, g.rect, g.normal, g.plane, g.location = (first.rays, first.rect, first.normal, first.plane,
                                                              first.location)
         g.centre = wp.vec3d(*(float(c) for c in geometry.centre))
-        solid = [float(x) for x in geometry.solid]
-        g.solid = int(solid[0] > 0)
-        g.body_radius, g.head_radius, g.bottom, g.shoulder, g.top, g.height_spread = solid[1:7]
-        g.leg_radius, g.hip, g.depth_radius = solid[7:10]
+        g.shape = geometry.shape.code  # its Warp function (kernels.pixel_model.object_depth)
+        fields = geometry.shape.kernel_fields()
+        for name in K.SHAPE_FIELDS:  # (0 where the shape has none)
+            setattr(g, name, fields.get(name, 0.0))
         return g
 
     def _behind_band(self) -> tuple[float, float]:

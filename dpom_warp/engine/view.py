@@ -80,7 +80,7 @@ class CameraView(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin):
         table_bytes = memory_estimate(0, 0, 0, table_pairs=most, table_pixels=self.n_pixels)
         extra = self.extra_bytes + shared_bytes
         if table is None:
-            table = geometry.solid[0] > 0 and table_bytes <= TABLE_BUDGET and (
+            table = geometry.shape.costly_depth and table_bytes <= TABLE_BUDGET and (
                 memory_gb is None or memory_estimate(P, L, max(1024, int(entries_per_pixel * P)))
                 + extra + table_bytes <= memory_gb * 2**30)
         self.use_table = bool(table)
