@@ -41,11 +41,10 @@ def cell_values(detector, result, k: int) -> dict:
 
     engine, p = detector.engine, detector.engine.params
     rho, e = float(result.rho.ravel()[k]), float(engine.share.numpy()[k])
-    counts = tuple(int(getattr(engine, n).numpy()[k]) for n in ("top_support", "top_against", "top_hidden",
-                                                                 "top_missing", "top_seen"))
+    counts = tuple(int(c.numpy()[k]) for c in engine.prior.top_counts)  # support, against, hidden, missing, seen
     area = float(engine.area.numpy()[k % len(engine.area)])
     return dict(rho=rho, e=e, before=rho / (1.0 + np.exp(-(p.alpha * e + p.beta))), counts=counts,
-                out_of_view=bool(band_out_of_view(counts[4], area, p)), behind=int(engine.n_behind.numpy()[k]),
+                out_of_view=bool(band_out_of_view(counts[4], area, p)), behind=int(engine.prior.n_behind.numpy()[k]),
                 rho_star=float(result.rho_star.ravel()[k]))
 
 

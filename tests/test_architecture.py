@@ -105,3 +105,17 @@ def test_files_and_functions_stay_readable():
                 long_functions.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}")
     assert not long_files, long_files
     assert not long_functions, long_functions
+
+
+def test_the_generic_engine_reads_no_people_only_parameter():
+    """The people-only tests (the behind cost, the top band, the joint test's lists) are a prior
+    the engine is given (engine/people.py): no other file of the engine reads one of their
+    parameters (model.behind_*, model.top_*) or builds the joint test's lists."""
+    import re
+
+    people = re.compile(r"\b(?:p|params|self\.params)\.(?:behind_|top_)\w+|JointLists\.of_batch")
+    found = [f"{path.name}:{n}: {line.strip()}" for path in sorted((ROOT / "dpom_warp" / "engine").glob("*.py"))
+             if path.name != "people.py"
+             for n, line in enumerate(path.read_text().splitlines(), 1) if people.search(line)]
+    assert not found, found
+    assert people.search((ROOT / "dpom_warp" / "engine" / "people.py").read_text())  # the check can fail

@@ -232,7 +232,7 @@ def test_a_person_at_a_ceiling_cameras_edge_is_found_with_a_background():
         res = engine.infer(depth)
         dets = detect(res.rho_star.reshape(grid.shape), geom.locations, geom.rect, 0.5, 0.4)
         own = int(np.argmin(np.hypot(*(geom.locations[:, :2] - person).T)))
-        return res, own, engine.top_seen.numpy()[own], np.array([[d.x, d.y] for d in dets]).reshape(-1, 2)
+        return res, own, engine.prior.top_counts[4].numpy()[own], np.array([[d.x, d.y] for d in dets]).reshape(-1, 2)
 
     res, own, seen, dets = found(1.0)
     assert 0 <= seen < 3, seen  # the band out of view (fewer than top_min_pixels)
@@ -331,8 +331,8 @@ def test_a_far_table_seen_from_a_ceiling_camera_is_not_a_person_floor_only(tmp_p
                                          (cfg.camera.height, cfg.camera.width)))
         engine = detector.engine
         where = np.array([(d.x, d.y) for d in res.detections]).reshape(-1, 2)
-        missing = engine.top_missing.numpy()[[d.k for d in res.detections]]
-        seen = engine.top_seen.numpy()[[d.k for d in res.detections]]
+        missing = engine.prior.top_counts[3].numpy()[[d.k for d in res.detections]]
+        seen = engine.prior.top_counts[4].numpy()[[d.k for d in res.detections]]
         return where, missing, seen, cfg
 
     where, missing, seen, _ = found(["model.top_missing=0"])

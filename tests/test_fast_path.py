@@ -459,3 +459,30 @@ def test_the_engine_takes_a_list_of_cameras_and_keeps_each_cameras_launches_its_
     with pytest.raises(ValueError, match=r"^cameras: expected one camera's geometry, found 2") as err:
         Engine([geom, geom], params, "cpu")
     assert "\n" not in str(err.value)
+
+
+def test_the_people_tests_are_a_prior_the_engine_is_given():
+    """An engine given people.Prior (nothing added to the mean field) gives bit for bit what the
+    default people.PeoplePrior gives with the people-only tests off (behind_cost 0, top_support
+    0, no shorter bands, no joint lists); with them on, the default prior counts readings behind,
+    where the plain prior counts none, and they push rho down (the tests are exercised)."""
+    from dpom_warp.engine import PeoplePrior, Prior
+
+    geom, params, depth, bg_frames = random_scene(3, shape="solid")
+    people = params.replace(sparse_epsilon=1e-3, behind_cost=3.0, behind_low=0.3, behind_step=1, top_support=0.3,
+                            top_heights=(0.8 * geom.height,))
+    off = people.replace(behind_cost=0.0, top_support=0.0, top_heights=())
+    got = {}
+    for name, p, prior in (("plain", people, Prior(people)), ("off", off, None), ("on", people, None),
+                           ("given", people, PeoplePrior(people))):
+        engine = Engine(geom, p, "cpu", prior=prior)
+        engine.set_background_frames(bg_frames)
+        engine.joint_threshold = 0.5 if name != "off" else None
+        got[name] = (engine.infer(depth), engine.prior.n_behind.numpy().copy())
+    plain, off_, on, given = (got[k][0] for k in ("plain", "off", "on", "given"))
+    np.testing.assert_array_equal(plain.rho_star, off_.rho_star)
+    np.testing.assert_array_equal(plain.rho, off_.rho)
+    assert plain.iterations == off_.iterations and plain.joint is None and off_.joint is None
+    assert not got["plain"][1].any() and got["on"][1].max() > 0
+    assert (on.rho < plain.rho - 1e-6).any() and on.joint is not None  # readings behind push rho down
+    np.testing.assert_array_equal(on.rho_star, given.rho_star)  # the default is the params' PeoplePrior

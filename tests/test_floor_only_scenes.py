@@ -37,11 +37,11 @@ def test_top_band_matches_reference(device, seed, sigmas, by_row):
     engine.top_band_by_row = by_row
     got = engine.infer(depth)
     want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
-    np.testing.assert_array_equal(engine.top_support.numpy(), want["top_support"])
-    np.testing.assert_array_equal(engine.top_against.numpy(), want["top_against"])
-    np.testing.assert_array_equal(engine.top_hidden.numpy(), want["top_hidden"])
-    np.testing.assert_array_equal(engine.top_missing.numpy(), want["top_missing"])
-    np.testing.assert_array_equal(engine.top_seen.numpy(), want["top_seen"])
+    np.testing.assert_array_equal(engine.prior.top_counts[0].numpy(), want["top_support"])
+    np.testing.assert_array_equal(engine.prior.top_counts[1].numpy(), want["top_against"])
+    np.testing.assert_array_equal(engine.prior.top_counts[2].numpy(), want["top_hidden"])
+    np.testing.assert_array_equal(engine.prior.top_counts[3].numpy(), want["top_missing"])
+    np.testing.assert_array_equal(engine.prior.top_counts[4].numpy(), want["top_seen"])
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     assert (want["top_missing"] > 0).any() and (want["top_seen"] == -1).any()  # every count exercised
     judged = want["top_support"] + want["top_against"] + want["top_hidden"]
@@ -243,7 +243,7 @@ def test_missing_band_readings_count_against(device, seed):
         res = engine.infer(depth)
         want = ref.mean_field(depth, geom, ref.floor_background(geom, p, depth), p)
         np.testing.assert_allclose(res.rho_star, want["rho_star"], rtol=0, atol=1e-6)
-        np.testing.assert_array_equal(engine.top_missing.numpy(), want["top_missing"])
+        np.testing.assert_array_equal(engine.prior.top_counts[3].numpy(), want["top_missing"])
         got[weight] = want
     off, on = got[0.0], got[1.0]
     for key in ("top_support", "top_against", "top_hidden", "top_missing", "top_seen"):
@@ -292,5 +292,5 @@ def test_a_sensors_dead_region_is_not_missing(device, seed):
         set_background(engine)
         got = engine.infer(depth)
         want = ref.mean_field(depth, geom, bg, params)
-        np.testing.assert_array_equal(engine.top_missing.numpy(), want["top_missing"])
+        np.testing.assert_array_equal(engine.prior.top_counts[3].numpy(), want["top_missing"])
         np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)

@@ -374,7 +374,7 @@ def test_neighbour_lists_are_the_locations_within_the_radius():
 
 @pytest.mark.parametrize("seed", range(2))
 def test_behind_table_serves_every_frame_and_counts_in_memory(device, seed):
-    """The core's lattice points are found once per engine (Engine._fill_behind_table): frames
+    """The core's lattice points are found once per engine (people.PeoplePrior.add_camera): frames
     with other readings, one after another, each get the reference's counts, and the table
     is in memory_bytes (BEHIND_POINT_BYTES a point, beside an engine without the cost)."""
     from dpom_warp.engine import BEHIND_POINT_BYTES
@@ -389,11 +389,11 @@ def test_behind_table_serves_every_frame_and_counts_in_memory(device, seed):
         engine.infer(frame)
         listed = engine.per_location.numpy() > 0
         want = ref.behind_count(frame, geom, params, everyone)
-        np.testing.assert_array_equal(engine.n_behind.numpy()[listed], want[listed])
+        np.testing.assert_array_equal(engine.prior.n_behind.numpy()[listed], want[listed])
         assert want[listed].max() > 0, "no reading behind any listed location: the count is not exercised"
-    assert engine.views[0].behind_table == len(engine.views[0].behind_mu) > 0
+    assert engine.prior.cameras[0].points == len(engine.prior.cameras[0].mu) > 0
     plain = Engine(geom, params.replace(behind_cost=0.0), device)
-    assert engine.memory_bytes() - plain.memory_bytes() == BEHIND_POINT_BYTES * engine.views[0].behind_table
+    assert engine.memory_bytes() - plain.memory_bytes() == BEHIND_POINT_BYTES * engine.prior.cameras[0].points
 
 
 def test_behind_count_at_the_mask_tests_edge(device):
@@ -404,7 +404,7 @@ def test_behind_count_at_the_mask_tests_edge(device):
     params = params.replace(sparse_epsilon=0.0, behind_cost=3.0, behind_low=0.3, behind_step=1)
     engine = Engine(geom, params, device)
     engine.set_background_frames(bg_frames)
-    pixel, mu, half = (a.numpy() for a in (engine.views[0].behind_pixel, engine.views[0].behind_mu, engine.views[0].behind_half))
+    pixel, mu, half = (a.numpy() for a in (engine.prior.cameras[0].pixel, engine.prior.cameras[0].mu, engine.prior.cameras[0].half))
     rng = np.random.default_rng(1)
     frame = depth.copy().reshape(-1)
     pick = rng.permutation(len(pixel))
@@ -414,7 +414,7 @@ def test_behind_count_at_the_mask_tests_edge(device):
     engine.infer(frame)
     listed = engine.per_location.numpy() > 0
     want = ref.behind_count(frame, geom, params, np.ones(len(geom.rect), bool))
-    np.testing.assert_array_equal(engine.n_behind.numpy()[listed], want[listed])
+    np.testing.assert_array_equal(engine.prior.n_behind.numpy()[listed], want[listed])
     near = np.abs(np.abs(frame.reshape(-1)[pixel] - mu) / half - 1) < 1e-5
     assert near.sum() > 100 and want[listed].max() > 0  # many readings at the edge, some behind
 
@@ -439,7 +439,7 @@ def test_behind_cost_matches_reference(device, seed, shape, path):
     valid, L = ref.pixel_lists(depth, geom, bg, params)[:2]
     listed = np.bincount(L[valid], minlength=len(geom.rect)) > 0  # in a list before the bound
     counts = ref.behind_count(depth, geom, params, listed)
-    np.testing.assert_array_equal(engine.n_behind.numpy()[listed], counts[listed])
+    np.testing.assert_array_equal(engine.prior.n_behind.numpy()[listed], counts[listed])
     assert counts.max() > 0, "no reading behind any location: the count is not exercised"
     assert got.iterations == want["iterations"]
     np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
@@ -474,8 +474,9 @@ def test_shorter_top_bands_match_reference(device, seed, shape, path):
     for by_row in (False, True):  # a thread a location (the CPU's) or a rectangle's row (a GPU's)
         engine.top_band_by_row = by_row
         got = engine.infer(depth)
-        for key in ("top_support", "top_against", "top_hidden", "top_missing", "top_seen"):
-            np.testing.assert_array_equal(getattr(engine, key).numpy(), want[key], err_msg=key)
+        for key, counts in zip(("top_support", "top_against", "top_hidden", "top_missing", "top_seen"),
+                               engine.prior.top_counts):
+            np.testing.assert_array_equal(counts.numpy(), want[key], err_msg=key)
         np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     plain = ref.mean_field(depth, geom, bg, params.replace(top_heights=()))
     kept_shorter = np.any([want[k] != plain[k] for k in ("top_support", "top_against", "top_hidden")], axis=0)
@@ -505,7 +506,7 @@ def test_unseen_band_share_matches_reference(device, seed, path):
     engine.set_background_frames(bg_frames)
     want = ref.mean_field(depth, geom, bg, params)
     got = engine.infer(depth)
-    np.testing.assert_array_equal(engine.top_seen.numpy(), want["top_seen"])
+    np.testing.assert_array_equal(engine.prior.top_counts[4].numpy(), want["top_seen"])
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     factor = ref.sigmoid(params.top_slope * (want["evidence_share"] - share))
     np.testing.assert_allclose(want["rho_star"], np.where(unseen, off["rho_star"] * factor, off["rho_star"]),
@@ -540,8 +541,9 @@ def test_band_partly_out_of_view_matches_reference(device, seed, path):
     engine.set_background_frames(bg_frames)
     want = ref.mean_field(depth, geom, bg, params)
     got = engine.infer(depth)
-    for key in ("top_support", "top_against", "top_hidden", "top_missing", "top_seen"):
-        np.testing.assert_array_equal(getattr(engine, key).numpy(), want[key], err_msg=key)
+    for key, counts in zip(("top_support", "top_against", "top_hidden", "top_missing", "top_seen"),
+                           engine.prior.top_counts):
+        np.testing.assert_array_equal(counts.numpy(), want[key], err_msg=key)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     partly = ref.band_out_of_view(want["top_seen"], geom.area, params) & (want["top_seen"] >= params.top_min_pixels)
     assert partly.any(), "no band partly out of view"

@@ -29,6 +29,7 @@ from .base import (
 )
 from .iterations import IterationsMixin
 from .launch import Launcher
+from .people import PeoplePrior, Prior
 from .sparse import SparseMixin
 from .threshold import ThresholdMixin
 from .view import CameraView
@@ -72,6 +73,9 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
             this resolution): its state counts in the memory budget and memory_bytes.
         drift: each frame's depth scale estimated against the background and divided out
             before inference (drift.py; None: frames as given).
+        prior: what the mean field adds to each location's pixels (people.Prior: nothing;
+            people.PeoplePrior, the default: the people-only tests `params` describes, the
+            behind cost, the top band and the joint test's lists).
     """
 
     def __init__(self, geometry: Geometry | Sequence[Geometry], params: ModelParams, device: str = "cpu",
@@ -79,7 +83,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
                  memory_gb: float | None = None, tile: int = 8, batch: int = 1,
                  graph: bool | None = None, resolution: Resolution | None = None,
                  background_auto: AutoBackground | None = None, table: bool | None = None,
-                 drift: DriftOptions | None = None):
+                 drift: DriftOptions | None = None, prior: Prior | None = None):
         init_warp()
         geometries = [geometry] if isinstance(geometry, Geometry) else list(geometry)
         if len(geometries) != 1:
@@ -90,8 +94,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
         if batch < 1 or tile < 1:
             raise ValueError(f"batch and tile: expected integers >= 1, found {batch} and {tile}")
         self.params, self.device, self.drift = params, device, drift
-        # results carry the joint test's lists of the locations whose rho* reaches this (None: none)
-        self.joint_threshold: float | None = None
+        self.prior = PeoplePrior(params) if prior is None else prior
         self.resolution = resolution or Resolution()
         self.n_locations = len(geometries[0].rect)
         self.batch = batch
@@ -112,9 +115,10 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
                 g, params, self.pm, device, batch, self.grown, self.resolution, entries_per_pixel, max_entries,
                 memory_gb, tile, table, state(g.rays.shape[0] * g.rays.shape[1]), drift,
                 self.extra_bytes + sum(v.memory_bytes() for v in self.views), self.one_pass_lists,
-                self.reduce_on_device))
+                self.reduce_on_device, self.prior))
         self.graph = self._graph_on  # every camera's launches follow the policy
         self._allocate_arrays(geometries, params, batch * self.n_locations, start, nbrs)
+        self.prior.allocate(self, batch * self.n_locations)
 
     def _device_policy(self, device: str, graph: bool | None) -> None:
         """What differs between the CPU and a GPU: the captured graph, the passes' scratch, how
@@ -150,25 +154,14 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
             self.evidence = wp.zeros(L, dtype=wp.float64)
             self.visible = wp.zeros(L, dtype=wp.float64)
             self.share = wp.zeros(L, dtype=wp.float64)
-            self.top_support = wp.zeros(L, dtype=wp.int32)
-            self.top_against = wp.zeros(L, dtype=wp.int32)
-            self.top_hidden = wp.zeros(L, dtype=wp.int32)
-            self.top_missing = wp.zeros(L, dtype=wp.int32)  # no reading where the object would be read
-            self.top_seen = wp.zeros(L, dtype=wp.int32)  # the band's pixels in the image (-1: not counted)
-            # a shorter solid's band counts (params.top_heights)
-            self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(5 if self.views[0].shorter_top else 0)]
-            self.all_support = wp.zeros(L, dtype=wp.int32)  # the same counts, whole silhouette
-            self.all_against = wp.zeros(L, dtype=wp.int32)
-            self.all_hidden = wp.zeros(L, dtype=wp.int32)
-            self.all_missing = wp.zeros(L, dtype=wp.int32)
-            self.all_seen = wp.zeros(L, dtype=wp.int32)
+            # the whole silhouette's support, against, hidden, missing and seen pixels (share_of unhidden)
+            self.all_counts = tuple(wp.zeros(L, dtype=wp.int32) for _ in range(5))
             self.rho_star = wp.zeros(L, dtype=wp.float64)
             self.max_change = wp.zeros((batch, max(1, params.max_iterations)), dtype=wp.float64)
             self.done = wp.zeros(batch, dtype=wp.int32)
             self.iterations = wp.zeros(batch, dtype=wp.int32)
             self.live = wp.ones(L, dtype=wp.int32)
             self.streak = wp.zeros(L, dtype=wp.int32)  # per-location damping runs (update_rho)
-            self.n_behind = wp.zeros(L, dtype=wp.int32)  # silhouette pixels read behind (behind_count)
             self.live_index = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.gather_live
             self.kept_index = wp.zeros(L, dtype=wp.int32)
             self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.prune_lists
@@ -177,8 +170,6 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
             self.live_count = wp.zeros(3, dtype=wp.int32)  # live locations (gather_live)
             self.live_changed = wp.zeros(2, dtype=wp.int32)  # live set changed, a location revived
             self.no_index = wp.zeros(0, dtype=wp.int32)
-            self.candidate = wp.zeros(L, dtype=wp.int32)  # the joint test's locations (joint_lists)
-            self.candidate_behind = wp.zeros(L, dtype=wp.int32)  # and their readings behind
             self.not_done = wp.zeros(batch, dtype=wp.int32)
             self.neighbour_start = wp.array(start, dtype=wp.int32)
             self.neighbours = wp.array(nbrs, dtype=wp.int32)
@@ -196,6 +187,16 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
         self._graph_on = bool(on)
         for launcher in self.launchers():
             launcher.reset(direct=not self._graph_on)
+
+    @property
+    def joint_threshold(self) -> float | None:
+        """Results carry the joint test's lists of the locations whose rho* reaches this (None:
+        none; the prior's, people.PeoplePrior.joint)."""
+        return self.prior.joint_threshold
+
+    @joint_threshold.setter
+    def joint_threshold(self, value: float | None):
+        self.prior.joint_threshold = value
 
     def launchers(self) -> list[Launcher]:
         """The engine's launcher (kernels over the locations alone), then each camera's."""
@@ -254,7 +255,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
         iterations, max_change, done = self.iterations.numpy(), self.max_change.numpy(), self.done.numpy()
         self._last_rho = rho[n - 1].copy()
         tj = time.perf_counter()
-        joint = [None] * n if self.joint_threshold is None else self.joint_lists(rho_star[:n])
+        joint = self.prior.joint(self, rho_star[:n])
         t3 = time.perf_counter()
         # (joint_lists_s: the part of threshold_s that copies the joint test's lists out)
         timings = {"lists_s": t1 - t0, "iterations_s": t2 - t1, "threshold_s": t3 - t2, "joint_lists_s": t3 - tj,

@@ -47,7 +47,7 @@ class IterationsMixin:
         launch(K.update_rho, dim, [logit_prior, damping, it, self.evidence, self.rho, self.n_locations,
                                    self.done, self.max_change, self.iterations, int(full), p.sparse_epsilon,
                                    self.live, index, self.live_changed, self.streak, p.damping_streak,
-                                   p.damping_streak_max, p.behind_cost, self.n_behind, p.sparse_drop])
+                                   p.damping_streak_max, self.prior.cost, self.prior.n_behind, p.sparse_drop])
 
     def _check(self, it: int):
         self._launch(K.check_converged, self.batch, [it, self.params.tolerance, self.max_change, self.done])
@@ -114,6 +114,6 @@ class IterationsMixin:
                 self.n_kept = self._gather(self.kept_index)
                 for v in self.views:
                     v.n_listed = int(v.n_listed_out.numpy()[0])
-        if p.behind_cost > 0 and not bound:  # (with the bound, prune counted them first)
-            self._count_behind()
+        if not bound:  # the prior's fixed term (with the bound, prune counted it first)
+            self.prior.count(self)
         return logit_prior, bound

@@ -1,6 +1,5 @@
-"""The sparse iterations' bookkeeping over the engine's cameras: the pruning bound, each
-location's readings behind, and the live locations gathered with every camera's lists
-compacted to them."""
+"""The sparse iterations' bookkeeping over the engine's cameras: the pruning bound and the live
+locations gathered with every camera's lists compacted to them."""
 
 from __future__ import annotations
 
@@ -20,8 +19,7 @@ class SparseMixin:
         marked idle."""
         p = self.params
         if p.bound_rounds > 0:
-            if p.behind_cost > 0:  # a fixed part of each location's evidence: the bound's too
-                self._count_behind()
+            self.prior.count(self)  # a fixed part of each location's evidence: the bound's too
             self.upper.fill_(1.0)
             self.evidence.zero_()
             for _ in range(p.bound_rounds):
@@ -30,7 +28,7 @@ class SparseMixin:
                              [v.lists, v.delta_bg, self.rho, self.upper, v.behind, self.evidence, v.n_pixels,
                               self.done, self.local_scratch, p.sparse_epsilon])
                 self._launch(K.update_bound, len(self.upper),
-                             [logit_prior, p.behind_cost, self.n_behind, self.evidence, self.upper,
+                             [logit_prior, self.prior.cost, self.prior.n_behind, self.evidence, self.upper,
                               p.sparse_epsilon, self.rho])
             self._launch(K.prune, len(self.upper), [p.sparse_epsilon, self.upper, self.rho, self.live])
         self.per_location.zero_()
@@ -39,19 +37,6 @@ class SparseMixin:
             v.launch(K.prune_lists, self.batch * v.n_pixels,
                      [v.lists, self.live, self.per_location, v.listed, v.n_listed_out])
         self._launch(K.mark_idle, len(self.live), [self.per_location, self.live])
-
-    def _count_behind(self):
-        """n_behind: what the lists leave out, the readings behind each listed location's
-        object (kernels.behind_count), after counting each location's entries in the lists
-        (before the pruning, or after it: the pruned ones are in no list)."""
-        self.per_location.zero_()
-        for v in self.views:
-            v.launch(K.count_entries, self.batch * v.n_pixels, [v.lists, self.per_location])
-        p = self.params
-        for v in self.views:
-            v.launch(K.behind_count, len(self.live), [v.depth, self.pm, v.behind_first, v.behind_pixel, v.behind_mu,
-                                                      v.behind_var, v.behind_half, p.behind_step, self.per_location,
-                                                      self.n_behind])
 
     def _gather(self, index, compact: str | None = None) -> int:
         """The live locations of the frames not done into `index` (kernels.sparse.gather_live);

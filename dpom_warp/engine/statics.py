@@ -1,5 +1,5 @@
 """What an engine builds once for each of its cameras over the grid: the geometry's arrays, the static mask
-index (image tiles or the pixel table), the behind-cost lattice and the list buffers."""
+index (image tiles or the pixel table) and the list buffers."""
 
 from __future__ import annotations
 
@@ -8,9 +8,6 @@ import warp as wp
 
 from .. import kernels as K
 from ..geometry import Geometry
-from ..model import (
-    BAND_ALL,
-)
 
 
 class StaticsMixin:
@@ -36,49 +33,6 @@ class StaticsMixin:
         for name in K.SHAPE_FIELDS:  # (0 where the shape has none)
             setattr(g, name, fields.get(name, 0.0))
         return g
-
-    def _behind_band(self) -> tuple[float, float]:
-        """The heights between which model.behind_cost counts readings behind (ground grids)."""
-        p, h = self.params, self.geometry.height
-        return (p.behind_low * h, p.behind_high * h) if h > 0 else (-BAND_ALL, BAND_ALL)
-
-    def _behind_statics(self) -> list:
-        """behind_points' inputs that describe the core: geometry, band, side share, lattice."""
-        p = self.params
-        low, high = self._behind_band()
-        return [self.geo, self.pm, float(self.geometry.centre[2]), p.behind_side, low, high, p.behind_step,
-                self.forward]
-
-    def _count_behind_points(self) -> np.ndarray:
-        """How many lattice points of each location's silhouette core model.behind_cost counts
-        (kernels.mean_field.behind_points, fill 0); none without behind_cost."""
-        L = self.n_locations
-        if self.params.behind_cost <= 0 or L == 0:
-            return np.zeros(0, np.int64)
-        with wp.ScopedDevice(self.device):
-            counts = wp.zeros(L, dtype=wp.int32)
-            none_i, none_f = wp.zeros(0, dtype=wp.int32), wp.zeros(0, dtype=wp.float64)
-            wp.launch(K.behind_points, dim=L, inputs=self._behind_statics() + [0, none_i, counts, none_i, none_f,
-                                                                               none_f, none_f])
-        return counts.numpy().astype(np.int64)
-
-    def _fill_behind_table(self, counts: np.ndarray):
-        """The table of those points (`counts` from _count_behind_points): each one's pixel,
-        the object's depth, variance and the mask test's half-width there (behind_points, fill
-        1). Static, so built once here and only classified against each frame's readings
-        (behind_count)."""
-        with wp.ScopedDevice(self.device):
-            first = np.zeros(self.n_locations + 1, np.int32)  # all 0: no points (no behind_cost)
-            first[1:len(counts) + 1] = np.cumsum(counts)
-            self.behind_first = wp.array(first, dtype=wp.int32)
-            n = int(first[-1])
-            self.behind_pixel = wp.zeros(n, dtype=wp.int32)
-            self.behind_mu, self.behind_var, self.behind_half = (wp.zeros(n, dtype=wp.float64) for _ in range(3))
-            if n:
-                none_i = wp.zeros(0, dtype=wp.int32)
-                wp.launch(K.behind_points, dim=len(counts),
-                          inputs=self._behind_statics() + [1, self.behind_first, none_i, self.behind_pixel,
-                                                           self.behind_mu, self.behind_var, self.behind_half])
 
     def _tile_index(self, pair_loc, pair_tile, tiles_x) -> K.TileIndex:
         """Depth bounds of every (location, tile) pair, sorted by tile then lo (kernels.masks)."""

@@ -1,6 +1,6 @@
 """One camera of an engine: what is per pixel (the frames, the background, the per-pixel lists,
-the static mask index, the behind-cost lattice) over the grid's locations, which the engine
-holds once (engine.core). An engine takes a list of cameras over one grid; a kernel that takes
+the static mask index) over the grid's locations, which the engine holds once (engine.core); the
+prior's part for the camera (people.Prior.add_camera) beside it. An engine takes a list of cameras over one grid; a kernel that takes
 a camera's arrays is launched through that camera's Launcher."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from ..geometry import Geometry
 from ..model import ModelParams
 from ..resolution import Resolution
 from .backgrounds import BackgroundMixin
-from .base import BEHIND_POINT_BYTES, ENTRY_BYTES, TABLE_BUDGET, MemoryBudgetError, memory_estimate, tile_pairs
+from .base import ENTRY_BYTES, TABLE_BUDGET, MemoryBudgetError, memory_estimate, tile_pairs
 from .drift import DriftMixin
 from .launch import Launcher
 from .lists import ListsMixin
@@ -31,6 +31,7 @@ class CameraView(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin):
         params, pm: the model's parameters and the kernels' pixel model (the engine's).
         device, batch: the engine's Warp device and frames per launch.
         grown: the engine's record of list growth, shared by its cameras.
+        prior: the engine's prior (people.Prior), given the camera once it is built.
         shared_bytes: the bytes the engine holds besides this camera (in the memory budget).
         The rest as Engine's arguments of the same names.
     """
@@ -38,7 +39,8 @@ class CameraView(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin):
     def __init__(self, geometry: Geometry, params: ModelParams, pm: K.PixelModel, device: str, batch: int,
                  grown: list[int], resolution: Resolution, entries_per_pixel: float, max_entries: int | None,
                  memory_gb: float | None, tile: int, table: bool | None, state_bytes: int,
-                 drift: DriftOptions | None, shared_bytes: int, one_pass_lists: bool, reduce_on_device: bool):
+                 drift: DriftOptions | None, shared_bytes: int, one_pass_lists: bool, reduce_on_device: bool,
+                 prior):
         self.geometry, self.params, self.pm, self.device, self.batch = geometry, params, pm, device, batch
         self.grown, self.resolution, self.drift = grown, resolution, drift
         self.one_pass_lists, self.reduce_on_device = one_pass_lists, reduce_on_device
@@ -58,13 +60,11 @@ class CameraView(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin):
         self.extra_bytes = state_bytes
         with wp.ScopedDevice(device):
             self.geo = self._geometry_arrays(geometry)
-        behind_points = self._count_behind_points()  # counted first: the table is in the budget
-        self.behind_table = int(behind_points.sum())
-        self.extra_bytes += BEHIND_POINT_BYTES * self.behind_table + 4 * (self.n_locations + 1)  # and its starts
+        self.extra_bytes += prior.camera_bytes(self)  # counted first: it is in the budget
         pair_loc, pair_tile = self._index_and_capacity(table, memory_gb, entries_per_pixel, max_entries, P, L,
                                                        tiles_x, shared_bytes)
         self._allocate_arrays(P)
-        self._fill_behind_table(behind_points)
+        prior.add_camera(self)
         self.tiles = self._tile_index(pair_loc, pair_tile, tiles_x)
         self.table = self._pixel_table(self.use_table)
         self._allocate_lists(int(entries_per_pixel * P))
@@ -104,7 +104,7 @@ class CameraView(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin):
     def _allocate_arrays(self, P: int) -> None:
         """Every per-pixel array of a batch and the camera's per-location geometry, allocated
         once (the lists' entries apart: _allocate_lists)."""
-        geometry, params = self.geometry, self.params
+        geometry = self.geometry
         with wp.ScopedDevice(self.device):
             self.area = wp.array(geometry.area.astype(np.float64), dtype=wp.float64)
             self.bounds = wp.array(geometry.bounds, dtype=wp.float64)
@@ -119,9 +119,6 @@ class CameraView(StaticsMixin, BackgroundMixin, DriftMixin, ListsMixin):
             self.bg_logs = wp.zeros(P, dtype=wp.vec4d)  # its logarithms (kernels.background_delta)
             self.bg_fresh = True  # bg changed since bg_logs were written
             self.floor_pixels = wp.ones(self.n_pixels, dtype=wp.int32)  # floor-only model here
-            # a shorter solid's band (params.top_heights): its GeometryArrays
-            self.shorter_top = [(h, self._geometry_arrays(geometry.shorter(h), self.geo)) for h in params.top_heights
-                                if geometry.height > 0]
             self.top_rows = int((geometry.rect[:, 3] - geometry.rect[:, 1]).max(initial=-1)) + 1
             self.compact_lists.counts = wp.zeros(P, dtype=wp.int32)  # the lists compacted (kernels.sparse)
             self.compact_lists.offsets = wp.zeros(P, dtype=wp.int32)
