@@ -551,3 +551,66 @@ def test_entry_cells_of_a_run_by_hand():
     inside = (xs[None, :] > 0.8) & (xs[None, :] < 1.4) & (ys[:, None] > 3.1) & (ys[:, None] < 3.5)
     assert inside.sum() == 3 * 2 and not want[inside].any()  # none an entry without the region
     assert np.array_equal(ok, want | inside)
+
+
+@pytest.mark.parametrize("appear_cost, max_gap, want", [
+    (5.9, 15, [(0, 12)]),  # 2 x 5.9 = 11.8 > 3 log 49 = 11.675: bridged
+    (5.8, 15, [(0, 4), (8, 12)]),  # 11.6 < 11.675: an end and a start are cheaper
+    (5.9, 2, [(0, 4), (8, 12)]),  # three hidden frames, at most two bridged: cut whatever the cost
+])
+def test_bridge_or_split_worked_out_by_hand(appear_cost, max_gap, want):
+    """Issue 63: a case whose optimum is worked out by hand, checked against the flow's tracks
+    (not its cost function). One person walks 0.1 m a frame through the middle of the room
+    (no entry cell), seen at rho* 0.98 in frames 0-4 and 8-12 of 13, hidden in 5-7. Either the
+    three hidden frames are bridged, each costing -log(min_rho / (1 - min_rho)) = log 49 at
+    min_rho 0.02 (3 log 49 = 11.675), or the track ends at frame 4 and another starts at frame
+    8, each inside the room: 2 x appear_cost (the first start and the last end are free, at
+    the window's edges; keeping either part beats dropping it, 5 x log 49 > appear_cost). The
+    move across the gap, 0.4 m in 4 frames, is within reach (1.5 m/s x 0.4 s + 0.2 m)."""
+    a = walk(1.0, 1.5, 0.1, 0.0, 13)
+    seen = {t: p for t, p in a.items() if not 5 <= t <= 7}
+    opt = TrackingOptions(max_speed=1.5, min_rho=0.02, appear_cost=appear_cost, max_gap=max_gap)
+    tracks = solve(maps_of([seen], 13), opt)
+    assert [(tr.frames[0], tr.frames[-1]) for tr in tracks] == want
+    if len(want) == 1:
+        assert tracks[0].bridged.tolist() == [5 <= t <= 7 for t in range(13)]
+        np.testing.assert_allclose(tracks[0].xyz[5:8, 0], [1.5, 1.6, 1.7], atol=1e-9)  # on the line
+
+
+@pytest.mark.parametrize("appear_cost, inner_track", [(40.0, False), (30.0, True)])
+def test_entries_beside_unseen_cells_and_in_regions_by_hand(appear_cost, inner_track):
+    """Issue 63: three people appear mid-sequence and stand still, rho* 0.98 in frames 4-11 of
+    12 (8 x log 49 = 31.13 to gain), at cells of a real geometry's Cells.of: one beside a cell
+    the camera does not see, one inside a tracking.regions rectangle, one inside the view away
+    from both. A track there pays its start, entry_cost 7 at an entry cell or appear_cost
+    elsewhere, and its end at the last frame is free: so the first two get tracks from frame
+    4, and the third only when appear_cost (30) is below 31.13, not at 40."""
+    from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
+
+    cam = Camera(160, 120, 114.0, 114.0, 79.5, 59.5, pose_from_angles(2.2, 20.0))
+    grid = Grid(x=(-3.0, 3.0, 0.2), y=(0.5, 7.0, 0.2))
+    geom = build_geometry(cam, grid, ObjectBox(0.4, 1.8))
+    region = (0.8, 1.4, 3.1, 3.5)
+    plain = Cells.of(geom, grid, (160, 120))
+    cells = Cells.of(geom, grid, (160, 120), regions=[region])
+    ny, nx = grid.shape
+    seen = (geom.rect_area > 0).reshape(ny, nx)
+    p = geom.locations
+
+    def at(x, y):
+        return int(np.argmin(np.hypot(p[:, 0] - x, p[:, 1] - y)))
+
+    # a seen cell beside an unseen one (at the edge of the view), not on the grid's border
+    unseen = np.argwhere(~seen)
+    beside = [j * nx + i for j, i in np.argwhere(seen) if 0 < j < ny - 1 and 0 < i < nx - 1
+              and (np.abs(unseen - [j, i]).max(1) == 1).any()]
+    k_beside, k_region, k_inner = beside[0], at(1.1, 3.2), at(-0.5, 4.5)
+    assert plain.entry[k_beside] and cells.entry[k_region] and not plain.entry[k_region]
+    assert not cells.entry[k_inner] and seen.ravel()[k_inner]
+    maps = np.zeros((12, len(p)), np.float32)
+    maps[4:, [k_beside, k_region, k_inner]] = 0.98
+    opt = TrackingOptions(max_speed=1.5, entry_cost=7.0, appear_cost=appear_cost)
+    tracks, _ = run_tracker(maps, cells, grid.shape, opt, 10.0, 0.5, "ksp")
+    got = sorted((tr.frames[0], tr.frames[-1], cells.nearest(tr.xyz[0])) for tr in tracks)
+    want = sorted([(4, 11, k_beside), (4, 11, k_region)] + ([(4, 11, k_inner)] if inner_track else []))
+    assert got == want
