@@ -97,6 +97,29 @@ def blocks(text: str) -> list[str]:
     return re.findall(r"<!-- docs:([a-z_]+) -->", text)
 
 
+# -- tests: what is tested, from the test files ----------------------------------------------------
+def tests_block() -> str:
+    """Every test of tests/, file by file: the file's purpose (its docstring's first sentence) and
+    each test's name read as a sentence (parametrised tests once); regenerated, never written by
+    hand, so the list cannot claim a test that is not there."""
+    import ast
+
+    lines = []
+    for path in sorted((ROOT / "tests").glob("test_*.py")):
+        tree = ast.parse(path.read_text())
+        doc = " ".join((ast.get_docstring(tree) or "").split())
+        first = doc.split(". ")[0].rstrip(".") + "." if doc else ""
+        tests = [n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))
+                 and n.name.startswith("test_")]
+        lines.append(f"**`tests/{path.name}`** ({len(tests)} test functions){': ' + first if first else ''}")
+        lines.append("")
+        lines += [f"- {t[len('test_'):].replace('_', ' ')} (`{path.stem}::{t}`)" for t in tests]
+        lines.append("")
+    total = sum(line.startswith("- ") for line in lines)
+    return (f"{total} test functions in {len(list((ROOT / 'tests').glob('test_*.py')))} files (some run once per "
+            f"parameter or device).\n\n" + "\n".join(lines))
+
+
 # -- config: the reference, from the models -------------------------------------------------------
 def config_block() -> str:
     """The config reference: every key with its default and meaning, from the models."""
@@ -432,7 +455,7 @@ def live_block(out: Path) -> str:
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.live`")])
 
 
-BUILDERS = {"config": lambda out, jobs: config_block(), "demo": lambda out, jobs: demo_block(out),
+BUILDERS = {"config": lambda out, jobs: config_block(), "tests": lambda out, jobs: tests_block(), "demo": lambda out, jobs: demo_block(out),
             "robustness": robustness_block, "drones": lambda out, jobs: drones_block(out),
             "real": lambda out, jobs: real_block(out), "eval": lambda out, jobs: eval_block(out),
             "speed": lambda out, jobs: speed_block(out), "kernels": lambda out, jobs: kernels_block(out),

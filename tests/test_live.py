@@ -437,3 +437,33 @@ def test_a_live_run_without_workers_uses_both_cores_on_the_cpu(tmp_path, monkeyp
                                   (16, "cuda:0", cfg, 1), (16, "cpu", warm, 1)):
         monkeypatch.setattr(live, "usable_cpus", lambda: cpus)
         assert live.default_workers(c, device) == want, (cpus, device, c.model.warm_start)
+
+
+def test_realsense_serial_picks_that_camera():
+    """README: `input.frames: realsense:SERIAL` runs on that camera. Two cameras connected
+    (software ones, of different sizes and intrinsics): `realsense` is the first, each
+    `realsense:SERIAL` brings its own size, intrinsics and serial, and a serial no camera has
+    is a one-line error naming it and the serials found."""
+    import numpy as np
+
+    from dpom_warp.io import InputError
+    from dpom_warp.sources import open_source
+    from dpom_warp.sources.software import SoftwareCamera
+
+    first = SoftwareCamera([np.zeros((48, 64), np.uint16)], 50.0, 51.0, 31.5, 23.5, serial="111").register()
+    second = SoftwareCamera([np.zeros((24, 32), np.uint16)], 25.0, 26.0, 15.5, 11.5, serial="222").register()
+    try:
+        infos = {spec: open_source(spec).info() for spec in ("realsense", "realsense:222",
+                                                                               "realsense:111")}
+        assert (infos["realsense"].width, infos["realsense"].height) == (64, 48)
+        assert infos["realsense"].intrinsics == infos["realsense:111"].intrinsics == {
+            "fx": 50.0, "fy": 51.0, "cx": 31.5, "cy": 23.5}
+        two = infos["realsense:222"]
+        assert (two.width, two.height, two.intrinsics) == (32, 24, {"fx": 25.0, "fy": 26.0, "cx": 15.5, "cy": 11.5})
+        assert "serial 222" in two.kind and "serial 111" in infos["realsense"].kind
+        with pytest.raises(InputError) as err:
+            open_source("realsense:333")
+        assert str(err.value) == "input.frames: realsense:333: no RealSense camera with serial 333; found 111, 222"
+    finally:
+        first.unregister()
+        second.unregister()

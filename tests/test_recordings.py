@@ -690,3 +690,30 @@ def test_gravity_from_a_ros_imu_in_the_depth_frame(tmp_path, scene):
     other = write_bag(tmp_path / "other.bag", "ros1",
                       messages(ts, frames, "16UC1", camera_of(cfg)) + imu_messages(ts, 5, acc, "imu_link"))
     assert open_source(other).info().gravity_up is None
+
+
+def test_fit_ground_topic_picks_the_depth_stream(tmp_path, scene, capsys):
+    """README: `dpom-warp fit-ground RECORDING --topic TOPIC` fits the floor in that stream. A bag
+    with two depth streams of the rendered room (camera 2.2 m up, pitch 20 deg): the first as
+    rendered, the second with every depth x 0.8, which puts the floor 0.8 x 2.2 = 1.76 m below
+    the camera at the same pitch. Without --topic the choice is a one-line error naming both."""
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))[:2]
+    nearer = []
+    for f in frames:
+        mm = np.asarray(Image.open(f)).astype(np.float64)
+        nearer.append(tmp_path / f.name)
+        Image.fromarray(np.round(mm * 0.8).astype(np.uint16)).save(nearer[-1])
+    ts = typestore(True)
+    msgs = messages(ts, frames, "16UC1", camera_of(cfg))
+    msgs += [(t.replace("image_raw", "nearer"), m, x) for t, m, x in messages(ts, nearer, "16UC1", None)]
+    bag = write_bag(tmp_path / "two.bag", "ros1", msgs)
+    assert main(["fit-ground", str(bag)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "found /cam/depth/image_raw, /cam/depth/nearer" in err
+    for topic, height in (("/cam/depth/image_raw", 2.2), ("/cam/depth/nearer", 1.76)):
+        out = tmp_path / f"{topic.rsplit('/', 1)[1]}.yaml"
+        assert main(["fit-ground", str(bag), "--topic", topic, "--output", str(out)]) == 0
+        pose = yaml.safe_load(out.read_text())
+        assert pose["camera_height"] == pytest.approx(height, abs=0.02), topic
+        assert pose["pitch_deg"] == pytest.approx(20.0, abs=0.3) and abs(pose["roll_deg"]) < 0.3, topic
