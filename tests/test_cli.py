@@ -9,6 +9,7 @@ import yaml
 
 from dpom_warp.cli import main
 from paths import CONFIGS
+from pictures import assert_picture
 
 
 def small_config(tmp_path, frames=3, **changes):
@@ -52,7 +53,7 @@ def test_run_writes_all_outputs(tmp_path, capsys):
         m = np.load(out / "maps" / f"{stem}.npy")
         assert m.shape == (28, 25) and m.dtype == np.float32
         assert np.all((m >= 0) & (m <= 1))
-        assert (out / "images" / f"{stem}.png").stat().st_size > 10_000
+        assert_picture(out / "images" / f"{stem}.png", (128 + 100, 106))  # the frame and the map beside it
     summary = json.load(open(out / "summary.json"))
     assert summary["config"]["grid"]["x"] == [-2.5, 2.5, 0.2]
     assert summary["scores"]["n_gt"] == 9

@@ -57,10 +57,44 @@ def test_the_list_of_tests_is_the_test_files():
     assert "`test_docs::test_the_list_of_tests_is_the_test_files`" in body
 
 
-def test_pictures_exist():
-    for page in pages():
-        for rel in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", page.read_text()):
-            assert (page.parent / rel).is_file(), f"{page.name}: {rel}"
+def test_pictures_are_pictures():
+    """Every picture a page shows is there, a PNG of a readable size, and not blank."""
+    from pictures import assert_picture
+
+    shown = [(page, rel) for page in pages() for rel in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", page.read_text())]
+    assert len(shown) >= 3
+    for page, rel in shown:
+        assert (page.parent / rel).is_file(), f"{page.name}: {rel}"
+        assert_picture(page.parent / rel, (400, 250))
+
+
+def test_the_picture_check_fails_a_blank_picture_and_a_plot_without_curves(tmp_path):
+    """assert_picture, which the run, eval and docs tests use, can fail: a white PNG, a plot whose
+    axes and labels are drawn but no curve, and a picture smaller than asked."""
+    import numpy as np
+    import pytest
+    from PIL import Image
+
+    from pictures import assert_picture
+
+    rng = np.random.default_rng(0)
+    white = np.full((300, 400, 3), 255, np.uint8)
+    axes = white.copy()
+    axes[250, 40:380] = axes[20:250, 40] = 0  # the axes, and grey text-like noise
+    axes[260:290, 100:300] = rng.integers(0, 200, (30, 200, 1)).astype(np.uint8)
+    curve = axes.copy()
+    curve[np.arange(30, 240), np.arange(60, 270)] = (31, 119, 180)  # a line in matplotlib's blue
+    curve[np.arange(31, 241), np.arange(60, 270)] = (31, 119, 180)
+    for name, rgb in (("white", white), ("axes", axes), ("curve", curve)):
+        Image.fromarray(rgb).save(tmp_path / f"{name}.png")
+    with pytest.raises(AssertionError, match="blank"):
+        assert_picture(tmp_path / "white.png")
+    assert_picture(tmp_path / "axes.png")  # a picture, but
+    with pytest.raises(AssertionError, match="no curve drawn"):
+        assert_picture(tmp_path / "axes.png", plot=True)
+    assert_picture(tmp_path / "curve.png", plot=True)
+    with pytest.raises(AssertionError, match="smaller than"):
+        assert_picture(tmp_path / "curve.png", (500, 300))
 
 
 def test_links_between_pages_resolve():

@@ -13,6 +13,7 @@ from dpom_warp.evaluate import (Detections, box_iou, counts, moda_curve, pr_curv
 from dpom_warp.io import InputError
 
 from test_cli import small_config
+from pictures import assert_picture
 
 
 def dets(frames):
@@ -127,7 +128,7 @@ def test_eval_command_on_a_run_and_a_csv(tmp_path, capsys):
     g1 = {c["gate"]: c for c in results[1]["penalise_hidden"]["moda_ground"]}
     assert g1[0.2]["tp"] <= g0[0.2]["tp"] and g1[1.0]["tp"] == g0[1.0]["tp"]
     for name in ("moda_ground.png", "pr_ground.png", "moda_image.png", "pr_image.png"):
-        assert (tmp_path / "ev" / "plots" / name).stat().st_size > 10_000
+        assert_picture(tmp_path / "ev" / "plots" / name, (300, 200), plot=True)
 
 
 def test_eval_errors(tmp_path, capsys):

@@ -14,6 +14,7 @@ from dpom_warp.ground import GroundFitError, GroundOptions, backproject, fit_gro
 from dpom_warp.synthetic import SceneSpec, _box, _scene, person_mesh, render, room_meshes, sensor_noise
 import paths
 from paths import CONFIGS
+from pictures import assert_picture
 
 REAL = paths.REAL / "five_people"
 
@@ -221,7 +222,7 @@ def test_run_with_auto_pose_on_the_real_frame(tmp_path, capsys):
     xy = np.array([[float(r.split(",")[1]), float(r.split(",")[2])] for r in rows])
     assert len(xy) >= 5  # five people stand 1.8 to 3 m away
     assert ((xy[:, 1] > 1.5) & (xy[:, 1] < 3.2)).sum() >= 5
-    assert (tmp_path / "out" / "images" / "depth_mm.png").stat().st_size > 20_000
+    assert_picture(tmp_path / "out" / "images" / "depth_mm.png", (512 + 200, 424))
     assert "warnings" not in summary["ground_fit"]  # a plausible floor, the corridor grid in view
     assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "readme"),  # the README's grid
                  "--set", "grid.x=[-2, 2, 0.1]", "--set", "grid.y=[1, 6, 0.1]"]) == 0

@@ -394,7 +394,13 @@ def test_a_run_writes_tracks_pictures_and_scores(tracked_run):
     assert len(list((run / "images").glob("*.png"))) == 8
     ev = json.loads((run / "eval.json").read_text())[0]["tracking"]
     s = ev["tracks"]["ignore_hidden"]["0.5"]
-    assert 0 < s["mota"] <= 1 and 0 < s["idf1"] <= 1 and 0 < s["hota"] <= 1
+    # the scores against their definitions, from the counts beside them (CLEAR MOT, IDF1)
+    assert s["num_objects"] > 0 and s["num_misses"] + s["num_false_positives"] + s["num_switches"] >= 0
+    assert s["mota"] == pytest.approx(
+        1 - (s["num_misses"] + s["num_false_positives"] + s["num_switches"]) / s["num_objects"], abs=1e-9)
+    assert s["recall"] == pytest.approx(1 - s["num_misses"] / s["num_objects"], abs=1e-9)
+    assert s["idf1"] == pytest.approx(2 * s["idp"] * s["idr"] / (s["idp"] + s["idr"]), abs=1e-9)
+    assert 0.5 < s["mota"] <= 1 and 0.5 < s["idf1"] <= 1 and 0 < s["hota"] <= 1
     assert "naive" in ev and set(ev["tracks"]["penalise_hidden"]) == {"0.5", "1"}
 
 

@@ -16,6 +16,7 @@ from dpom_warp.model import ModelParams
 
 from test_model_cases import H, W, run_both, toy_geometry, wall_background
 from paths import CONFIGS
+from pictures import assert_picture
 
 
 def cupboard_background():
@@ -114,6 +115,24 @@ def small_drone_config(tmp_path):
     return path
 
 
+def check_ply(out, frame, dets, size):
+    """ply/0000_points.ply holds a point for each pixel of the frame with a reading, and
+    ply/0000_boxes.ply one box (8 corners) of the object's size per detection, centred on it
+    (read back with Open3D's reader, not the writer's code)."""
+    import open3d as o3d
+    from PIL import Image
+
+    pts = np.asarray(o3d.io.read_point_cloud(str(out / "ply" / "0000_points.ply")).points)
+    assert len(pts) == np.count_nonzero(np.asarray(Image.open(frame))) > 1000
+    corners = np.asarray(o3d.io.read_triangle_mesh(str(out / "ply" / "0000_boxes.ply")).vertices)
+    assert len(dets) >= 1 and corners.shape == (8 * len(dets), 3)
+    boxes = corners.reshape(len(dets), 8, 3)
+    got = sorted(tuple(np.round(b.mean(0), 4)) for b in boxes)
+    want = sorted(tuple(np.round([float(d[1]), float(d[2]), float(d[3])], 4)) for d in dets)
+    np.testing.assert_allclose(got, want, atol=1e-4)
+    np.testing.assert_allclose(np.ptp(boxes, axis=1), np.tile(size, (len(dets), 1)), atol=1e-9)
+
+
 def test_drone_run_end_to_end(tmp_path, capsys):
     path = small_drone_config(tmp_path)
     assert main(["run", str(path), "--no-progress"]) == 0
@@ -126,12 +145,12 @@ def test_drone_run_end_to_end(tmp_path, capsys):
     assert m.shape == (10, 23, 20)  # (nz, ny, nx)
     rows = (out / "detections.csv").read_text().splitlines()[1:]
     assert rows and all(0.4 <= float(r.split(",")[3]) <= 2.4 for r in rows)  # z is filled
-    assert (out / "ply" / "0000_points.ply").stat().st_size > 1000
-    assert (out / "ply" / "0000_boxes.ply").exists()
+    check_ply(out, tmp_path / "scene" / "frames" / "0000.png", [r.split(",") for r in rows if r.startswith("0000")],
+              (0.4, 0.4, 0.12))  # the drone config's object: 0.4 x 0.4 x 0.12 m
     ev = json.load(open(out / "eval.json"))[0]
     assert ev["distance"] == "space" and ev["cube_size"] == [0.4, 0.4, 0.12]
     assert "moda_cube" in ev["penalise_hidden"]
-    assert (out / "plots" / "moda_cube.png").exists()
+    assert_picture(out / "plots" / "moda_cube.png", (300, 200), plot=True)
     summary = json.load(open(out / "summary.json"))
     assert summary["scores"]["tp"] >= 1
 
