@@ -633,3 +633,62 @@ def test_a_frame_unreadable_inside_a_batch_is_skipped_alone(tmp_path, scene):
     assert "not a readable image" in outcomes[0][2]
     assert sorted(o[0] for o in outcomes[1:]) == sorted(Path(items[i].path).name for i in (0, 2))
     assert all(o[1] is not None and o[2] is None for o in outcomes[1:])
+
+
+def _limits(model, prefix=""):
+    """(key, kind, limit) of every bound the config's models state (pydantic's gt, ge, lt, le)."""
+    import typing
+
+    import annotated_types as at
+    from pydantic import BaseModel
+
+    for name, f in model.model_fields.items():
+        ann = f.annotation
+        subs = [ann] if isinstance(ann, type) and issubclass(ann, BaseModel) else [
+            a for a in typing.get_args(ann) if isinstance(a, type) and issubclass(a, BaseModel)]
+        for sub in subs:
+            yield from _limits(sub, f"{prefix}{name}.")
+        for m in f.metadata:
+            for kind, cls in (("gt", at.Gt), ("ge", at.Ge), ("lt", at.Lt), ("le", at.Le)):
+                if isinstance(m, cls):
+                    yield f"{prefix}{name}", kind, getattr(m, kind)
+
+
+def test_every_config_value_at_each_limit_it_states():
+    """Issue 63, boundaries: every bound a config key states (the schema and docs/config.md say
+    it) holds at the limit itself: an exclusive one (> or <) refuses the limit with the one-line
+    error naming the key, an inclusive one (>= or <=) takes it and refuses one step beyond (1 for
+    a count, 1e-6 for a value), naming the key. Three inclusive limits meet another key's check
+    first (a camera 1 pixel wide cannot hold cx 31.5), which that key's error names."""
+    from dpom_warp.config import ConfigError, parse_config
+    from dpom_warp.config.read import apply_overrides
+    from dpom_warp.config.schema import ConfigFile
+
+    base = {"device": "cpu", "input": {"frames": "f/*.png"}, "synthetic": {"cache": "c"},
+            "camera": {"width": 64, "height": 48, "intrinsics": {"fx": 50.0, "fy": 50.0, "cx": 31.5, "cy": 23.5},
+                       "extrinsics": {"height": 2.0, "pitch_deg": 20.0}},
+            "grid": {"x": [-1, 1, 0.1], "y": [1, 3, 0.1]}}
+    parse_config(base)
+    other_first = {"input.background_auto.max_frames": "input.background_auto.min_frames",
+                   "camera.width": "camera.intrinsics.cx", "camera.height": "camera.intrinsics.cy"}
+
+    def error(key, value):
+        try:
+            parse_config(apply_overrides(base, [f"{key}={value}"]))
+        except ConfigError as e:
+            assert "\n" not in str(e)
+            return str(e)
+        return None
+
+    limits = list(_limits(ConfigFile))
+    assert len(limits) > 100
+    for key, kind, v in limits:
+        sign = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}[kind]
+        if kind in ("gt", "lt"):
+            assert error(key, v) == f"{key}: expected a value {sign} {v:g}, found {v:g}", key
+            continue
+        step = 1 if isinstance(v, int) else 1e-6
+        beyond = v - step if kind == "ge" else v + step
+        got = error(key, v)
+        assert got is None or got.startswith(other_first[key] + ": "), (key, got)
+        assert error(key, beyond).startswith(f"{key}: expected a value {sign} {v:g}"), (key, beyond)

@@ -563,6 +563,7 @@ def test_entry_cells_of_a_run_by_hand():
     (5.9, 15, [(0, 12)]),  # 2 x 5.9 = 11.8 > 3 log 49 = 11.675: bridged
     (5.8, 15, [(0, 4), (8, 12)]),  # 11.6 < 11.675: an end and a start are cheaper
     (5.9, 2, [(0, 4), (8, 12)]),  # three hidden frames, at most two bridged: cut whatever the cost
+    (5.9, 3, [(0, 12)]),  # max_gap exactly the three hidden frames: bridged
 ])
 def test_bridge_or_split_worked_out_by_hand(appear_cost, max_gap, want):
     """Issue 63: a case whose optimum is worked out by hand, checked against the flow's tracks

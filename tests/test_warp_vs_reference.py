@@ -154,6 +154,36 @@ def test_background_delta_follows_every_change_of_background(device, outside):
             before = got
 
 
+def test_a_reading_at_exactly_0_and_z_max(device):
+    """MODEL.md: the sensor's range is (0, z_max]; 0 is no reading. A pixel reading exactly z_max
+    is a reading (its Delta_bg is the background's density there, not the missing term); one
+    reading the next float32 above z_max counts as no reading, as 0 does; the kernel and the
+    reference agree at each. By hand: with the background's mu at z_max, the pixel at z_max is
+    the most likely reading there, so its Delta_bg is above the no-reading pixels'."""
+    from dpom_warp.model import Background
+
+    geom, params, depth, frames = random_scene(4)
+    h, w = depth.shape
+    z_max = np.float32(params.z_max)
+    assert float(z_max) == params.z_max  # representable: the frame holds z_max exactly
+    bg = Background(mu=np.full((h, w), float(z_max)), sigma=np.full((h, w), 0.05), missing=np.full((h, w), 0.1),
+                    outlier=np.full((h, w), 0.05))
+    engine = Engine(geom, params, device)
+    engine.set_background(bg)
+    frame = np.zeros((h, w), np.float32)
+    frame[:, 1::4] = z_max
+    frame[:, 2::4] = np.nextafter(z_max, np.float32(np.inf))
+    frame[:, 3::4] = z_max - np.float32(0.5)
+    engine.build_lists(frame)
+    got = engine.views[0].delta_bg.numpy().reshape(h, w)
+    np.testing.assert_allclose(got, ref.background_delta(frame, bg, params), rtol=1e-12, atol=1e-12)
+    none, at_max, beyond, inside = got[:, 0::4], got[:, 1::4], got[:, 2::4], got[:, 3::4]
+    np.testing.assert_array_equal(beyond, none)  # beyond z_max: no reading, as 0
+    assert (at_max > none).all() and (at_max > inside).all()  # z_max itself: a reading, the likeliest
+    assert ref.valid_reading(np.array([0.0, z_max, np.nextafter(z_max, np.float32(np.inf))]), params).tolist() == [
+        False, True, False]
+
+
 def test_lists_longer_than_the_one_pass_buffer(device):
     """Pixels with more entries than pixel_entries_once keeps on its stack are filled by the
     two-pass kernel, alone; the lists are the reference's either way."""
