@@ -242,8 +242,8 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
 
 def set_up_background(cfg: RunConfig, view, bg_frames: list, n_files: int, sample: list[Path], dev: str,
                       parallel: bool, log=print) -> tuple[str, tuple | None, dict | None]:
-    """A camera's background (its view.view.CameraView) from the background frames (brought to their median scale when
-    they drift), `auto` from `sample`, or the floor; returns (the run's words for it, what other
+    """A camera's background (its engine.view.CameraView) from the background frames (brought to
+    their median scale when they drift), `auto` from `sample`, or the floor; returns (the run's words for it, what other
     workers take: WorkerSpec.background, auto's report)."""
     auto_report, given = None, None
     if bg_frames:
@@ -269,8 +269,8 @@ def set_up_background(cfg: RunConfig, view, bg_frames: list, n_files: int, sampl
 
 def static_structure(cfg: RunConfig, view, camera, files: list[Path], log=print) -> dict:
     """Large planes other than the floor in the median of `files` made background (structure.py)
-    where a camera's background (its view.view.CameraView) is the floor model (floor-only, or the pixels auto left to
-    it); returns the report for summary.json's inference.structure."""
+    where a camera's background (its engine.view.CameraView) is the floor model (floor-only, or
+    the pixels auto left to it); returns the report for summary.json's inference.structure."""
     from .model import Background
     from .structure import find_planes, median_frame, plane_depths
 

@@ -1,8 +1,8 @@
 """The Warp inference engine: buffers allocated once per grid and camera, one call per frame
 (or per batch of frames). The class is put together from one part per step, each in its own
 file of this package: the cameras (view: each one's static arrays, background, drift and
-per-pixel lists), the sparse bookkeeping, the iterations (the mean field) and the threshold
-(what the joint test needs)."""
+per-pixel lists), the sparse bookkeeping, the iterations (the mean field) and the threshold,
+with the people-only tests a prior it is given (people)."""
 
 from __future__ import annotations
 
