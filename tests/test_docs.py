@@ -70,7 +70,8 @@ def test_pictures_are_pictures():
 
 def test_the_picture_check_fails_a_blank_picture_and_a_plot_without_curves(tmp_path):
     """assert_picture, which the run, eval and docs tests use, can fail: a white PNG, a plot whose
-    axes and labels are drawn but no curve, and a picture smaller than asked."""
+    axes and labels are drawn but no curve, one curve where two runs are compared, and a picture
+    smaller than asked."""
     import numpy as np
     import pytest
     from PIL import Image
@@ -93,6 +94,8 @@ def test_the_picture_check_fails_a_blank_picture_and_a_plot_without_curves(tmp_p
     with pytest.raises(AssertionError, match="no curve drawn"):
         assert_picture(tmp_path / "axes.png", plot=True)
     assert_picture(tmp_path / "curve.png", plot=True)
+    with pytest.raises(AssertionError, match="curves in 1 colours, expected 2"):
+        assert_picture(tmp_path / "curve.png", plot=True, curves=2)  # one run's curve where two are compared
     with pytest.raises(AssertionError, match="smaller than"):
         assert_picture(tmp_path / "curve.png", (500, 300))
 

@@ -20,6 +20,7 @@ from dpom_warp.io import InputError, read_depth
 from test_cli import small_config
 
 from paths import ROOT
+from pictures import assert_picture
 CONFIGS = sorted((ROOT / "configs").glob("*.yaml"))
 SCHEMA = ROOT / "configs" / "dpom-warp.schema.json"
 
@@ -230,7 +231,8 @@ def test_relative_paths_are_relative_to_the_config_folder(tmp_path, capsys, monk
     assert loaded.inputs.frames == str(tmp_path / "scene" / "frames" / "*.png")
     assert loaded.output.dir == str(tmp_path / "out")
     assert main(["run", str(folder / "run.yaml"), "--no-progress"]) == 0
-    assert (tmp_path / "out" / "detections.csv").exists() and (tmp_path / "scene" / "frames").is_dir()
+    assert (tmp_path / "out" / "detections.csv").read_text().startswith("frame,x,y,z,rho")
+    assert (tmp_path / "scene" / "frames").is_dir()
     capsys.readouterr()
     # a --set path is relative to the current folder, and a failed glob says where it looked
     assert main(["run", str(folder / "run.yaml"), "--no-progress", "--overwrite",
@@ -381,7 +383,7 @@ def test_eval_compare_leaves_the_runs_untouched(tmp_path, capsys):
     target = tmp_path / "eval_out_vs_floor"
     results = json.loads((target / "eval.json").read_text())
     assert len(results) == 2
-    assert (target / "plots" / "moda_ground.png").exists()
+    assert_picture(target / "plots" / "moda_ground.png", (300, 200), plot=True, curves=2)  # a curve a run
     assert f"curves in {target / 'eval.json'}" in capsys.readouterr().out
 
 
