@@ -1,6 +1,8 @@
 """Plain NumPy reference of the DPOM maths (MODEL.md). Small, readable, slow.
 
 The Warp kernels in `dpom_warp.kernels` implement exactly these steps; the tests compare the two.
+The per-pixel model is in reference_pixels.py and the people-only tests in reference_people.py
+(both importable from here, as the tests do).
 List entries are stored as float32 (object depth and Delta) on the fast path, so the reference
 rounds them the same way; everything else is float64.
 """
@@ -12,30 +14,11 @@ import warnings
 import numpy as np
 
 from .geometry import Geometry, neighbour_lists
-from .model import BAND_ALL, MISSING_READ, TOP_MIN_RHO, AutoBackground, Background, ModelParams
-
-LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
-
-
-def gaussian_logpdf(z, mu, sigma):
-    return -0.5 * ((z - mu) / sigma) ** 2 - np.log(sigma) - LOG_SQRT_2PI
-
-
-def log_theta(z, mu, sigma, missing, outlier, z_max):
-    """Delta = log theta(z) of eq. 11 for a reading z (metres) in (0, z_max]."""
-    with np.errstate(divide="ignore"):
-        return np.log1p(-missing) + np.logaddexp(
-            np.log(outlier) - np.log(z_max), np.log1p(-outlier) + gaussian_logpdf(z, mu, sigma))
-
-
-def valid_reading(depth_m, params: ModelParams):
-    return (depth_m > 0) & (depth_m <= params.z_max)
-
-
-def object_sigma(mu, params: ModelParams, shape_var=0.0):
-    """sqrt(sigma_obj^2 + var + sigma_sensor(mu)^2): `shape_var` is what the object's shape
-    adds (geometry.Geometry.object_depth; 0 on a facing plane)."""
-    return np.sqrt(params.sigma_object ** 2 + shape_var + params.sensor_sigma(mu) ** 2)
+from .model import AutoBackground, Background, ModelParams
+from .reference_people import (band_out_of_view, behind_count, behind_evidence, rig_bands, top_band,  # noqa: F401
+                               top_factor)
+from .reference_pixels import (LOG_SQRT_2PI, gaussian_logpdf, kept_silhouette, log_outlier, log_theta,  # noqa: F401
+                               object_sigma, reading_classes, sigmoid, silhouette, silhouettes, valid_reading)
 
 
 def outside_objects(points, bounds):
@@ -171,41 +154,6 @@ def background_delta(depth_m, bg: Background, params: ModelParams):
     return np.where(ok, d, 0.0)
 
 
-def log_outlier(params: ModelParams):
-    """log(pi_out U(z)): the outlier term the mask test compares with."""
-    return np.log(params.outlier_prob) - np.log(params.z_max)
-
-
-def silhouette(z_img, geom: Geometry, k: int, params: ModelParams):
-    """Location k's silhouette rectangle: ((v0, u0), rays, readings z, object depth mu
-    (-1 where the ray misses the facing plane or the solid), log inlier term of the object at
-    mu), or None when it has no silhouette."""
-    u0, v0, u1, v1 = (int(x) for x in geom.rect[k])
-    if u1 < u0 or v1 < v0:
-        return None
-    rays = geom.rays[v0:v1 + 1, u0:u1 + 1]
-    z = z_img[v0:v1 + 1, u0:u1 + 1]
-    mu, var = geom.object_depth(k, rays)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inlier = np.log1p(-params.outlier_prob) + gaussian_logpdf(z, mu, object_sigma(mu, params, var))
-    return (v0, u0), rays, z, mu, inlier
-
-
-def silhouettes(z_img, geom: Geometry, which, params: ModelParams, sils: dict | None = None) -> dict:
-    """{k: silhouette(z_img, geom, k, params)} for the locations `which` (indices), those in
-    `sils` (the same frame's, computed before) taken from it; `sils` receives the others."""
-    sils = {} if sils is None else sils
-    for k in which:
-        if int(k) not in sils:
-            sils[int(k)] = silhouette(z_img, geom, int(k), params)
-    return sils
-
-
-def kept_silhouette(z_img, geom: Geometry, k: int, params: ModelParams, sils: dict | None):
-    """silhouette(z_img, geom, k, params), taken from `sils` (silhouettes()) where it holds k."""
-    return sils[k] if sils is not None and k in sils else silhouette(z_img, geom, k, params)
-
-
 def mask_entries(depth_m, geom: Geometry, params: ModelParams, bg: Background | None = None, which=None,
                  sils: dict | None = None):
     """All (pixel, location) pairs with i in M_k (eq. 12, corrected sign); with
@@ -258,12 +206,6 @@ def table_window(start, mu, half):
             key[a:b, 0] = (hi + 1e-6 * (1 + np.abs(hi))).astype(np.float32)
             key[a:b, 1] = (lo - 1e-6 * (1 + np.abs(lo))).astype(np.float32)
     return key
-
-
-def sigmoid(x):
-    x = np.asarray(x, dtype=np.float64)
-    e = np.exp(-np.abs(x))
-    return np.where(x >= 0, 1.0 / (1.0 + e), e / (1.0 + e))
 
 
 def _padded_lists(pixel, loc, delta):
@@ -366,7 +308,36 @@ def evidence_bound(valid, L, D, dbg, rho0, params: ModelParams, behind=0.0):
 
 def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, start=None,
                trace: list | None = None):
-    """Mean-field inference of MODEL.md in exclusive form, with damping and soft threshold.
+    """Mean-field inference of MODEL.md in exclusive form, with damping and soft threshold, for
+    one camera (mean_field_rig with one camera; see there)."""
+    return mean_field_rig([depth_m], [geom], [bg], params, start, trace)
+
+
+def rig_lists(depths, geoms: list[Geometry], bgs: list[Background], params: ModelParams):
+    """A rig's per-pixel lists: every camera's (pixel_lists) one after the other, padded to the
+    longest list (a rig's pixels are its cameras' pixels together: the evidence sums of eq. 10
+    add over them). Returns (valid, L, D, dbg, entries) as pixel_lists does."""
+    parts = [pixel_lists(d, g, b, params) for d, g, b in zip(depths, geoms, bgs)]
+    if len(parts) == 1:
+        return parts[0]
+    width = max(p[1].shape[1] for p in parts)
+
+    def pad(a, fill):
+        return np.pad(a, ((0, 0), (0, width - a.shape[1])), constant_values=fill)
+
+    return (np.concatenate([pad(p[0], False) for p in parts]), np.concatenate([pad(p[1], 0) for p in parts]),
+            np.concatenate([pad(p[2], 0.0) for p in parts]), np.concatenate([p[3] for p in parts]),
+            sum(p[4] for p in parts))
+
+
+def mean_field_rig(depths, geoms: list[Geometry], bgs: list[Background], params: ModelParams, start=None,
+                   trace: list | None = None):
+    """Mean-field inference of MODEL.md in exclusive form, with damping and soft threshold, over
+    one grid seen by a rig of cameras (lists: depths, geoms, bgs, one a camera, the geometries
+    over the same locations): each location's evidence sums its entries over every camera's
+    pixels, its readings behind over every camera, its |S_k| (area) over the cameras, and the
+    top band's counts over the cameras; the update, the prior and the threshold act once per
+    location.
 
     With params.sparse_epsilon > 0, the pruning bound first (evidence_bound: a location whose
     bound is below epsilon leaves every list for good, rho = 0; a location in no list is idle:
@@ -384,12 +355,16 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         dict with rho (K,), rho_star (K,), evidence_share e_k (K,), iterations, entries, live,
         pruned (locations the bound removed).
     """
+    geom = geoms[0]
     K = len(geom.rect)
-    valid, L, D, dbg, entries = pixel_lists(depth_m, geom, bg, params)
+    valid, L, D, dbg, entries = rig_lists(depths, geoms, bgs, params)
     logit_prior = np.log(params.prior) - np.log1p(-params.prior)
     rho = np.full(K, params.prior) if start is None else np.array(start, dtype=np.float64)
     kept = np.ones(K, bool)
-    behind = behind_evidence(depth_m, geom, params, valid, L)  # (the bound subtracts it too)
+    behind = 0.0  # the readings behind, over every camera (the bound subtracts them too)
+    if params.behind_cost > 0:
+        listed = np.bincount(L[valid], minlength=K) > 0
+        behind = params.behind_cost * sum(behind_count(d, g, params, listed) for d, g in zip(depths, geoms))
     if params.sparse_epsilon > 0 and params.bound_rounds > 0:
         kept = evidence_bound(valid, L, D, dbg, rho, params, behind) >= params.sparse_epsilon
         rho = np.where(kept, rho, 0.0)  # pruned: rho_new < epsilon at every iteration
@@ -435,150 +410,47 @@ def mean_field(depth_m, geom: Geometry, bg: Background, params: ModelParams, sta
         iterations = it + 1
         if (it + 1) % params.check_every == 0 and diff < params.tolerance:
             break
-    r = np.where(valid, rho[L], 0.0)
-    T = front_transparency(r)
-    tsum = np.bincount(L[valid], weights=T[valid], minlength=K)
-    denominator = geom.area.astype(np.float64)
-    if params.share_of == "unhidden":
-        s_all, a_all, *_ = top_band(depth_m, geom, params, rho, bg, whole=True)
-        denominator = np.where(s_all + a_all > 0, s_all + a_all, denominator)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        share = np.where(geom.area > 0, tsum / denominator, 0.0)
-    rho_star = np.where(geom.area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
-    # the top band is counted where rho* can still reach TOP_MIN_RHO (its factor is <= 1)
-    gate = rho if params.share_of == "unhidden" else rho_star
-    counts = top_band(depth_m, geom, params, gate, bg)
-    if params.top_support > 0 and geom.height > 0:
-        for height in params.top_heights:  # shorter people: the band whose factor is larger
-            shorter = top_band(depth_m, geom.shorter(height), params, gate, bg)
-            seen = counts[4]
-            better = (top_factor(*shorter, params, geom.area) > top_factor(*counts, params, geom.area)) & ~(
-                band_out_of_view(seen, geom.area, params))  # out of view: top_unseen decides
-            counts = tuple(np.where(better, b, a) for a, b in zip(counts, shorter))
-        rho_star = rho_star * top_factor(*counts, params, geom.area)
-        if params.top_unseen_share > 0:  # band out of view: the share of eq. 13 must reach this
-            unseen = band_out_of_view(counts[4], geom.area, params)
-            rho_star = np.where(unseen, rho_star * sigmoid(params.top_slope * (share - params.top_unseen_share)),
-                                rho_star)
+    rho_star, share, counts = rig_threshold(depths, geoms, bgs, params, rho, valid, L)
     support, against, hidden, missing, seen = counts
     return dict(rho=rho, rho_star=rho_star, evidence_share=share, iterations=iterations,
                 entries=entries, live=int(live.sum()), pruned=pruned, top_support=support, top_against=against,
                 top_hidden=hidden, top_missing=missing, top_seen=seen)
 
 
-def band_out_of_view(seen, area, params: ModelParams):
-    """Where a location's top band is out of view: counted (seen >= 0), with fewer than
-    top_min_pixels, or fewer than top_unseen_part x |S_k| (area), of its pixels in the image
-    (kernels.mean_field.band_out_of_view)."""
-    seen = np.asarray(seen)
-    return (seen >= 0) & ((seen < params.top_min_pixels) | (seen < params.top_unseen_part * np.asarray(area)))
-
-
-def top_factor(support, against, hidden, missing, seen, params: ModelParams, area):
-    """The top-band factor of each location from its counts (top_band):
-    sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f + top_missing m);
-    1 with fewer than top_min_pixels judged in the band (read, or missing where top_missing >
-    0), top_unseen where the band is out of view (band_out_of_view;
-    kernels.mean_field.top_factor)."""
-    n = support + against + hidden + (missing if params.top_missing > 0 else 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = (support + params.top_hidden * hidden) / (support + against + hidden + params.top_missing * missing)
-        factor = np.where(n >= max(params.top_min_pixels, 1),
-                          sigmoid(params.top_slope * (u - params.top_support)), 1.0)
-    return np.where(band_out_of_view(seen, area, params), params.top_unseen, factor)
-
-
-def top_band(depth_m, geom: Geometry, params: ModelParams, rho, bg: Background, whole=False):
-    """The top-band test of the soft threshold (ModelParams.top_support): for each location
-    with rho >= TOP_MIN_RHO (mean_field gives rho* before the test) of a standing box, the silhouette pixels with a reading whose
-    object point lies between top_band x height and the height that pass the mask test
-    (support), and of the others those that read beyond the object (against) and in front
-    of it (hidden); `missing`: those without a reading where the object lies within z_max (it
-    would be read there) and the background `bg` is mostly read (missing < MISSING_READ: not a
-    sensor's dead region, where nothing is ever read). `whole`: the same counts over the whole silhouette, any grid (the
-    unhidden share of ModelParams.share_of). Also `seen`: the band's pixels in the image,
-    with a reading or not (-1 where not counted). Returns five (K,) arrays: support, against,
-    hidden, missing, seen."""
+def rig_threshold(depths, geoms: list[Geometry], bgs: list[Background], params: ModelParams, rho, valid, L):
+    """After the iterations (mean_field_rig): each location's evidence share e_k over every
+    camera's pixels (the transparency sums, over |S_k| summed over the cameras, or over the
+    unhidden pixels' counts with share_of 'unhidden'), rho* of eq. 13 and the top band's
+    factor on the cameras' summed counts (with the shorter bands). Returns (rho_star, share,
+    the top band's five counts)."""
+    geom = geoms[0]
     K = len(geom.rect)
-    support, against, hidden, missing = (np.zeros(K, np.int64) for _ in range(4))
-    seen = np.full(K, -1, np.int64)
-    if geom.height <= 0 and not whole:
-        return support, against, hidden, missing, seen
-    z_img = np.asarray(depth_m, dtype=np.float64)
-    lo, hi = (-BAND_ALL, BAND_ALL) if whole else (params.top_band * geom.height, geom.height)
-    bg_read = np.asarray(bg.missing) < MISSING_READ
-    for k in np.flatnonzero(np.asarray(rho) >= TOP_MIN_RHO):
-        seen[k] = 0
-        sil = silhouette(z_img, geom, k, params)
-        if sil is None:
-            continue
-        (v0, u0), rays, z, mu, inlier = sil
-        read = bg_read[v0:v0 + z.shape[0], u0:u0 + z.shape[1]]
-        h = geom.centre[2] + mu * rays[..., 2]
-        in_band = (mu > 0) & (h >= lo) & (h <= hi)
-        seen[k] = np.sum(in_band)
-        if params.top_sigmas > 0 and not whole:  # within top_sigmas sigma instead of the mask test
-            _, var = geom.object_depth(k, rays)
-            passes = np.abs(z - mu) <= params.top_sigmas * object_sigma(mu, params, var)
-        else:
-            passes = inlier > log_outlier(params)
-        supports, behind, in_front = reading_classes(z, mu, passes, params)
-        support[k] = np.sum(in_band & supports)
-        against[k] = np.sum(in_band & behind)
-        hidden[k] = np.sum(in_band & in_front)
-        missing[k] = np.sum(in_band & ~valid_reading(z, params) & (mu <= params.z_max) & read)
-    return support, against, hidden, missing, seen
+    r = np.where(valid, rho[L], 0.0)
+    T = front_transparency(r)
+    tsum = np.bincount(L[valid], weights=T[valid], minlength=K)
+    area = sum(g.area.astype(np.float64) for g in geoms)
+    denominator = area
+    if params.share_of == "unhidden":
+        s_all, a_all, *_ = rig_bands(depths, geoms, bgs, params, rho, whole=True)
+        denominator = np.where(s_all + a_all > 0, s_all + a_all, denominator)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(area > 0, tsum / denominator, 0.0)
+    rho_star = np.where(area > 0, sigmoid(params.alpha * share + params.beta) * rho, 0.0)
+    # the top band is counted where rho* can still reach TOP_MIN_RHO (its factor is <= 1)
+    gate = rho if params.share_of == "unhidden" else rho_star
+    counts = rig_bands(depths, geoms, bgs, params, gate)
+    if params.top_support > 0 and geom.height > 0:
+        for height in params.top_heights:  # shorter people: the band whose factor is larger
+            shorter = rig_bands(depths, [g.shorter(height) for g in geoms], bgs, params, gate)
+            seen = counts[4]
+            better = (top_factor(*shorter, params, area) > top_factor(*counts, params, area)) & ~(
+                band_out_of_view(seen, area, params))  # out of view: top_unseen decides
+            counts = tuple(np.where(better, b, a) for a, b in zip(counts, shorter))
+        rho_star = rho_star * top_factor(*counts, params, area)
+        if params.top_unseen_share > 0:  # band out of view: the share of eq. 13 must reach this
+            unseen = band_out_of_view(counts[4], area, params)
+            rho_star = np.where(unseen, rho_star * sigmoid(params.top_slope * (share - params.top_unseen_share)),
+                                rho_star)
+    return rho_star, share, counts
 
 
-def reading_classes(z, mu, passes, params: ModelParams):
-    """What each reading z says of an object at depth mu, given whether it passes the test:
-    (supports, behind: z > mu, the object would hide it, in front: hidden by something nearer),
-    three boolean arrays, all False without a reading (kernels.mean_field.reading_class)."""
-    valid = valid_reading(z, params)
-    return valid & passes, valid & ~passes & (z > mu), valid & ~passes & (z <= mu)
-
-
-def behind_evidence(depth_m, geom: Geometry, params: ModelParams, valid, L):
-    """behind_cost x behind_count of every location in a list (pixel_lists' valid, L), the
-    evidence the lists leave out: fixed for the frame, subtracted by every update and by the
-    pruning bound (evidence_bound's `behind`); 0.0 without the cost."""
-    if params.behind_cost <= 0:
-        return 0.0
-    listed = np.bincount(L[valid], minlength=len(geom.rect)) > 0
-    return params.behind_cost * behind_count(depth_m, geom, params, listed)
-
-
-def behind_count(depth_m, geom: Geometry, params: ModelParams, which, sils: dict | None = None):
-    """For each location in `which` (bool (K,)), its silhouette pixels whose reading lies
-    behind its object beyond the mask test (z > mu_ki and not in M_k: the object would hide
-    them), counted in its core on the pixels whose row and column are multiples of
-    behind_step (each standing for behind_step^2): in each such row the lattice pixels whose
-    rays hit the solid run from column a to b, and those before a + behind_side (b - a) or
-    after b - behind_side (b - a) are left out, as are object points below behind_low or above
-    behind_high x the height (ground grids; kernels.mean_field.behind_count). `sils`: some of
-    their silhouettes (silhouettes()). Returns (K,) int64."""
-    n = np.zeros(len(geom.rect), np.int64)
-    z_img = np.asarray(depth_m, dtype=np.float64)
-    low, high = ((params.behind_low * geom.height, params.behind_high * geom.height) if geom.height > 0
-                 else (-BAND_ALL, BAND_ALL))
-    for k in np.flatnonzero(which):
-        sil = kept_silhouette(z_img, geom, k, params, sils)
-        if sil is None:
-            continue
-        (v0, u0), rays, z, mu, inlier = sil
-        s = params.behind_step  # the lattice: absolute rows and columns that are multiples of s
-        rs, cs = slice((-v0) % s, None, s), slice((-u0) % s, None, s)
-        rays, z, mu, inlier = rays[rs, cs], z[rs, cs], mu[rs, cs], inlier[rs, cs]
-        if mu.size == 0:
-            continue
-        cols = u0 + np.arange((-u0) % s, (-u0) % s + mu.shape[1] * s, s).astype(np.float64)
-        hit = mu > 0
-        rows = hit.any(axis=1)
-        first = cols[np.argmax(hit, axis=1)]
-        last = cols[hit.shape[1] - 1 - np.argmax(hit[:, ::-1], axis=1)]
-        trim = params.behind_side * (last - first)
-        core = (cols >= (first + trim)[:, None]) & (cols <= (last - trim)[:, None]) & rows[:, None] & hit
-        h = geom.centre[2] + mu * rays[..., 2]
-        _, behind, _ = reading_classes(z, mu, inlier > log_outlier(params), params)
-        n[k] = s * s * np.sum(core & (h >= low) & (h <= high) & behind)
-    return n

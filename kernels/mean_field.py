@@ -427,8 +427,10 @@ def behind_count(
     step: int,
     entries: wp.array(dtype=wp.int32),
     behind: wp.array(dtype=wp.int32),
+    add: int,
 ):
-    """behind[i]: the pixels of location i's silhouette core (behind_points' lattice: the
+    """behind[i] (plus what it holds with `add`: the cameras of a rig after the first): the pixels
+    of location i's silhouette core (behind_points' lattice: the
     table from first[k] to first[k + 1]) whose reading lies behind its object beyond the mask
     test (reading_class BEHIND: were the object there it would hide them), each standing for
     step^2 pixels. One thread per location of the batch; 0 for the locations in no list
@@ -458,7 +460,10 @@ def behind_count(
                 elif wp.abs(gap) >= w * f64(0.999999999) - f64(1.0e-12):  # at the edge: the test
                     if reading_class(pm, z, mu[j], var[j], f64(0.0)) == BEHIND:
                         n += step * step
-    behind[i] = n
+    if add != 0:
+        behind[i] += n
+    else:
+        behind[i] = n
 
 
 @wp.func

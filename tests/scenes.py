@@ -59,3 +59,39 @@ def random_scene(seed: int, width=48, height=40, shape="plane", step=0.3):
     depth = depth + rng.normal(0, 0.02, depth.shape) * (depth > 0)
     depth[rng.random(depth.shape) < 0.05] = 0
     return geom, params, depth.astype(np.float32), bg_frames.astype(np.float32)
+
+
+def random_rig(seed: int, cameras: int = 2, width=40, height=32, shape="plane", step=0.3):
+    """random_scene's room seen by a rig: `cameras` cameras around one grid (the first in front
+    of it, the others from its sides and its far end, looking at its middle), the same few
+    objects drawn into every camera's frame (so an object hidden from one camera may be seen
+    by another). Returns (geometries, params, frames, background frames): lists, one a camera."""
+    rng = np.random.default_rng(seed)
+    height_m = rng.uniform(1.6, 1.9)
+    obj = ObjectBox(0.5, height_m, shape=shape, radius=0.22 if shape == "solid" else None)
+    grid = Grid(x=(-1.5, 1.5, step), y=(1.5, 5.0, step))
+    spots = [(0.0, 0.0, 0.0), (3.6, 3.25, 90.0), (0.0, 6.5, 180.0), (-3.6, 3.25, -90.0)]
+    geoms = []
+    for c in range(cameras):
+        x, y, yaw = spots[c]
+        # yaw turns the view from +y toward -x: (3.6, y) looks along -x at yaw 90
+        pose = pose_from_angles(rng.uniform(2.0, 3.0), rng.uniform(20, 40), rng.uniform(-3, 3), yaw, x, y)
+        cam = Camera(width, height, 0.7 * width, 0.7 * width, (width - 1) / 2, (height - 1) / 2, pose)
+        geoms.append(build_geometry(cam, grid, obj))
+    params = ModelParams(prior=rng.uniform(0.005, 0.05), sigma_object=rng.uniform(0.05, 0.2),
+                         damping=rng.uniform(0.1, 0.4), max_iterations=int(rng.integers(20, 60)),
+                         check_every=int(rng.integers(1, 6)), outlier_prob=rng.uniform(0.02, 0.2))
+    people = rng.choice(len(geoms[0].rect), size=int(rng.integers(2, 6)), replace=False)
+    frames, backgrounds = [], []
+    for g in geoms:
+        floor = ref.floor_background(g, params).mu
+        depth = floor.copy()
+        for k in people:
+            draw_slab(depth, g, k)
+        bg = np.stack([floor + rng.normal(0, 0.01, floor.shape) * (floor > 0) for _ in range(5)])
+        bg[rng.random(bg.shape) < 0.1] = 0
+        depth = depth + rng.normal(0, 0.02, depth.shape) * (depth > 0)
+        depth[rng.random(depth.shape) < 0.05] = 0
+        frames.append(depth.astype(np.float32))
+        backgrounds.append(bg.astype(np.float32))
+    return geoms, params, frames, backgrounds

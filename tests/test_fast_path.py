@@ -431,8 +431,8 @@ def test_the_engine_takes_a_list_of_cameras_and_keeps_each_cameras_launches_its_
     """Engine takes a list of cameras' geometries over one grid (one today): a list of one gives
     bit for bit what the geometry alone gives, the per-pixel state lives in the camera's view
     and the per-location state once in the engine; a kernel given a camera's arrays is launched
-    through that camera's Launcher, the engine's own launches take none of them; two cameras are
-    refused with a one-line error until their evidence is fused."""
+    through that camera's Launcher, the engine's own launches take none of them; a rig's cameras
+    must see one grid, and its frames come as a list (one-line errors)."""
     import warp as wp
 
     geom, params, depth, bg_frames = random_scene(5, shape="solid")
@@ -456,9 +456,12 @@ def test_the_engine_takes_a_list_of_cameras_and_keeps_each_cameras_launches_its_
     assert engine.launchers()[0].recorded and not any(id(x) in owned for x in engine_inputs)
     assert view.launch.recorded and all(any(id(x) in owned for x in rec.inputs)
                                         for rec in view.launch.recorded.values())
-    with pytest.raises(ValueError, match=r"^cameras: expected one camera's geometry, found 2") as err:
-        Engine([geom, geom], params, "cpu")
+    other, *_ = random_scene(6, shape="solid", step=0.25)  # another grid
+    with pytest.raises(ValueError, match=r"^cameras\[1\]: expected the grid's \d+ locations of cameras\[0\]") as err:
+        Engine([geom, other], params, "cpu")
     assert "\n" not in str(err.value)
+    with pytest.raises(ValueError, match=r"^depth: expected a list of 2 frames, one a camera of the rig"):
+        Engine([geom, geom], params, "cpu").infer(depth)
 
 
 def test_the_people_tests_are_a_prior_the_engine_is_given():

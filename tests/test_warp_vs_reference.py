@@ -670,3 +670,38 @@ def test_frame_tally_is_numpys_per_frame_sum_and_count(device):
     for slot, code in ((1, 1), (2, K.PRUNED), (3, K.IDLE)):
         np.testing.assert_array_equal(got[slot], (rows == code).sum(1))
     assert got[0, 1] == 0 and (got[1:, 0] > 0).all()
+
+
+@pytest.mark.parametrize("path", ["exact", "sparse", "graph"])
+@pytest.mark.parametrize("shape", ["plane", "solid"])
+@pytest.mark.parametrize("seed, cameras", [(1, 2), (2, 3)])
+def test_a_rig_matches_the_reference(device, seed, cameras, shape, path):
+    """Several cameras on one map (issue 61): the engine given a rig's geometries and frames
+    sums every camera's pixels into each location's evidence, readings behind, area and top
+    band, and updates each location once: the reference's mean_field_rig (the cameras' lists
+    one after the other) at 1e-6, the same iterations and entries, on the exact path, the sparse
+    one with its pruning bound, and a captured graph; with the people tests (behind cost, top
+    band with a shorter band) on the solid. The fused map is no single camera's."""
+    from scenes import random_rig
+
+    geoms, params, frames, bg_frames = random_rig(seed, cameras, shape=shape)
+    if shape == "solid":
+        params = params.replace(behind_cost=2.0, behind_low=0.3, behind_step=1, top_support=0.3,
+                                top_heights=(round(0.85 * geoms[0].height, 6),))
+    if path != "exact":
+        params = params.replace(sparse_epsilon=1e-3)
+    engine = Engine(geoms, params, device, graph=path == "graph")
+    for c, frames_c in enumerate(bg_frames):
+        engine.set_background_frames(frames_c, camera=c)
+    got = engine.infer(frames)
+    bgs = [ref.background_from_frames(b, params) for b in bg_frames]
+    want = ref.mean_field_rig(frames, geoms, bgs, params)
+    assert got.iterations == want["iterations"] and got.entries == want["entries"] > 0
+    np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
+    for key, counts in zip(("top_support", "top_against", "top_hidden", "top_missing", "top_seen"),
+                           engine.prior.top_counts):
+        np.testing.assert_array_equal(counts.numpy(), want[key], err_msg=key)
+    alone = ref.mean_field(frames[0], geoms[0], bgs[0], params)
+    assert np.abs(alone["rho"] - want["rho"]).max() > 1e-3  # the other cameras' pixels count
+    assert got.entries == sum(ref.pixel_lists(f, g, b, params)[4] for f, g, b in zip(frames, geoms, bgs))

@@ -52,8 +52,10 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
 
     Args:
         geometry: silhouettes, facing planes and rays (geometry.build_geometry), or a list of
-            them, one a camera, over the same locations (`views`: each camera's CameraView).
-            One camera today: evidence fused over several is the multi-camera issue's.
+            them, one a camera of a rig, over the same locations (`views`: each camera's
+            CameraView). A rig's frames are a list, one a camera (infer, infer_batch): every
+            camera's pixels add to each location's evidence in one mean field (README, How it
+            works: several cameras).
         params: model and inference parameters.
         device: Warp device name ('cpu', 'cuda:0').
         entries_per_pixel: initial list capacity per pixel.
@@ -86,9 +88,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
                  drift: DriftOptions | None = None, prior: Prior | None = None):
         init_warp()
         geometries = [geometry] if isinstance(geometry, Geometry) else list(geometry)
-        if len(geometries) != 1:
-            raise ValueError(f"cameras: expected one camera's geometry, found {len(geometries)} "
-                             f"(several cameras on one map are not supported yet)")
+        check_rig(geometries)
         if min(params.sensor_noise) < 0:
             raise ValueError(f"sensor_noise: expected [a, b] >= 0, found {list(params.sensor_noise)}")
         if batch < 1 or tile < 1:
@@ -196,6 +196,9 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
 
     @joint_threshold.setter
     def joint_threshold(self, value: float | None):
+        if value is not None and len(self.views) > 1:
+            raise ValueError(f"detection.min_log_odds: the joint test reads one camera's lists; expected 0 for "
+                             f"a rig of {len(self.views)} cameras")
         self.prior.joint_threshold = value
 
     def launchers(self) -> list[Launcher]:
@@ -212,21 +215,37 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
         for launcher in self.launchers():
             launcher.reset(direct=bool(on))
 
-    def infer(self, depth_m: np.ndarray, start: np.ndarray | None = None) -> FrameResult:
-        """Occupancy probabilities of one depth frame (metres, 0 = no reading); `start`:
-        the rho to start from (a previous frame's, for warm starts) instead of the prior."""
-        return self.infer_batch(np.asarray(depth_m)[None], start)[0]
+    def infer(self, depth_m, start: np.ndarray | None = None) -> FrameResult:
+        """Occupancy probabilities of one depth frame (metres, 0 = no reading; a rig: a list of
+        frames, one a camera); `start`: the rho to start from (a previous frame's, for warm
+        starts) instead of the prior."""
+        if len(self.views) == 1:
+            return self.infer_batch(np.asarray(depth_m)[None], start)[0]
+        return self.infer_batch([np.asarray(d)[None] for d in self._per_camera(depth_m, "depth")], start)[0]
+
+    def _per_camera(self, frames, what: str) -> list:
+        """A rig's frames as a list, one entry a camera (ValueError otherwise)."""
+        if isinstance(frames, np.ndarray) or not hasattr(frames, "__len__") or len(frames) != len(self.views):
+            found = f"an array of shape {np.shape(frames)}" if isinstance(frames, np.ndarray) else (
+                f"{len(frames)} entries" if hasattr(frames, "__len__") else type(frames).__name__)
+            raise ValueError(f"{what}: expected a list of {len(self.views)} frames, one a camera of the rig, "
+                             f"found {found}")
+        return list(frames)
 
     def infer_batch(self, depths_m: np.ndarray, start: np.ndarray | None = None) -> list[FrameResult]:
-        """Occupancy of up to `batch` frames (n, H, W) at once; one result per frame, each
-        equal to what `infer` gives that frame alone. Timings are the batch's. `start`
-        (locations,): the rho every frame starts from instead of the prior."""
+        """Occupancy of up to `batch` frames (n, H, W) at once (a rig: a list of such, one a
+        camera); one result per frame, each equal to what `infer` gives that frame alone.
+        Timings are the batch's. `start` (locations,): the rho every frame starts from instead
+        of the prior."""
         dev = self.device
-        n = len(depths_m)
+        per_camera = [depths_m] if len(self.views) == 1 else self._per_camera(depths_m, "depths")
+        n = len(per_camera[0])
+        if any(len(f) != n for f in per_camera):
+            raise ValueError(f"depths: expected as many frames from every camera, found {[len(f) for f in per_camera]}")
         t0 = time.perf_counter()
         self.tallies.zero_()  # (the entries counted now: the bound's pruning changes the counts)
         drift = []
-        for v, frames in zip(self.views, [depths_m]):  # (one camera's frames: one camera today)
+        for v, frames in zip(self.views, per_camera):
             frames, estimates = v.correct_drift(frames)
             drift.append(estimates)
             v.build_lists(frames)
@@ -267,7 +286,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
                             live=int(live[f]), converged=bool(done[f]),
                             kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]),
-                            joint=joint[f], drift=drift[0][f])
+                            joint=joint[f], drift=drift[0][f] if len(drift) == 1 else [d[f] for d in drift])
                 for f in range(n)]
 
     # -- the cameras' backgrounds and lists (engine.view), camera 0 unless told ------------
@@ -303,4 +322,19 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
         """Bytes the engine's buffers hold now: the cameras' and the locations' (base.memory_estimate)."""
         return (sum(v.memory_bytes() for v in self.views) + self.batch * self.n_locations * LOCATION_BYTES
                 + self.extra_bytes)
+
+
+def check_rig(geometries: list[Geometry]) -> None:
+    """The cameras of a rig see one grid: ValueError naming the first camera whose locations are
+    not the first camera's (or none given)."""
+    if not geometries:
+        raise ValueError("cameras: expected at least one camera's geometry, found none")
+    first = geometries[0]
+    for i, g in enumerate(geometries[1:], 1):
+        if g.locations.shape != first.locations.shape or not np.array_equal(g.locations, first.locations):
+            raise ValueError(f"cameras[{i}]: expected the grid's {len(first.locations)} locations of cameras[0], "
+                             f"found {len(g.locations)} others")
+        if g.height != first.height:
+            raise ValueError(f"cameras[{i}]: expected the object of cameras[0] ({first.height:g} m tall), "
+                             f"found one {g.height:g} m tall")
 

@@ -167,10 +167,10 @@ class PeoplePrior(Prior):
         for v in engine.views:
             v.launch(K.count_entries, engine.batch * v.n_pixels, [v.lists, engine.per_location])
         p = self.params
-        for v, cam in zip(engine.views, self.cameras):
+        for c, (v, cam) in enumerate(zip(engine.views, self.cameras)):  # summed over the cameras
             v.launch(K.behind_count, engine.batch * engine.n_locations,
                      [v.depth, engine.pm, cam.first, cam.pixel, cam.mu, cam.var, cam.half, p.behind_step,
-                      engine.per_location, self.n_behind])
+                      engine.per_location, self.n_behind, int(c > 0)])
 
     def threshold(self, engine, unhidden: int) -> None:
         """The top band's counts, counted only where rho* before the test (a factor <= 1) reaches
@@ -237,7 +237,7 @@ class PeoplePrior(Prior):
         if p.behind_cost > 0:  # counted for every candidate (n_behind leaves out locations in no list)
             v.launch(K.behind_count, len(self.candidate),
                      [v.depth, engine.pm, cam.first, cam.pixel, cam.mu, cam.var, cam.half, p.behind_step,
-                      self.candidate, self.candidate_behind])
+                      self.candidate, self.candidate_behind, 0])
             behind = p.behind_cost * self.candidate_behind.numpy().reshape(batch, locations).astype(np.float64)
         else:
             behind = np.zeros((batch, locations))

@@ -45,8 +45,13 @@ class ThresholdMixin:
         each camera's GeometryArrays of another solid): a thread a row of each rectangle on a
         GPU, a thread a location elsewhere (kernels.top_band)."""
         L = self.batch * self.n_locations
-        # (a thread a row while the launch's thread indices fit Warp's 32-bit tid)
-        by_row = self.top_band_by_row and all(L * v.top_rows < 2 ** 31 for v in self.views)
+        # (a thread a row while the launch's thread indices fit Warp's 32-bit tid); a rig's cameras
+        # add to each location's counts, which the rows' launch does (top_band writes them)
+        fits = all(L * v.top_rows < 2 ** 31 for v in self.views)
+        by_row = (self.top_band_by_row or len(self.views) > 1) and fits
+        if len(self.views) > 1 and not fits:
+            raise ValueError(f"a rig's top band: {L} locations x {max(v.top_rows for v in self.views)} rows "
+                             f"exceed Warp's 2^31 threads; coarsen grid.x/grid.y")
         if by_row:
             self._launch(K.top_band_clear, L, [gate, TOP_MIN_RHO, *counts])
         for i, v in enumerate(self.views):
