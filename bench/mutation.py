@@ -46,6 +46,8 @@ def clone(commit: str, work: Path, module: str) -> Path:
     work.mkdir(parents=True, exist_ok=True)
     subprocess.run(["git", "clone", "-q", str(ROOT), str(where)], check=True)
     subprocess.run(["git", "-C", str(where), "checkout", "-q", commit], check=True)
+    # the clone's own kernels (the installed package maps dpom_warp.kernels to this checkout's)
+    (where / "dpom_warp" / "kernels").symlink_to("../kernels")
     shared = ROOT.parent / "shared"
     if shared.exists() and not (where.parent / "shared").exists():
         (where.parent / "shared").symlink_to(shared)
