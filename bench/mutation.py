@@ -27,12 +27,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# module -> (its file, the tests that are about it)
+# module -> (its file, the pytest arguments that select the tests about it)
 MODULES = {
     "evaluate": ("dpom_warp/evaluate.py", ["tests/test_detect_eval.py", "tests/test_eval.py"]),
     "tracking": ("dpom_warp/tracking.py", ["tests/test_tracking.py"]),
     "model": ("dpom_warp/model.py", ["tests/test_model_cases.py"]),
-    "config": ("dpom_warp/config/model_section.py", ["tests/test_face.py", "tests/test_errors.py"]),
+    # the config's value types and checks, with the corpus of bad configs and every stated limit
+    "config": ("dpom_warp/values.py", ["tests/test_errors.py", "-k", "bad_config or yaml_syntax or limit"]),
 }
 KILLED, SURVIVED = 1, 0  # mutmut 3's exit codes of a mutant's test run (its .meta files)
 
@@ -53,8 +54,8 @@ def clone(commit: str, work: Path, module: str) -> Path:
         (where.parent / "shared").symlink_to(shared)
     with open(where / "pyproject.toml", "a") as f:
         f.write("\n[tool.mutmut]\n"
-                f"paths_to_mutate = [\"{path}\"]\n"
-                f"tests_dir = {json.dumps(tests)}\n"
+                f"source_paths = [\"{path}\"]\n"
+                f"pytest_add_cli_args_test_selection = {json.dumps(tests)}\n"
                 "also_copy = [\"dpom_warp\", \"kernels\", \"configs\", \"bench\", \"tests\", \"README.md\", \"docs\"]\n")
     # the tests find ../shared from the mutants/ copy too
     if shared.exists():
