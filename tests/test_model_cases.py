@@ -286,3 +286,13 @@ def test_a_shape_is_one_class_and_one_warp_function():
         assert type(geom.shape) is cls and geom.shape == ObjectBox(0.4, 1.8, shape=name).build("ground")
         seen = geom.rect_area > 0
         assert (geom.area[seen] < geom.rect_area[seen]).any() == cls.counted_area  # a solid misses corners
+
+
+def test_sensor_sigma_by_hand():
+    """model.sensor_noise [a, b]: a reading's noise at depth z is a + b z^2 (MODEL.md): with a
+    = 0.01 and b = 0.002, 0.01 at 0 m, 0.012 at 1 m, 0.028 at 3 m, 0.04528 at 4.2 m; arrays
+    and scalars alike (mutation testing found no test holding it)."""
+    p = ModelParams(sensor_noise=(0.01, 0.002))
+    np.testing.assert_allclose(p.sensor_sigma(np.array([0.0, 1.0, 3.0, 4.2])), [0.01, 0.012, 0.028, 0.04528],
+                               rtol=0, atol=1e-12)
+    assert float(p.sensor_sigma(3.0)) == pytest.approx(0.028, abs=1e-12)
