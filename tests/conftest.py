@@ -48,3 +48,14 @@ def rng():
 
 def pytest_report_header(config):
     return f"warp devices: {', '.join(DEVICES)}; WARP_CACHE_PATH={os.environ.get('WARP_CACHE_PATH', 'default')}"
+
+
+TOP_KEYS = ("top_support", "top_against", "top_hidden", "top_missing", "top_seen")  # prior.top_counts' order
+
+
+def assert_top_counts(engine, want):
+    """The engine's top-band counts (people.PeoplePrior.top_counts) equal the reference's
+    (mean_field's top_support ... top_seen), exactly: they are integers."""
+    for key, counts in zip(TOP_KEYS, engine.prior.top_counts, strict=True):
+        np.testing.assert_array_equal(counts.numpy(), want[key], err_msg=key)
+

@@ -5,18 +5,8 @@ colour)."""
 from pathlib import Path
 
 import numpy as np
+from matplotlib.colors import rgb_to_hsv
 from PIL import Image
-
-
-def hue(rgb: np.ndarray) -> np.ndarray:
-    """Hue in degrees (0 to 359) of (N, 3) uint8 colours: an anti-aliased line keeps its hue
-    where it fades into the white behind it."""
-    c = rgb.astype(float) / 255
-    mx, mn = c.max(1), c.min(1)
-    d = np.where(mx > mn, mx - mn, 1.0)
-    r, g, b = c.T
-    h = np.where(mx == r, (g - b) / d % 6, np.where(mx == g, (b - r) / d + 2, (r - g) / d + 4))
-    return (60 * h).astype(int) % 360
 
 
 def assert_picture(path: Path, min_size: tuple[int, int] = (100, 100), colours: int = 16,
@@ -35,6 +25,8 @@ def assert_picture(path: Path, min_size: tuple[int, int] = (100, 100), colours: 
     if plot:
         coloured = (flat.max(1).astype(int) - flat.min(1)) > 60
         assert coloured.mean() > 0.002, f"{path}: {coloured.mean():.2%} coloured pixels: no curve drawn"
-        drawn = int((np.bincount(hue(flat[coloured]) // 30, minlength=12) > 0.0005 * len(flat)).sum())
+        # hue, which an anti-aliased line keeps where it fades into the white behind it, in 30 deg bins
+        hue = rgb_to_hsv(flat[coloured] / 255.0)[:, 0]
+        drawn = int((np.bincount((hue * 12).astype(int) % 12, minlength=12) > 0.0005 * len(flat)).sum())
         assert drawn >= curves, f"{path}: curves in {drawn} colours, expected {curves}"
     return rgb

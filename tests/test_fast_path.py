@@ -298,8 +298,8 @@ def test_sparse_path_matches_sparse_reference(device, seed, streak, graph):
 
 
 def test_direct_launches_give_warps_launches_results():
-    """Engine._launch on the CPU calls the iteration's kernels through argument blocks it keeps
-    (engine._direct): the same rho and rho*, bit for bit, as Warp's Launch.launch, frame after
+    """A Launcher on the CPU calls the iteration's kernels through argument blocks it keeps
+    (engine.launch._direct): the same rho and rho*, bit for bit, as Warp's Launch.launch, frame after
     frame with other depths, a batch and lists that grow (new arrays in the blocks); and an
     engine switched to a graph afterwards replays what Warp's launches give."""
     geom, params, depth, bg_frames = random_scene(3, shape="solid")

@@ -13,6 +13,7 @@ from dpom_warp.engine import Engine
 from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
 from dpom_warp.model import MISSING_READ, TOP_MIN_RHO, ModelParams
 
+from conftest import assert_top_counts
 from scenes import draw_slab, random_scene
 
 
@@ -37,11 +38,7 @@ def test_top_band_matches_reference(device, seed, sigmas, by_row):
     engine.top_band_by_row = by_row
     got = engine.infer(depth)
     want = ref.mean_field(depth, geom, ref.floor_background(geom, params, depth), params)
-    np.testing.assert_array_equal(engine.prior.top_counts[0].numpy(), want["top_support"])
-    np.testing.assert_array_equal(engine.prior.top_counts[1].numpy(), want["top_against"])
-    np.testing.assert_array_equal(engine.prior.top_counts[2].numpy(), want["top_hidden"])
-    np.testing.assert_array_equal(engine.prior.top_counts[3].numpy(), want["top_missing"])
-    np.testing.assert_array_equal(engine.prior.top_counts[4].numpy(), want["top_seen"])
+    assert_top_counts(engine, want)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     assert (want["top_missing"] > 0).any() and (want["top_seen"] == -1).any()  # every count exercised
     judged = want["top_support"] + want["top_against"] + want["top_hidden"]

@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from conftest import assert_same_sums
+from conftest import assert_same_sums, assert_top_counts
 from dpom_warp import reference as ref
 from dpom_warp.engine import Engine
 from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
@@ -504,9 +504,7 @@ def test_shorter_top_bands_match_reference(device, seed, shape, path):
     for by_row in (False, True):  # a thread a location (the CPU's) or a rectangle's row (a GPU's)
         engine.top_band_by_row = by_row
         got = engine.infer(depth)
-        for key, counts in zip(("top_support", "top_against", "top_hidden", "top_missing", "top_seen"),
-                               engine.prior.top_counts):
-            np.testing.assert_array_equal(counts.numpy(), want[key], err_msg=key)
+        assert_top_counts(engine, want)
         np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     plain = ref.mean_field(depth, geom, bg, params.replace(top_heights=()))
     kept_shorter = np.any([want[k] != plain[k] for k in ("top_support", "top_against", "top_hidden")], axis=0)
@@ -571,9 +569,7 @@ def test_band_partly_out_of_view_matches_reference(device, seed, path):
     engine.set_background_frames(bg_frames)
     want = ref.mean_field(depth, geom, bg, params)
     got = engine.infer(depth)
-    for key, counts in zip(("top_support", "top_against", "top_hidden", "top_missing", "top_seen"),
-                           engine.prior.top_counts):
-        np.testing.assert_array_equal(counts.numpy(), want[key], err_msg=key)
+    assert_top_counts(engine, want)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
     partly = ref.band_out_of_view(want["top_seen"], geom.area, params) & (want["top_seen"] >= params.top_min_pixels)
     assert partly.any(), "no band partly out of view"
@@ -699,9 +695,7 @@ def test_a_rig_matches_the_reference(device, seed, cameras, shape, path):
     assert got.iterations == want["iterations"] and got.entries == want["entries"] > 0
     np.testing.assert_allclose(got.rho, want["rho"], rtol=0, atol=1e-6)
     np.testing.assert_allclose(got.rho_star, want["rho_star"], rtol=0, atol=1e-6)
-    for key, counts in zip(("top_support", "top_against", "top_hidden", "top_missing", "top_seen"),
-                           engine.prior.top_counts):
-        np.testing.assert_array_equal(counts.numpy(), want[key], err_msg=key)
+    assert_top_counts(engine, want)
     alone = ref.mean_field(frames[0], geoms[0], bgs[0], params)
     assert np.abs(alone["rho"] - want["rho"]).max() > 1e-3  # the other cameras' pixels count
     assert got.entries == sum(ref.pixel_lists(f, g, b, params)[4] for f, g, b in zip(frames, geoms, bgs))

@@ -112,4 +112,5 @@ class FrameResult:
     # with Engine.joint_threshold: what the detections' joint test needs of the frame, for the
     # locations whose rho* reaches that threshold (joint.JointLists; detect.joint_detections)
     joint: JointLists | None = None
-    drift: DriftEstimate | None = None  # the frame's depth scale (Engine.drift; None: not estimated)
+    # the frame's depth scale (drift.py; None: not estimated; a rig: a list, one a camera)
+    drift: DriftEstimate | list | None = None

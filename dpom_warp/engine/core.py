@@ -93,7 +93,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
             raise ValueError(f"sensor_noise: expected [a, b] >= 0, found {list(params.sensor_noise)}")
         if batch < 1 or tile < 1:
             raise ValueError(f"batch and tile: expected integers >= 1, found {batch} and {tile}")
-        self.params, self.device, self.drift = params, device, drift
+        self.params, self.device = params, device
         self.prior = PeoplePrior(params) if prior is None else prior
         self.resolution = resolution or Resolution()
         self.n_locations = len(geometries[0].rect)
@@ -167,7 +167,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
             self.per_location = wp.zeros(L, dtype=wp.int32)  # kernels.sparse.prune_lists
             # each frame's entries, live, pruned and kept entries (kernels.sparse.frame_tally)
             self.tallies = wp.zeros((4, batch), dtype=wp.int32)
-            self.live_count = wp.zeros(3, dtype=wp.int32)  # live locations (gather_live)
+            self.live_count = wp.zeros(1, dtype=wp.int32)  # live locations (gather_live)
             self.live_changed = wp.zeros(2, dtype=wp.int32)  # live set changed, a location revived
             self.no_index = wp.zeros(0, dtype=wp.int32)
             self.not_done = wp.zeros(batch, dtype=wp.int32)

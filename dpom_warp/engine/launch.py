@@ -14,7 +14,7 @@ import warp as wp
 def _direct(cmd):
     """(entry point, argument block, field names, its address) of a recorded CPU launch that
     Warp invokes with a ctypes block of its arguments (warp's `invoke`, whose block type it
-    caches per kernel at the first launch), for Engine._launch to call the entry point with
+    caches per kernel at the first launch), for Launcher.__call__ to call the entry point with
     a block it keeps; None where the launch is not such (a GPU, tiles, another Warp)."""
     try:
         if not cmd.device.is_cpu or cmd.block_dim > 1 or cmd.adjoint:
@@ -33,7 +33,7 @@ def _direct(cmd):
 
 
 class _Recorded:
-    """Engine._launch's record of one kernel: Warp's recorded command, the dim and inputs of
+    """A Launcher's record of one kernel: Warp's recorded command, the dim and inputs of
     its last launch, its direct call (_direct's tuple; None: Warp's Launch.launch) and, for a
     direct call, the bounds of the current dim and those of each dim seen (ctypes refs)."""
 
