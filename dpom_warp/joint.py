@@ -73,14 +73,24 @@ class JointLists:
         if len(outside):
             raise ValueError(f"joint test: cells {sorted(set(outside.tolist()))} are not among the frame's "
                              f"candidates (rho* at or above the detection threshold)")
+        return self.logit_prior + (self.pixel_terms(cells) - self.exclusion_terms(cells))
+
+    def pixel_terms(self, cells) -> np.ndarray:
+        """(len(cells),) the part of log_odds this camera's pixels give: each cell's evidence at
+        the binary state where `cells` are present, less its behind cost (a rig's cameras add)."""
+        cells = np.asarray(cells, np.int64)
         at = np.searchsorted(self.cells, cells)
         present = np.zeros(len(self.cells), bool)
         present[at] = True
-        evidence = self._evidence(present)[at] - self.behind[at]
-        if self.exclusion > 0:  # each cell's neighbours among the cells, as mean_field finds them
-            start, _ = neighbour_lists(self.locations[at], self.exclusion_radius)
-            evidence -= self.exclusion * np.diff(start)
-        return self.logit_prior + evidence
+        return self._evidence(present)[at] - self.behind[at]
+
+    def exclusion_terms(self, cells) -> np.ndarray:
+        """(len(cells),) exclusion x each cell's neighbours among `cells` (as mean_field finds them)."""
+        cells = np.asarray(cells, np.int64)
+        if self.exclusion <= 0:
+            return np.zeros(len(cells))
+        start, _ = neighbour_lists(self.locations[np.searchsorted(self.cells, cells)], self.exclusion_radius)
+        return self.exclusion * np.diff(start)
 
     def _evidence(self, present) -> np.ndarray:
         """(len(self.cells),) each candidate's evidence_sums at the binary state `present`
@@ -97,3 +107,22 @@ class JointLists:
         B[pixel[second]] = self.D[second]
         first = on & (rank == 1)
         return np.bincount(self.L[first], weights=self.D[first] - B[pixel[first]], minlength=len(self.cells))
+
+
+@dataclass
+class RigJointLists:
+    """The joint test of a rig's frame: one JointLists a camera, over the same candidates. The
+    prior and the exclusion act once per location, every camera's pixels (evidence and behind
+    cost) add: log_odds is reference.joint_log_odds_rig."""
+
+    cameras: list[JointLists]
+
+    @property
+    def cells(self) -> np.ndarray:
+        return self.cameras[0].cells
+
+    def log_odds(self, cells) -> np.ndarray:
+        """(len(cells),) each cell's log posterior odds with the other `cells` present (JointLists.log_odds)."""
+        first = self.cameras[0]
+        first.log_odds(cells)  # (refuses cells that are not candidates)
+        return first.logit_prior + (sum(c.pixel_terms(cells) for c in self.cameras) - first.exclusion_terms(cells))

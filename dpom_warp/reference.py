@@ -264,6 +264,21 @@ def joint_log_odds(depth_m, geom: Geometry, bg: Background, params: ModelParams,
     return np.log(params.prior) - np.log1p(-params.prior) + evidence - behind - params.exclusion * close
 
 
+def joint_log_odds_rig(depths, geoms: list[Geometry], bgs: list[Background], params: ModelParams, cells):
+    """joint_log_odds for a rig (one depth, geometry and background a camera, over one grid):
+    the prior and the exclusion once per location, every camera's evidence and behind cost
+    added (each camera's pixels are independent given the binary state)."""
+    cells = np.asarray(cells, np.int64)
+    if not len(cells):
+        return np.zeros(0)
+    no_prior = params.replace(exclusion=0.0)  # each camera's evidence - behind, read off its own log odds
+    own = [joint_log_odds(d, g, b, no_prior, cells) - (np.log(params.prior) - np.log1p(-params.prior))
+           for d, g, b in zip(depths, geoms, bgs)]
+    where = geoms[0].locations[cells]
+    close = (np.linalg.norm(where[:, None] - where[None], axis=-1) < params.exclusion_radius).sum(1) - 1
+    return np.log(params.prior) - np.log1p(-params.prior) + sum(own) - params.exclusion * close
+
+
 def pixel_lists(depth_m, geom: Geometry, bg: Background, params: ModelParams):
     """The per-pixel lists of a frame as padded arrays: valid, L (locations), D (Delta) of
     shape (pixels with entries, longest list), each pixel's Delta_bg, and the entry count."""

@@ -60,8 +60,8 @@ def test_a_person_hidden_from_one_camera_is_found_by_the_rig():
 
 
 def test_a_rig_needs_one_grid_and_a_frame_per_camera():
-    """The cameras of a rig see the same locations; frames come one a camera; the joint test
-    (one camera's lists) is refused for a rig: one-line errors naming what was expected."""
+    """The cameras of a rig see the same locations; frames come one a camera: one-line errors
+    naming what was expected."""
     grid, geoms = two_cameras()
     other = build_geometry(Camera(64, 48, 45.0, 45.0, 31.5, 23.5, pose_from_angles(1.0, 0.0)),
                            Grid(x=(-1.5, 1.5, 0.5), y=(1.5, 5.5, 0.5)), ObjectBox(0.5, 1.8, shape="plane"))
@@ -71,5 +71,35 @@ def test_a_rig_needs_one_grid_and_a_frame_per_camera():
     rig = Engine(geoms, ModelParams(), "cpu")
     with pytest.raises(ValueError, match=r"^depth: expected a list of 2 frames, one a camera of the rig, found 1 entries"):
         rig.infer([np.zeros((48, 64), np.float32)])
-    with pytest.raises(ValueError, match=r"^detection.min_log_odds: the joint test reads one camera's lists"):
-        rig.joint_threshold = 0.5
+
+
+@pytest.mark.parametrize("ordered", [False, True])
+def test_the_joint_test_of_a_rig_adds_every_cameras_pixels(ordered):
+    """The joint test acts once per location: its log odds are the prior's and the exclusion's
+    once plus every camera's evidence and behind cost (reference.joint_log_odds_rig, by the
+    per-camera reference), on a random two-camera rig with the behind cost on, both ways of
+    copying the lists out (ordered: the GPU's count, scan and fill, run here on the CPU). Each
+    camera's own odds differ from the rig's (the other camera's pixels count)."""
+    from scenes import random_rig
+
+    geoms, params, frames, bg_frames = random_rig(3, 2, shape="solid")
+    params = params.replace(behind_cost=2.0, behind_low=0.3, behind_step=1, exclusion=0.5)
+    engine = Engine(geoms, params, "cpu")
+    engine.ordered_joint_lists = ordered
+    for c, frames_c in enumerate(bg_frames):
+        engine.set_background_frames(frames_c, camera=c)
+    star = np.asarray(engine.infer(frames).rho_star, np.float32)
+    threshold = float(np.sort(star)[-6])
+    engine.joint_threshold = threshold
+    joint = engine.infer(frames).joint
+    candidates = np.flatnonzero(star >= threshold)
+    np.testing.assert_array_equal(joint.cells, candidates)
+    bgs = [ref.background_from_frames(b, params) for b in bg_frames]
+    for size in (1, 3, len(candidates)):
+        cells = np.random.default_rng(size).choice(candidates, size=size, replace=False)
+        want = ref.joint_log_odds_rig(frames, geoms, bgs, params, cells)
+        np.testing.assert_allclose(joint.log_odds(cells), want, rtol=1e-6, atol=1e-6)
+        alone = ref.joint_log_odds(frames[0], geoms[0], bgs[0], params, cells)
+        assert np.abs(alone - want).max() > 1e-3
+    with pytest.raises(ValueError, match="not among the frame's candidates"):
+        joint.log_odds([int(np.flatnonzero(star < threshold)[0])])

@@ -196,9 +196,6 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
 
     @joint_threshold.setter
     def joint_threshold(self, value: float | None):
-        if value is not None and len(self.views) > 1:
-            raise ValueError(f"detection.min_log_odds: the joint test reads one camera's lists; expected 0 for "
-                             f"a rig of {len(self.views)} cameras")
         self.prior.joint_threshold = value
 
     def launchers(self) -> list[Launcher]:

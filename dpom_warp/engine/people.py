@@ -9,7 +9,8 @@ field (the lists, the iterations, the soft threshold) knows them only through th
   object's top shows (kernels.top_band), for the object and for shorter people, scales rho*
   (kernels.soft_threshold's top factor).
 - The joint test's lists (joint.JointLists, detect.joint_detections): the candidates' entries
-  copied out after a frame, with their readings behind.
+  copied out after a frame, with their readings behind, one camera's after another (a rig's:
+  joint.RigJointLists, whose log odds add every camera's terms to the prior's once).
 
 `Prior` is the interface and a prior that adds nothing: every location judged by its pixels
 alone (a drone's, or a run that turns the people tests off); `PeoplePrior` reads the tests'
@@ -23,7 +24,7 @@ import numpy as np
 import warp as wp
 
 from .. import kernels as K
-from ..joint import JointLists
+from ..joint import JointLists, RigJointLists
 from ..model import BAND_ALL, ModelParams
 from .base import BEHIND_POINT_BYTES
 
@@ -203,11 +204,20 @@ class PeoplePrior(Prior):
         order on one thread, sorted to be sure) and read through NumPy views of the arrays."""
         if self.joint_threshold is None:
             return [None] * len(rho_star)
-        (v,), (cam,) = engine.views, self.cameras  # the joint test reads one camera's lists (one camera today)
         n, locations, batch = len(rho_star), engine.n_locations, engine.batch
         marked = np.zeros((batch, locations), np.int32)
         marked[:n] = np.asarray(rho_star, np.float32) >= self.joint_threshold
         self.candidate.assign(marked.ravel())
+        cells = np.flatnonzero(marked[:n])
+        per_camera = [self._camera_joint(engine, v, cam, cells, n) for v, cam in zip(engine.views, self.cameras)]
+        if len(per_camera) == 1:
+            return per_camera[0]
+        return [RigJointLists(list(frame)) for frame in zip(*per_camera)]  # a rig: every camera's sums add
+
+    def _camera_joint(self, engine, v, cam, cells: np.ndarray, n: int) -> list:
+        """One camera's JointLists of each of the batch's `n` frames for the candidates marked in
+        self.candidate (`cells`, ascending over the batch)."""
+        locations, batch = engine.n_locations, engine.batch
         if engine.ordered_joint_lists:
             v.compact(self.candidate, engine.not_done)
             # the pixels with entries in order: a flag each (into active_next), its inclusive
@@ -241,5 +251,5 @@ class PeoplePrior(Prior):
             behind = p.behind_cost * self.candidate_behind.numpy().reshape(batch, locations).astype(np.float64)
         else:
             behind = np.zeros((batch, locations))
-        return JointLists.of_batch(np.flatnonzero(marked[:n]), active, count, loc, delta, dbg, behind[:n],
+        return JointLists.of_batch(cells, active, count, loc, delta, dbg, behind[:n],
                                    v.geometry.locations, p, locations, v.n_pixels)
