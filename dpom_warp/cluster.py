@@ -304,7 +304,8 @@ class ActorPool:
         in_flight = {}
 
         def send(i, run, chunk, losses):
-            sent = [dataclasses.replace(item, data=_read(item.path)) for item in chunk]
+            sent = [dataclasses.replace(item, data=_read(item.path) if item.paths is None else  # a rig: each camera's
+                                        tuple(None if p is None else _read(p) for p in item.paths)) for item in chunk]
             in_flight[self.actors[i].process.remote(run, refs[run], sent)] = (i, run, chunk, losses)
             self.load[i] += 1
 

@@ -319,3 +319,33 @@ def neighbour_lists(locations: np.ndarray, radius: float) -> tuple[np.ndarray, n
     start = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(both[:, 0], minlength=n), out=start[1:])
     return start.astype(np.int32), (both[:, 1].astype(np.int32) if len(both) else np.zeros(1, np.int32))
+
+
+@dataclass
+class RigGeometry:
+    """A rig's full-resolution geometries (`parts`, one a camera, over one grid) as what reads one
+    geometry needs of them: the locations; the first camera's rectangles (detections.csv's box);
+    each location's largest rectangle area and share in view over the cameras (in view of any
+    one: detections, tracking's entry cells, the map's footprint); the first camera's centre."""
+
+    parts: list
+
+    @property
+    def locations(self) -> np.ndarray:
+        return self.parts[0].locations
+
+    @property
+    def rect(self) -> np.ndarray:
+        return self.parts[0].rect
+
+    @property
+    def rect_area(self) -> np.ndarray:
+        return np.max([g.rect_area for g in self.parts], axis=0)
+
+    @property
+    def view_part(self) -> np.ndarray:
+        return np.max([g.view_part for g in self.parts], axis=0)
+
+    @property
+    def centre(self) -> np.ndarray:
+        return self.parts[0].centre

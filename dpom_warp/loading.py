@@ -60,10 +60,21 @@ def camera_from_recording(raw: dict) -> dict:
 
 def config_from_mapping(raw: dict) -> RunConfig:
     """A config mapping (as loaded from YAML, overrides applied) validated into a RunConfig, with
-    the camera keys it leaves out taken from `camera.file`, then from the recording it names."""
+    the camera keys it leaves out taken from `camera.file`, then from the recording it names; a
+    rig's (`cameras:`) camera by camera (rig_from_mapping)."""
+    if isinstance(raw, dict) and "cameras" in raw:
+        return rig_from_mapping(raw)
     if isinstance(raw, dict):
         raw = camera_from_recording(camera_from_file(camera_shorthand(raw)))
     return parse_config(raw)
+
+
+def rig_from_mapping(raw: dict) -> RunConfig:
+    """A rig's config (`cameras:`): config.rig.parse_rig with each camera's keys filled in from
+    its camera file or recording."""
+    from .config.rig import parse_rig
+
+    return parse_rig(raw, config_from_mapping)
 
 
 def load_config(path: str | Path, overrides: list[str] | None = None) -> RunConfig:

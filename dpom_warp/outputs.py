@@ -153,8 +153,15 @@ def summarise(cfg, done, records, skipped, truth, geometry, dev, background, gro
         "per_frame": per_frame,
     }
     drifts = {p["frame"]: p["drift"] for p in per_frame if "drift" in p}
-    if drifts:  # each frame's estimate is in its record (and per_frame); here their range
+    rig = hasattr(geometry, "parts")  # a rig's (geometry.RigGeometry)
+    if drifts and rig:  # each camera's range
+        summary["drift"] = {n: drift_summary({f: d[n] for f, d in drifts.items() if d.get(n)}) for n, _ in cfg.cameras}
+    elif drifts:  # each frame's estimate is in its record (and per_frame); here their range
         summary["drift"] = drift_summary(drifts)
+    if rig:  # each camera's frames, and the rig frames it had none for (inferred from the others)
+        summary["cameras"] = {n: {"frames": sum(records[f.name]["cameras"][n] is not None for f in done),
+                                  "missing": [f.name for f in done if records[f.name]["cameras"][n] is None]}
+                              for n, _ in cfg.cameras}
     if truth is not None and done:
         dims = 3 if cfg.grid.mode == "voxel" else 2
         det_xy = {f.name: np.array(records[f.name]["xy"]).reshape(-1, dims) for f in done}

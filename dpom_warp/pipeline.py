@@ -13,7 +13,7 @@ import numpy as np
 from .config import ConfigError, RunConfig
 from .evaluate import load_ground_truth
 from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
-from .geometry import build_geometry
+from .geometry import RigGeometry, build_geometry
 from .io import InputError, write_json_atomic
 from .outputs import (RUN_STATE, ShownTracks, check_output, fps_of, pictures_deferred, remove_temporaries, summarise)
 from .session import Setup, set_up
@@ -47,7 +47,7 @@ class RunPlan(Setup):
 
     def chunks(self) -> list[list[FrameItem]]:
         """The frames to do in engine batches, in frame order (their files not read yet)."""
-        items = [FrameItem(str(f), None, self.truth.get(f.name) if self.truth else None)
+        items = [FrameItem(str(f), None, self.truth.get(f.name) if self.truth else None, getattr(f, "paths", None))
                  for f in self.todo]
         n = self.cfg.engine.batch
         return [items[i:i + n] for i in range(0, len(items), n)]
@@ -151,10 +151,10 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
                           skipped=plan.skipped, grown=plan.grown, by_worker=plan.by_worker,
                           timestamps=plan.timestamps, strict=plan.strict)
     plan.view, plan.writers = plan.loop.view, plan.loop.writers
-    log(f"device {plan.device}; {plan.geometry.locations.shape[0]} locations {cfg.grid.shape}; "
+    images = i["image"] if cfg.is_rig else [i["image"]]
+    log(f"device {plan.device}; {int(np.prod(cfg.grid.shape))} locations {cfg.grid.shape}; "
         f"{len(plan.frames)} frame{'' if len(plan.frames) == 1 else 's'}; background: {plan.background}; "
-        f"inference at {i['image'][0]}x"
-        f"{i['image'][1]} pixels (stride {i['stride']}{', ' + i['reduce'] if i['stride'] > 1 else ''}"
+        f"inference at {' and '.join(f'{w}x{h}' for w, h in images)} pixels (stride {i['stride']}{', ' + i['reduce'] if i['stride'] > 1 else ''}"
         f"{', exact path' if cfg.engine.exact else ''}"
         f"{f', {cfg.engine.batch} frames an engine call' if cfg.engine.batch > 1 else ''})")
     again = []
@@ -371,10 +371,13 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
             raise ConfigError(f"--set {key}: expected a tracking.* key, input.fps, output.images, output.rerun or output.view "
                               f"(the rest of a run changes only by inferring again)")
     cfg = parse_config(apply_overrides(raw, overrides))
-    camera = cfg.camera
-    if cfg.pose_auto:
-        camera = dataclasses.replace(camera, T_world_from_camera=np.array(
-            summary["ground_fit"]["T_world_from_camera"], float))
+    fits = summary.get("ground_fit") if cfg.is_rig else [summary.get("ground_fit")]
+    cameras = []
+    for c, (_, m) in enumerate(cfg.members()):  # each camera as the run posed it
+        camera = m.camera
+        if m.pose_auto:
+            camera = dataclasses.replace(camera, T_world_from_camera=np.array(fits[c]["T_world_from_camera"], float))
+        cameras.append(camera)
     names = [p["frame"] for p in summary["per_frame"]]
     if cfg.live and (cfg.output.images or cfg.output.rerun or cfg.output.view):
         raise InputError(f"{run_dir}: a live run keeps no frames (input.frames: {cfg.inputs.frames}"
@@ -382,7 +385,12 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
                          f"pictures and Rerun log cannot be drawn again; expected --set output.images=false "
                          f"--set output.rerun=null (tracks.csv, track_table.csv and the summary only)")
     if cfg.output.images:
-        by_name = {f.name: f for f in expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, log)}
+        if cfg.is_rig:  # each camera's frames paired again
+            from .frames import rig_frames
+
+            by_name = {f.name: f for f in rig_frames(cfg, log=lambda *_: None).frames}
+        else:
+            by_name = {f.name: f for f in expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, log)}
         missing = [n for n in names if n not in by_name]
         if missing:
             raise InputError(f"input.frames: {cfg.inputs.frames} has no frame {missing[0]} of the run "
@@ -395,7 +403,9 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
         if not (run_dir / "maps" / f"{Path(n).stem}.npy").is_file():
             raise InputError(f"{run_dir / 'maps' / (Path(n).stem + '.npy')}: missing occupancy map")
     truth = load_ground_truth(cfg.evaluation.ground_truth) if cfg.evaluation.ground_truth else None
-    view = RunView(cfg, run_dir, build_geometry(camera, cfg.grid, cfg.obj), camera)
+    geometries = [build_geometry(c, cfg.grid, cfg.obj) for c in cameras]
+    view = RunView(cfg, run_dir, RigGeometry(geometries) if cfg.is_rig else geometries[0],
+                   cameras if cfg.is_rig else cameras[0])
     # the writers of what tracking changes: the pictures (all drawn again), the Rerun log, the
     # tracks' tables and summary.json
     writers = Writers(([Pictures(view)] if cfg.output.images else []) +

@@ -163,7 +163,9 @@ def fly(spec: SceneSpec, camera: Camera, boxes, rng: np.random.Generator):
         return all(not (b[0] - 0.35 < x < b[1] + 0.35 and b[2] - 0.35 < y < b[3] + 0.35 and z < b[4] + 0.2)
                    for b in boxes)
 
-    def in_view(x, y, z):
+    def in_view(x, y, z, camera=camera):
+        if isinstance(camera, (list, tuple)):  # a rig: in one camera's view at least
+            return any(in_view(x, y, z, c) for c in camera)
         u, v, depth = camera.project(np.array([[x + dx, y, z + dz] for dx in (-0.2, 0.2) for dz in (-0.06, 0.06)]))
         return bool(np.all(depth > 0.5) and np.all((u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)))
 
@@ -277,7 +279,9 @@ def sensor_noise(depth, spec: SceneSpec, rng: np.random.Generator):
 
 
 def _in_view(camera: Camera, x, y, top, from_above=False):
-    """Feet and head in the image, or (`from_above`) the head."""
+    """Feet and head in the image, or (`from_above`) the head; `camera` a list: in one of them."""
+    if isinstance(camera, (list, tuple)):
+        return any(_in_view(c, x, y, top, from_above) for c in camera)
     u, v, z = camera.project(np.array([[x, y, top]] if from_above else [[x, y, 0.0], [x, y, top]]))
     return bool(np.all(z > 0.3) and np.all((u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)))
 
@@ -432,6 +436,70 @@ def _walk_pairs(spec: SceneSpec, ok, heights, builds, rng: np.random.Generator):
     return frames
 
 
+def furnish(spec: SceneSpec, rng: np.random.Generator):
+    """(the room's meshes, the footprints people keep off, the boxes drones keep clear of)."""
+    room, footprints = room_meshes(spec, rng)
+    boxes = [(*f, 3.0) for f in footprints]
+    if spec.obstacles:
+        extra, inside = obstacle_meshes(spec, rng, footprints)
+        room, boxes = room + extra, boxes + inside
+        if spec.kind == "people":  # people walk around them (and behind them, hidden)
+            footprints = footprints + [b[:4] for b in inside]
+    if spec.tables:
+        extra, placed = table_meshes(spec, rng, footprints)
+        room, footprints, boxes = room + extra, footprints + placed, boxes + [(*f, 0.8) for f in placed]
+    return room, footprints, boxes
+
+
+def clear_frames(out: Path) -> None:
+    """out/frames and out/background made, emptied of a scene rendered before with more frames
+    (not of a concurrent render's hidden temporary files)."""
+    for sub in ("frames", "background"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+        for old in (out / sub).glob("[0-9]*.png"):
+            old.unlink()
+
+
+def moves(spec: SceneSpec, camera, footprints, boxes, rng: np.random.Generator) -> list:
+    """The objects of every frame (walk, stroll or fly), kept in view of `camera` (a list: of
+    one of them at least)."""
+    if spec.kind == "people":
+        return (stroll if spec.motion == "paths" else walk)(spec, camera, footprints, rng)
+    return fly(spec, camera, boxes, rng)
+
+
+def placed_meshes(spec: SceneSpec, people: list) -> list:
+    """The meshes of one frame's objects, placed."""
+    if spec.kind == "people":
+        meshes = [person_mesh(p["height"], p["heading"], p["phase"], p["build"]) for p in people]
+    else:
+        meshes = [drone_mesh(p["heading"]) for p in people]
+    for m, p in zip(meshes, people):
+        m.translate((p["x"], p["y"], p.get("z", 0.0)))
+    return meshes
+
+
+def seen_objects(meshes, people, ids, gid, camera: Camera) -> list:
+    """Each object's ground truth as `camera` sees it in a frame whose geometry ids are `gid`
+    (its box and the share of it in view), None where it is out of view or wholly hidden."""
+    objects = []
+    for n, (m, p, pid) in enumerate(zip(meshes, people, ids)):
+        alone, _ = _scene([m])
+        ta, _ = render(alone, camera)
+        full = np.isfinite(ta)
+        visible = int((gid == pid).sum())
+        if visible == 0:  # out of view or wholly hidden: nothing in the image to find
+            objects.append(None)
+            continue
+        vv, uu = np.nonzero(full)
+        obj = {"id": n, "x": round(p["x"], 4), "y": round(p["y"], 4), "z": round(p.get("z", 0.0), 4)}
+        if "height" in p:
+            obj["height"] = round(p["height"], 3)
+        objects.append({**obj, "bbox": [int(uu.min()), int(vv.min()), int(uu.max()), int(vv.max())],
+                        "visibility": round(visible / float(full.sum()), 4)})
+    return objects
+
+
 def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
     """Render the sequence into `out_dir` (frames/, background/, ground_truth.json, scene.json).
 
@@ -462,21 +530,9 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
     if spec.motion not in ("random", "paths"):
         raise ValueError(f"synthetic.motion: expected random or paths, found {spec.motion!r}")
     rng = np.random.default_rng(spec.seed)
-    room, footprints = room_meshes(spec, rng)
-    boxes = [(*f, 3.0) for f in footprints]
-    if spec.obstacles:
-        extra, inside = obstacle_meshes(spec, rng, footprints)
-        room, boxes = room + extra, boxes + inside
-        if spec.kind == "people":  # people walk around them (and behind them, hidden)
-            footprints = footprints + [b[:4] for b in inside]
-    if spec.tables:
-        extra, placed = table_meshes(spec, rng, footprints)
-        room, footprints, boxes = room + extra, footprints + placed, boxes + [(*f, 0.8) for f in placed]
+    room, footprints, boxes = furnish(spec, rng)
     meta.unlink(missing_ok=True)  # an interrupted render is never taken for a finished one
-    for sub in ("frames", "background"):
-        (out / sub).mkdir(parents=True, exist_ok=True)
-        for old in (out / sub).glob("[0-9]*.png"):  # a scene rendered before with more frames
-            old.unlink()  # (not a concurrent render's hidden temporary files)
+    clear_frames(out)
     static, _ = _scene(room)
     t_static, _ = render(static, camera)
     scales = drift_scales(spec)
@@ -484,36 +540,13 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
         write_depth_png(out / "background" / f"{f:04d}.png",
                         sensor_noise(t_static, spec, rng) * scales["background"][f])
     truth = []
-    if spec.kind == "people":
-        sequence = (stroll if spec.motion == "paths" else walk)(spec, camera, footprints, rng)
-    else:
-        sequence = fly(spec, camera, boxes, rng)
-    for f, people in enumerate(sequence):
-        if spec.kind == "people":
-            meshes = [person_mesh(p["height"], p["heading"], p["phase"], p["build"]) for p in people]
-        else:
-            meshes = [drone_mesh(p["heading"]) for p in people]
-        for m, p in zip(meshes, people):
-            m.translate((p["x"], p["y"], p.get("z", 0.0)))
+    for f, people in enumerate(moves(spec, camera, footprints, boxes, rng)):
+        meshes = placed_meshes(spec, people)
         scene, ids = _scene(room + meshes)
         t, gid = render(scene, camera)
         name = f"{f:04d}.png"
         write_depth_png(out / "frames" / name, sensor_noise(t, spec, rng) * scales["frames"][f])
-        objects = []
-        for n, (m, p, pid) in enumerate(zip(meshes, people, ids[len(room):])):
-            alone, _ = _scene([m])
-            ta, _ = render(alone, camera)
-            full = np.isfinite(ta)
-            visible = int((gid == pid).sum())
-            if visible == 0:  # out of view or wholly hidden: nothing in the image to find
-                continue
-            vv, uu = np.nonzero(full)
-            obj = {"id": n, "x": round(p["x"], 4), "y": round(p["y"], 4), "z": round(p.get("z", 0.0), 4)}
-            if "height" in p:
-                obj["height"] = round(p["height"], 3)
-            objects.append({**obj,
-                            "bbox": [int(uu.min()), int(vv.min()), int(uu.max()), int(vv.max())],
-                            "visibility": round(visible / float(full.sum()), 4)})
+        objects = [o for o in seen_objects(meshes, people, ids[len(room):], gid, camera) if o is not None]
         truth.append({"frame": name, "objects": objects})
     write_json_atomic(out / "ground_truth.json", truth)
     drift_file = out / "drift.json"

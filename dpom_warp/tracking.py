@@ -84,9 +84,13 @@ class Cells:
            edge_view: float = 0.5) -> "Cells":
         """From a run's full-resolution geometry: entry cells are the cells the camera sees on
         the grid's border, beside a cell it does not see, whose silhouette leaves the image
-        (`image_size` = (width, height)), or inside a configured region [x0, x1, y0, y1]."""
+        (`image_size` = (width, height)), or inside a configured region [x0, x1, y0, y1]. A rig's
+        (geometry.RigGeometry, `image_size` a list, one a camera): the cells any camera sees, on the
+        border, beside a cell none sees, or cut by the image's edge in every camera that sees them."""
         shape = grid.shape
-        seen = (geometry.rect_area > 0).reshape(shape)
+        rig = getattr(geometry, "parts", None) or [geometry]  # a rig (geometry.RigGeometry): what any camera sees
+        sizes = image_size if len(rig) > 1 or isinstance(image_size, list) else [image_size]
+        seen = np.any([g.rect_area > 0 for g in rig], axis=0).reshape(shape)
         border = np.zeros(shape, bool)
         for axis in range(len(shape)):
             idx = [slice(None)] * len(shape)
@@ -98,10 +102,12 @@ class Cells:
         padded = np.pad(~seen, 1, constant_values=False)
         for off in np.ndindex(*(3,) * len(shape)):
             beside |= padded[tuple(slice(o, o + n) for o, n in zip(off, shape))]
-        w, h = image_size
-        r = geometry.rect
-        leaves = ((r[:, 0] <= 0) | (r[:, 1] <= 0) | (r[:, 2] >= w - 1) | (r[:, 3] >= h - 1)).reshape(shape)
-        p = geometry.locations
+        leaves = np.ones(shape, bool)  # in every camera that sees it, the silhouette leaves the image
+        for g, (w, h) in zip(rig, sizes):
+            r = g.rect
+            cut = (r[:, 0] <= 0) | (r[:, 1] <= 0) | (r[:, 2] >= w - 1) | (r[:, 3] >= h - 1)
+            leaves &= (cut | (g.rect_area <= 0)).reshape(shape)
+        p = rig[0].locations
         inside = np.zeros(len(p), bool)
         for x0, x1, y0, y1 in regions:
             inside |= (p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)
@@ -115,7 +121,8 @@ class Cells:
         """`of` with a run config's grid, image size, tracking.regions and detection's
         nms_radius, edge_radius and edge_view."""
         d = cfg.detection
-        return cls.of(geometry, cfg.grid, (cfg.camera.width, cfg.camera.height), cfg.tracking.regions,
+        sizes = [(m.camera.width, m.camera.height) for _, m in cfg.members()]
+        return cls.of(geometry, cfg.grid, sizes if cfg.is_rig else sizes[0], cfg.tracking.regions,
                       d.nms_radius, d.edge_radius, d.edge_view)
 
     def nearest(self, xyz) -> int:

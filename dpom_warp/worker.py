@@ -29,7 +29,7 @@ import numpy as np
 from .config import ConfigError, RunConfig
 from .detect import joint_detections
 from .engine import Engine, ListOverflow
-from .geometry import Camera, build_geometry
+from .geometry import Camera, RigGeometry, build_geometry
 from .io import InputError, read_depth
 from .resolution import Resolution, auto_stride
 
@@ -56,6 +56,7 @@ class FrameItem:
     path: str
     data: bytes | None = None
     truth: list | None = None
+    paths: tuple | None = None  # a rig's frame: each camera's file (None: no frame of that camera)
 
 
 @dataclasses.dataclass
@@ -71,13 +72,16 @@ class FrameOutput:
     grown: list
 
 
-def resolution_of(cfg: RunConfig, camera: Camera) -> Resolution:
-    """input.stride (auto: resolution.auto_stride for this camera and grid) and input.reduce."""
-    stride = (auto_stride(camera, cfg.grid, cfg.obj) if cfg.inputs.stride == "auto"
+def resolution_of(cfg: RunConfig, camera: Camera | list[Camera]) -> Resolution:
+    """input.stride (auto: resolution.auto_stride for this camera and grid; a rig's cameras:
+    the finest any of them chooses) and input.reduce."""
+    cameras = camera if isinstance(camera, list) else [camera]
+    stride = (min(auto_stride(c, cfg.grid, cfg.obj) for c in cameras) if cfg.inputs.stride == "auto"
               else cfg.inputs.stride)
-    if min(camera.width // stride, camera.height // stride) < 1:
-        raise ConfigError(f"input.stride: expected a stride that leaves at least one pixel of "
-                          f"the {camera.width}x{camera.height} image, found {stride}")
+    for c in cameras:
+        if min(c.width // stride, c.height // stride) < 1:
+            raise ConfigError(f"input.stride: expected a stride that leaves at least one pixel of "
+                              f"the {c.width}x{c.height} image, found {stride}")
     return Resolution(stride, cfg.inputs.reduce, cfg.model.z_max)
 
 
@@ -86,12 +90,24 @@ def read_frame(cfg: RunConfig, path, data: bytes | None = None) -> np.ndarray:
     return read_depth(path, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width), data)
 
 
+def read_rig_frame(cfg: RunConfig, paths, data: tuple | None = None) -> list[np.ndarray]:
+    """A rig's frame in metres, one a camera (read with its own input section; `data`: the
+    files' bytes); a camera with no frame there (None) reads nothing: all zeros, which the model
+    explains the same whatever stands where (no reading is as likely under every hypothesis)."""
+    data = data or (None,) * len(paths)
+    return [read_frame(m, p, b) if p is not None else np.zeros((m.camera.height, m.camera.width), np.float32)
+            for (_, m), p, b in zip(cfg.cameras, paths, data)]
+
+
 def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engine:
     """The engine of a run (engine.* options) at the run's inference resolution, for `batch`
     frames per call; it takes frames at the camera's full resolution (reduced by the engine:
     on a GPU by a kernel) or already reduced by engine.resolution.frames."""
     resolution = resolution_of(cfg, camera)
-    geometry = build_geometry(resolution.camera(camera), cfg.grid, cfg.obj)
+    if isinstance(camera, list):  # a rig: one geometry a camera
+        geometry = [build_geometry(resolution.camera(c), cfg.grid, cfg.obj) for c in camera]
+    else:
+        geometry = build_geometry(resolution.camera(camera), cfg.grid, cfg.obj)
     # the tile index's tiles (where the pixel table is not used) keep about 8 x 8 full-resolution
     # pixels' worth of the scene (2 x 2 at stride 4: list building ~20 % faster than 8 x 8 there)
     tile = max(2, round(8 / resolution.stride))
@@ -122,10 +138,16 @@ class FrameWorker:
     def __init__(self, spec: WorkerSpec, name: str = "main", engine: Engine | None = None):
         self.cfg, self.name = spec.cfg, name
         self.pictures = spec.cfg.output.images and spec.pictures
-        self.geometry = build_geometry(spec.camera, spec.cfg.grid, spec.cfg.obj)  # full resolution
+        self.rig = isinstance(spec.camera, list)
+        self.geometry = (RigGeometry([build_geometry(c, spec.cfg.grid, spec.cfg.obj) for c in spec.camera]) if self.rig
+                         else build_geometry(spec.camera, spec.cfg.grid, spec.cfg.obj))  # full resolution
         if engine is None:
             engine = make_engine(spec.cfg, spec.camera, spec.device, spec.cfg.engine.batch)
-            if spec.background is not None:
+            if self.rig:
+                for c, state in enumerate(spec.background or []):
+                    if state is not None:
+                        engine.set_background(*state, camera=c)
+            elif spec.background is not None:
                 engine.set_background(*spec.background)
         self.engine = engine
 
@@ -135,7 +157,8 @@ class FrameWorker:
         for item in items:
             t = time.perf_counter()
             try:
-                depth = read_frame(self.cfg, item.path, item.data)
+                depth = (read_rig_frame(self.cfg, item.paths, item.data) if item.paths is not None
+                         else read_frame(self.cfg, item.path, item.data))
             except InputError as e:
                 outcomes.append((Path(item.path).name, None, str(e)))
                 continue
@@ -153,7 +176,7 @@ class FrameWorker:
         if len(read) > 1:
             grown, t0 = len(engine.grown), time.perf_counter()
             try:
-                results = engine.infer_batch(np.stack([d for _, d, _ in read]))  # reduced by the engine
+                results = engine.infer_batch(stacked([d for _, d, _ in read], self.rig))  # reduced by the engine
             except ListOverflow:
                 pass  # each frame alone below
             else:
@@ -188,7 +211,11 @@ class FrameWorker:
         rho_map = rho_map.astype(np.float32)  # the map written, which later pictures are drawn from
         t2 = time.perf_counter()
         files = {}
-        if self.pictures:
+        if self.pictures and self.rig:
+            from .render_rig import rig_picture
+
+            files[f"images/{f.stem}.png"] = rig_picture(depth, rho_map, cfg, geometry.parts, dets, item.truth, f.name)
+        elif self.pictures:
             from .render import frame_picture
 
             files[f"images/{f.stem}.png"] = frame_picture(depth, rho_map, cfg.grid, dets,
@@ -209,19 +236,31 @@ class FrameWorker:
                       "infer_s": infer_s, "detect_s": t2 - t1, "render_s": t3 - t2,
                       "worker": self.name, **{f"engine_{k}": v for k, v in res.timings.items()}},
         }
-        if res.drift is not None:  # the frame's depth scale against the background (drift.py)
+        if self.rig:  # each camera's file (None: inferred from the others) and drift
+            names = [n for n, _ in cfg.cameras]
+            record["cameras"] = {n: (Path(p).name if p is not None else None) for n, p in zip(names, item.paths)}
+            if res.drift is not None:
+                record["stats"]["drift"] = {n: (d.record() if d is not None else None) for n, d in zip(names, res.drift)}
+        elif res.drift is not None:  # the frame's depth scale against the background (drift.py)
             record["stats"]["drift"] = res.drift.record()
         return f.name, FrameOutput(f.name, f.stem, rho_map, files, record,
                                    list(grown)), None
 
 
+def stacked(depths: list, rig: bool):
+    """A batch's frames as the engine takes them: (n, H, W), a rig's one such a camera."""
+    if not rig:
+        return np.stack(depths)
+    return [np.stack([d[c] for d in depths]) for c in range(len(depths[0]))]
+
+
 def ply_files(stem: str, depth, geometry, dets, cfg: RunConfig) -> dict[str, bytes]:
-    """For Open3D's viewer: ply/<stem>_points.ply (the frame's points, world metres) and
-    ply/<stem>_boxes.ply (the detected object boxes as a mesh), as bytes."""
+    """For Open3D's viewer: ply/<stem>_points.ply (the frame's points, world metres; a rig's:
+    every camera's) and ply/<stem>_boxes.ply (the detected object boxes as a mesh), as bytes."""
     import open3d as o3d
 
-    ok = depth > 0
-    pts = geometry.centre + depth[ok][:, None].astype(np.float64) * geometry.rays[ok]
+    views = list(zip(depth, geometry.parts)) if hasattr(geometry, "parts") else [(depth, geometry)]
+    pts = np.concatenate([g.centre + d[d > 0][:, None].astype(np.float64) * g.rays[d > 0] for d, g in views])
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
     boxes = o3d.geometry.TriangleMesh()
     size = np.array([cfg.obj.width, cfg.obj.depth or cfg.obj.width, cfg.obj.height])

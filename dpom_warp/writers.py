@@ -80,6 +80,10 @@ class FrameDone:
     @cached_property
     def depth(self) -> np.ndarray:
         cfg = self.run.cfg
+        if cfg.is_rig:  # a rig's frame (frames.RigFrame): one depth a camera
+            from .worker import read_rig_frame
+
+            return read_rig_frame(cfg, self.path.paths)
         return read_depth(self.path, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width))
 
     @property
@@ -328,6 +332,10 @@ def writers_for(run: RunView, rerun: bool = True) -> Writers:
 def tracked_picture(cfg: RunConfig, geometry, depth, rho_map, dets, name: str, truth, shown) -> bytes:
     """A frame's picture with the tracks `shown` on it (ShownTracks; None: no tracks), as a
     finished run and a live run draw it."""
+    if cfg.is_rig:
+        from .render_rig import rig_picture
+
+        return rig_picture(depth, rho_map, cfg, geometry.parts, dets, truth, name, tracks=shown)
     from .render import frame_picture
 
     return frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2], truth, name,

@@ -129,7 +129,7 @@ def test_auto_aligns_its_frames_before_estimating(drifting):
     """`auto` brings each frame to the frames' median scale before its clusters (the report says
     how many it corrected), then each frame's estimate is its scale over that median (0.3 %)."""
     from dpom_warp.loading import load_config
-    from dpom_warp.session import frame_scales
+    from dpom_warp.camera_setup import frame_scales
     from dpom_warp.io import read_depth
 
     tmp, path, cfg, scales = drifting

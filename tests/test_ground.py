@@ -241,7 +241,7 @@ def test_implausible_floor_fits_are_said():
     issue found it) is said with the key that fixes it; a camera above 6 m or below 0.3 m, or
     looking up more than 15 deg, too; a grid more than half out of view too. Each limit itself
     passes."""
-    from dpom_warp.session import pose_warnings
+    from dpom_warp.camera_setup import pose_warnings
 
     def fit(h, pitch, roll):
         return {"camera_height": h, "pitch_deg": pitch, "roll_deg": roll}

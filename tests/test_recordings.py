@@ -463,7 +463,7 @@ def test_a_wall_faced_is_not_taken_for_a_floor_seen_from_above(tmp_path, capsys)
 
     from dpom_warp.loading import load_config
     from dpom_warp.io import InputError
-    from dpom_warp.session import refuse_low_view_from_above
+    from dpom_warp.camera_setup import refuse_low_view_from_above
 
     path, line = run_auto_pose_fails(tmp_path, capsys, RS_BAG)
     assert line.startswith(f"dpom-warp: error: {RS_BAG} (frame 000000) and 1 more frames: ")

@@ -58,16 +58,31 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
         keys = path.strip().split(".")
         node = out
         for k in keys[:-1]:
-            if not isinstance(node.get(k), dict):
+            if isinstance(node, list):  # a rig's camera by its index: cameras.1.input.frames
+                node = _list_item(node, k, path)
+                continue
+            if not isinstance(node.get(k), (dict, list)):
                 node[k] = {} if node.get(k) is None else node[k]
                 if not isinstance(node[k], dict):
                     raise ConfigError(f"--set {path}: {k} is not a mapping")
             node = node[k]
         try:
-            node[keys[-1]] = yaml.safe_load(value)
+            parsed = yaml.safe_load(value)
         except yaml.YAMLError as e:
             raise ConfigError(f"--set {path}: value is not valid YAML ({e.problem})") from None
+        if isinstance(node, list):
+            _list_item(node, keys[-1], path)
+            node[int(keys[-1])] = parsed
+        else:
+            node[keys[-1]] = parsed
     return out
+
+
+def _list_item(items: list, key: str, path: str):
+    """items[int(key)] of an override's path, else a one-line error."""
+    if not key.isdigit() or int(key) >= len(items):
+        raise ConfigError(f"--set {path}: expected an index below {len(items)} for the list, found {key!r}")
+    return items[int(key)]
 
 
 def resolve_paths(raw: dict, base: str | Path) -> dict:
@@ -86,6 +101,10 @@ def resolve_paths(raw: dict, base: str | Path) -> dict:
         if (isinstance(v, str) and v != "auto" and not is_live(v)
                 and not os.path.isabs(os.path.expanduser(v))):
             node[last] = os.path.normpath(os.path.join(base, v))
+    if isinstance(out.get("cameras"), list):  # a rig: each camera's input and camera sections too
+        out["cameras"] = [{**item, **{k: v for k, v in resolve_paths(
+            {k: item[k] for k in ("input", "camera") if k in item}, base).items()}}
+            if isinstance(item, dict) else item for item in out["cameras"]]
     return out
 
 

@@ -55,6 +55,19 @@ class RunConfig:
     tracking: TrackingOptions = TrackingOptions()
     # where the values came from (loading.load_config): the config file, and the --set items
     origin: dict = field(default_factory=dict)
+    # a rig (`cameras:`): (name, the camera's own RunConfig: the shared sections with its input
+    # and camera), in the config's order; the rig's inputs and camera are the first camera's
+    cameras: tuple = ()
+    rig: Any = None  # config.rig.RigSection of a rig
+
+    @property
+    def is_rig(self) -> bool:
+        """A config with a `cameras:` list (of one camera or more)."""
+        return bool(self.cameras)
+
+    def members(self) -> list[tuple[str, "RunConfig"]]:
+        """(name, RunConfig) of each camera: a rig's, else this config's own camera ("camera")."""
+        return list(self.cameras) or [("camera", self)]
 
     def source_of(self, key: str) -> str:
         """Where the value of `key` came from: `--set KEY=VALUE`, else the config file."""
@@ -73,7 +86,7 @@ class RunConfig:
         return f"{self.source_of(key)}: {message}" if key else message
 
 
-KEY_AT_START = re.compile(r"^([a-z_]+(?:\.[a-z_]+)*): ")
+KEY_AT_START = re.compile(r"^([a-z_]+(?:\[\d+\])?(?:\.[a-z_]+)*): ")
 
 
 def config_key(message: str) -> str | None:
@@ -84,6 +97,7 @@ def config_key(message: str) -> str | None:
 
 def source_of(key: str, overrides, file: str) -> str:
     """`--set ITEM` where an override set `key` (or a section above it, or a key inside it), else `file`."""
+    key = re.sub(r"\[(\d+)\]", r".\1", key)  # cameras[1].input.frames as --set writes it
     for item in overrides:
         k = item.split("=", 1)[0].strip()
         if key == k or key.startswith(k + ".") or k.startswith(key + "."):
@@ -95,6 +109,10 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     """Validate a config mapping into a RunConfig. No file is read: the camera keys a camera file
     or a recording gives are filled in before (loading.config_from_mapping; a run folder's
     run.json has them all)."""
+    if isinstance(raw, dict) and "cameras" in raw:  # a rig: camera by camera
+        from .rig import parse_rig
+
+        return parse_rig(raw, parse_config)
     try:
         c = ConfigFile.model_validate(raw)
     except ValidationError as e:

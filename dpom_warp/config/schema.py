@@ -7,6 +7,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .camera import CameraSection
 from .model_section import ModelSection
+from .rig import RigCamera, RigSection
 from .sections import (
     DetectionSection,
     EngineSection,
@@ -29,6 +30,11 @@ class ConfigFile(Node):
     device: Device = Field("auto", description="auto (first CUDA device, else the CPU), cpu, cuda, cuda:N")
     input: InputSection
     camera: CameraSection
+    # a rig instead of input and camera (loading.rig_from_mapping validates it camera by camera)
+    cameras: list[RigCamera] | None = Field(None, description=(
+        "a rig: several cameras on one map, each {name, input, camera}, in place of input and camera "
+        "(README, Several cameras)"))
+    rig: RigSection = RigSection()
     grid: GridSection
     object: ObjectSection = ObjectSection()
     model: ModelSection = ModelSection()
@@ -70,7 +76,9 @@ def json_schema() -> dict:
     # from a recording (parse_config says when they come from neither), and `camera: FILE` is
     # short for {file: FILE}
     schema["$defs"]["CameraSection"].pop("required", None)
-    schema["required"] = [k for k in schema["required"] if k != "camera"]
+    schema["required"] = [k for k in schema["required"] if k not in ("camera", "input")]
+    schema["oneOf"] = [{"required": ["input"], "not": {"required": ["cameras"]}},
+                       {"required": ["cameras"], "not": {"anyOf": [{"required": ["input"]}, {"required": ["camera"]}]}}]
     schema["properties"]["camera"] = {"anyOf": [
         {"$ref": "#/$defs/CameraSection"},
         {"type": "string", "description": "a camera file: short for {file: FILE}"}]}
