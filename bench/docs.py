@@ -144,6 +144,7 @@ def config_block() -> str:
             key = f"{prefix}{name}"
             subs = [a for a in _members(info.annotation) if isinstance(a, type) and issubclass(a, Node)]
             nested = subs and not all(s.__name__.startswith("Pose") for s in subs)  # extrinsics: one row
+            nested = nested and not key.startswith("cameras.")  # a rig camera's input and camera: the sections above
             text = info.description or (subs[0].__doc__.strip().splitlines()[0] if nested else "")
             rows.append(f"| `{key}` | {default(info)} | {text.replace('|', chr(92) + '|')} |")
             for s in subs if nested else []:

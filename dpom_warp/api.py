@@ -9,6 +9,9 @@
     tracks, report = det.track(det.detect_batch(frames))   # identities over a sequence
     online = det.online_tracker()           # or as frames come (a camera): what a live run does
 
+    rig = Detector.from_config("rig.yaml")  # a config with cameras: [{name, input, camera}, ...]
+    result = rig.detect([depth_0, depth_1])  # one frame a camera, in the config's order (or by name)
+
 The Detector is the CLI's engine side: the same setup (`pipeline.set_up`: pose fit, background,
 stride, sparse iterations, every default) and the same frame-to-detections step
 (`worker.FrameWorker`), so it gives the detections of detections.csv at the run's speed. The
@@ -108,13 +111,18 @@ class Detector:
             raise ConfigError(f"{where}: {e}") from None
         quiet = log or (lambda *_: None)
         render_synthetic(cfg, quiet)
-        needs_frames = cfg.inputs.auto_background or (cfg.pose_auto and not cfg.inputs.background)
-        frames = expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, quiet) if needs_frames and cfg.inputs.frames else []
+        needs = [m.inputs.auto_background or (m.pose_auto and not m.inputs.background) for _, m in cfg.members()]
+        if cfg.is_rig:  # the cameras' frames, paired, where one needs them (auto, or a floor fit on them)
+            from .frames import rig_frames
+
+            frames = rig_frames(cfg, log=quiet).frames if any(needs) else []
+        else:
+            frames = expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, quiet) if needs[0] and cfg.inputs.frames else []
         return cls(cfg, set_up(cfg, frames, device, quiet))
 
     @property
     def camera(self):
-        """The posed camera (with extrinsics: auto, the fitted pose)."""
+        """The posed camera (with extrinsics: auto, the fitted pose); a rig's: a list, one a camera."""
         return self.setup.spec.camera
 
     @property
@@ -131,28 +139,39 @@ class Detector:
     def device(self) -> str:
         return self.setup.device
 
-    def detect(self, depth: np.ndarray) -> Result:
-        """Detections and maps of one (H, W) frame at the camera's full resolution."""
+    def detect(self, depth) -> Result:
+        """Detections and maps of one (H, W) frame at the camera's full resolution; a rig's:
+        one such frame a camera, a list in the config's camera order or a dict by name (a
+        camera with no frame: None, inferred from the others)."""
+        if self.config.is_rig:
+            return self.detect_batch([depth])[0]
         return self.detect_batch(np.asarray(depth)[None])[0]
 
     def detect_batch(self, depths) -> list[Result]:
-        """One Result per frame of `depths` ((n, H, W) or a sequence of (H, W) arrays), in
-        order, each what `detect` gives it alone (engine.batch frames per engine call)."""
+        """One Result per frame of `depths` ((n, H, W) or a sequence of (H, W) arrays; a rig's:
+        a sequence of what `detect` takes), in order, each what `detect` gives it alone
+        (engine.batch frames per engine call)."""
         from .engine import ListOverflow
+        from .worker import stacked
 
         first = self.frames_given
-        frames = [self._metres(d, first + i) for i, d in enumerate(depths)]
+        if self.config.is_rig:
+            frames = [self._rig_metres(d, first + i) for i, d in enumerate(depths)]
+        else:
+            frames = [self._metres(d, first + i) for i, d in enumerate(depths)]
         self.frames_given += len(frames)
         engine, n = self.engine, self.engine.batch
         results = []
         for start in range(0, len(frames), n):
-            chunk = np.stack(frames[start:start + n])
+            part = frames[start:start + n]
+            whole = not self.config.is_rig or all(d is not None for f in part for d in f)
             t0 = time.perf_counter()
-            try:
-                out = engine.infer_batch(chunk)  # reduced by the engine (on a GPU there)
+            try:  # reduced by the engine (on a GPU there); a rig's frame missing a camera's alone
+                out = (engine.infer_batch(stacked(part, self.config.is_rig)) if whole
+                       else [self.worker.infer(f) for f in part])
             except ListOverflow as e:
                 raise InputError(f"depth (frame {first + start}): {e}") from None
-            share = (time.perf_counter() - t0) / len(chunk)
+            share = (time.perf_counter() - t0) / len(part)
             for res in out:
                 t1 = time.perf_counter()
                 rho_map, dets = self.worker.detections(res)
@@ -197,24 +216,44 @@ class Detector:
                                 cfg.detection.threshold)
         return OnlineTracks(tracker)
 
-    def _metres(self, depth, index: int) -> np.ndarray:
+    def _rig_metres(self, depths, index: int) -> list[np.ndarray]:
+        """A rig's frame, a list in camera order or a dict by name, as metres a camera (None: that
+        camera has no frame: the frame is inferred from the others, FrameWorker.infer)."""
+        names = [n for n, _ in self.config.cameras]
+        if isinstance(depths, Mapping):
+            unknown = sorted(set(depths) - set(names))
+            if unknown:
+                raise InputError(f"depth (frame {index}): expected the rig's cameras {names}, found {unknown[0]!r}")
+            depths = [depths.get(n) for n in names]
+        elif isinstance(depths, np.ndarray) or not hasattr(depths, "__len__") or len(depths) != len(names):
+            found = f"an array of shape {np.shape(depths)}" if isinstance(depths, np.ndarray) else (
+                f"{len(depths)} entries" if hasattr(depths, "__len__") else type(depths).__name__)
+            raise InputError(f"depth (frame {index}): expected a list of {len(names)} frames, one a camera of the rig "
+                             f"({', '.join(names)}), or a dict by name; found {found}")
+        out = []
+        for (name, m), d in zip(self.config.cameras, depths):
+            out.append(None if d is None else self._metres(d, index, m, f"camera {name}, "))
+        return out
+
+    def _metres(self, depth, index: int, cfg: RunConfig | None = None, who: str = "") -> np.ndarray:
+        cfg = cfg or self.config
         depth = np.asarray(depth)
-        shape = (self.config.camera.height, self.config.camera.width)
+        shape = (cfg.camera.height, cfg.camera.width)
         if depth.shape != shape:
-            raise InputError(f"depth (frame {index}): expected an array of shape {shape} (camera.height, "
+            raise InputError(f"depth ({who}frame {index}): expected an array of shape {shape} (camera.height, "
                              f"camera.width), found {depth.shape}")
         integer = np.issubdtype(depth.dtype, np.integer)
         if not integer and not np.issubdtype(depth.dtype, np.floating):
-            raise InputError(f"depth (frame {index}): expected an integer or float array, found {depth.dtype}")
+            raise InputError(f"depth ({who}frame {index}): expected an integer or float array, found {depth.dtype}")
         if integer and depth.min(initial=0) < 0:
-            raise InputError(f"depth (frame {index}): expected depth units >= 0, found {depth.min()}")
-        metres = array_to_metres(depth, self.config.inputs.depth_scale)  # integers as read_depth reads them
+            raise InputError(f"depth ({who}frame {index}): expected depth units >= 0, found {depth.min()}")
+        metres = array_to_metres(depth, cfg.inputs.depth_scale)  # integers as read_depth reads them
         if metres.min(initial=0) < 0:
-            raise InputError(f"depth (frame {index}): expected metres >= 0, found {metres.min():g}")
-        self._check_units(metres, depth.dtype, index)
+            raise InputError(f"depth ({who}frame {index}): expected metres >= 0, found {metres.min():g}")
+        self._check_units(metres, depth.dtype, index, cfg)
         return metres
 
-    def _check_units(self, metres: np.ndarray, dtype, index: int) -> None:
+    def _check_units(self, metres: np.ndarray, dtype, index: int, cfg: RunConfig | None = None) -> None:
         """Every frame's units, from the median of every 4th pixel of every 4th row (about
         0.2 ms at 512x424): a warning naming the frame when its median is one no depth camera
         gives (as `dpom-warp run` warns), the first such frame and again at the first after
@@ -225,7 +264,7 @@ class Detector:
         if not np.any(sample > 0):
             return
         if np.issubdtype(dtype, np.integer):
-            hint = depth_scale_hint(sample, self.config.inputs.depth_scale)
+            hint = depth_scale_hint(sample, (cfg or self.config).inputs.depth_scale)
         else:
             median, (low, high) = implausible_median(sample), PLAUSIBLE_MEDIAN_M
             hint = None if median is None else (

@@ -39,12 +39,14 @@ def rig_picture(depths: list, rho_map: np.ndarray, cfg, geometries: list, detect
     in_view = np.any([g.rect_area > 0 for g in geometries], axis=0)
     truth = None if truth is None else [{k: v for k, v in o.items() if k != "bbox"} for o in truth]  # (boxes: one camera's)
     main = Image.open(io.BytesIO(frame_picture(
-        depths[0], rho_map, cfg.grid, detections, geometries[0].centre[:2], truth, f"{title}  camera {names[0]}",
+        depths[0] if depths[0] is not None else np.zeros(geometries[0].rays.shape[:2]), rho_map, cfg.grid, detections, geometries[0].centre[:2], truth, f"{title}  camera {names[0]}",
         in_view=in_view, tracks=tracks, trail=cfg.tracking.trail)))
     panels = []
     for name, depth, g in zip(names[1:], depths[1:], geometries[1:]):
         boxes = [g.rect[d.k] for d in detections if g.rect_area[d.k] > 0]
-        panels.append(depth_panel(depth, boxes, f"camera {name}", None))
+        none = depth is None  # no frame of this camera here: inferred from the others
+        panels.append(depth_panel(np.zeros((g.rays.shape[0], g.rays.shape[1])) if none else depth, [] if none else boxes,
+                                  f"camera {name}{' (no frame)' if none else ''}", None))
     width = max([main.width, sum(p.width for p in panels)])
     canvas = Image.new("RGB", (width, main.height + (max(p.height for p in panels) if panels else 0)), BG)
     canvas.paste(main.convert("RGB"), (0, 0))

@@ -132,6 +132,8 @@ def set_up_rig(cfg: RunConfig, frames: list, device: str | None = None, log=prin
     preps = []
     for c, (name, m) in enumerate(cfg.cameras):
         preps.append(prepare_camera(m, camera_frames(frames, c), dev, _named(log, name)))
+    for line in lone_cameras(cfg, [p.geometry for p in preps]):
+        log(f"warning: {line}")
     t = time.perf_counter()
     if parallel and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
@@ -160,6 +162,19 @@ def set_up_rig(cfg: RunConfig, frames: list, device: str | None = None, log=prin
                                  else None), RigGeometry([p.geometry for p in preps]),
                  grounds if any(g is not None for g in grounds) else None, "; ".join(words),
                  autos if any(a is not None for a in autos) else None, inference, engine, time.perf_counter() - t)
+
+
+def lone_cameras(cfg: RunConfig, geometries: list) -> list[str]:
+    """A warning for each camera of a rig that sees none of the grid's cells another camera
+    sees: its evidence fuses with no other camera's (and calibrate cannot place it)."""
+    seen = [g.rect_area > 0 for g in geometries]
+    out = []
+    for c, (name, _) in enumerate(cfg.cameras):
+        others = np.any([s for i, s in enumerate(seen) if i != c], axis=0) if len(seen) > 1 else seen[c]
+        if len(seen) > 1 and not np.any(seen[c] & others):
+            out.append(f"cameras[{c}].camera.extrinsics: camera {name} sees none of the grid's cells another camera "
+                       f"sees ({int(seen[c].sum())} cells of its own); expected views that overlap, for one map")
+    return out
 
 
 def _named(log, name: str):

@@ -90,20 +90,19 @@ def read_frame(cfg: RunConfig, path, data: bytes | None = None) -> np.ndarray:
     return read_depth(path, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width), data)
 
 
-def read_rig_frame(cfg: RunConfig, paths, data: tuple | None = None) -> list[np.ndarray]:
+def read_rig_frame(cfg: RunConfig, paths, data: tuple | None = None) -> list[np.ndarray | None]:
     """A rig's frame in metres, one a camera (read with its own input section; `data`: the
-    files' bytes); a camera with no frame there (None) reads nothing: all zeros, which the model
-    explains the same whatever stands where (no reading is as likely under every hypothesis)."""
+    files' bytes); None for a camera with no frame there."""
     data = data or (None,) * len(paths)
-    return [read_frame(m, p, b) if p is not None else np.zeros((m.camera.height, m.camera.width), np.float32)
-            for (_, m), p, b in zip(cfg.cameras, paths, data)]
+    return [read_frame(m, p, b) if p is not None else None for (_, m), p, b in zip(cfg.cameras, paths, data)]
 
 
-def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int) -> Engine:
-    """The engine of a run (engine.* options) at the run's inference resolution, for `batch`
-    frames per call; it takes frames at the camera's full resolution (reduced by the engine:
-    on a GPU by a kernel) or already reduced by engine.resolution.frames."""
-    resolution = resolution_of(cfg, camera)
+def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int,
+                resolution: Resolution | None = None) -> Engine:
+    """The engine of a run (engine.* options) at the run's inference resolution (`resolution`:
+    another's), for `batch` frames per call; it takes frames at the camera's full resolution
+    (reduced by the engine: on a GPU by a kernel) or already reduced by engine.resolution.frames."""
+    resolution = resolution or resolution_of(cfg, camera)
     if isinstance(camera, list):  # a rig: one geometry a camera
         geometry = [build_geometry(resolution.camera(c), cfg.grid, cfg.obj) for c in camera]
     else:
@@ -138,7 +137,8 @@ class FrameWorker:
     def __init__(self, spec: WorkerSpec, name: str = "main", engine: Engine | None = None):
         self.cfg, self.name = spec.cfg, name
         self.pictures = spec.cfg.output.images and spec.pictures
-        self.rig = isinstance(spec.camera, list)
+        self.rig, self.spec = isinstance(spec.camera, list), spec
+        self.partial: dict[tuple, Engine] = {}  # a rig's cameras that have a frame -> their engine
         self.geometry = (RigGeometry([build_geometry(c, spec.cfg.grid, spec.cfg.obj) for c in spec.camera]) if self.rig
                          else build_geometry(spec.camera, spec.cfg.grid, spec.cfg.obj))  # full resolution
         if engine is None:
@@ -173,7 +173,8 @@ class FrameWorker:
         (the one-process run reads the next frames while these infer)."""
         outcomes, read = self.read(items) if read is None else (list(read[0]), read[1])
         engine = self.engine
-        if len(read) > 1:
+        whole = not self.rig or all(d is not None for _, frame, _ in read for d in frame)
+        if len(read) > 1 and whole:
             grown, t0 = len(engine.grown), time.perf_counter()
             try:
                 results = engine.infer_batch(stacked([d for _, d, _ in read], self.rig))  # reduced by the engine
@@ -182,19 +183,44 @@ class FrameWorker:
             else:
                 share = (time.perf_counter() - t0) / len(read)
                 for i, ((item, depth, read_s), res) in enumerate(zip(read, results)):
+                    res = every_camera(res, [True] * len(depth)) if self.rig else res
                     growth = engine.grown[grown:] if i == 0 else []
                     outcomes.append(self._finish(item, depth, res, read_s, share, growth))
                 return outcomes
         for item, depth, read_s in read:
             grown, t0 = len(engine.grown), time.perf_counter()
             try:
-                res = engine.infer(depth)
+                res = self.infer(depth)
             except ListOverflow as e:
                 outcomes.append((Path(item.path).name, None, f"{item.path}: {e}"))
                 continue
             outcomes.append(self._finish(item, depth, res, read_s, time.perf_counter() - t0,
                                          engine.grown[grown:]))
         return outcomes
+
+    def infer(self, depth):
+        """One frame's engine result; a rig's frame where some cameras have none (None) is
+        inferred by an engine of the cameras that have one (built once for those cameras, at
+        the rig's resolution, with their backgrounds): the rig without them."""
+        if not self.rig:
+            return self.engine.infer(depth)
+        if all(d is not None for d in depth):
+            return every_camera(self.engine.infer(depth if len(depth) > 1 else depth[0]), [True] * len(depth))
+        present = tuple(d is not None for d in depth)
+        if not any(present):
+            raise InputError("no camera of the rig has a frame here")
+        if present not in self.partial:
+            which = [c for c, p in enumerate(present) if p]
+            cameras = [self.spec.camera[c] for c in which]
+            part = make_engine(self.cfg, cameras if len(which) > 1 else cameras[0], self.spec.device,
+                               1, self.engine.resolution)
+            for i, c in enumerate(which):
+                state = self.engine.background_state(c)
+                if state is not None:
+                    part.set_background(*state, camera=i)
+            self.partial[present] = part
+        frames = [d for d in depth if d is not None]
+        return every_camera(self.partial[present].infer(frames if len(frames) > 1 else frames[0]), present)
 
     def detections(self, res) -> tuple[np.ndarray, list]:
         """The rho* map (grid-shaped) of an engine result and its detections, located and
@@ -247,11 +273,21 @@ class FrameWorker:
                                    list(grown)), None
 
 
+def every_camera(res, present):
+    """A rig's result with its drift a list over every camera of the rig (None where a camera
+    had no frame, or no estimate), whichever engine inferred it."""
+    if res.drift is None:
+        return res
+    got = iter(res.drift if isinstance(res.drift, list) else [res.drift])
+    return dataclasses.replace(res, drift=[next(got) if p else None for p in present])
+
+
 def stacked(depths: list, rig: bool):
     """A batch's frames as the engine takes them: (n, H, W), a rig's one such a camera."""
     if not rig:
         return np.stack(depths)
-    return [np.stack([d[c] for d in depths]) for c in range(len(depths[0]))]
+    per_camera = [np.stack([d[c] for d in depths]) for c in range(len(depths[0]))]
+    return per_camera if len(per_camera) > 1 else per_camera[0]  # (the engine of a rig of one takes an array)
 
 
 def ply_files(stem: str, depth, geometry, dets, cfg: RunConfig) -> dict[str, bytes]:
@@ -259,7 +295,8 @@ def ply_files(stem: str, depth, geometry, dets, cfg: RunConfig) -> dict[str, byt
     every camera's) and ply/<stem>_boxes.ply (the detected object boxes as a mesh), as bytes."""
     import open3d as o3d
 
-    views = list(zip(depth, geometry.parts)) if hasattr(geometry, "parts") else [(depth, geometry)]
+    views = ([(d, g) for d, g in zip(depth, geometry.parts) if d is not None] if hasattr(geometry, "parts")
+             else [(depth, geometry)])
     pts = np.concatenate([g.centre + d[d > 0][:, None].astype(np.float64) * g.rays[d > 0] for d, g in views])
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
     boxes = o3d.geometry.TriangleMesh()

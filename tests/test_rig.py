@@ -4,6 +4,7 @@ rigs is in test_warp_vs_reference (test_a_rig_matches_the_reference)."""
 
 import numpy as np
 import pytest
+import yaml
 
 from dpom_warp import reference as ref
 from dpom_warp.engine import Engine
@@ -103,3 +104,131 @@ def test_the_joint_test_of_a_rig_adds_every_cameras_pixels(ordered):
         assert np.abs(alone - want).max() > 1e-3
     with pytest.raises(ValueError, match="not among the frame's candidates"):
         joint.log_odds([int(np.flatnonzero(star < threshold)[0])])
+
+
+# -- the rig in the config and its frames paired (issue 61, items 1 and 7) ----------------------
+def rig_mapping(tmp_path):
+    from test_rig_run import rig_config
+
+    rig = rig_config(tmp_path)
+    rig.pop("synthetic")
+    return rig
+
+
+def test_a_rig_config_is_each_camera_with_the_shared_sections(tmp_path):
+    """Each camera is its own single-camera config (its input and camera, the shared grid,
+    model, ...): the rig's inputs and camera are the first camera's; resolved has cameras and
+    rig, not input and camera; --set reaches a camera by its index."""
+    from dpom_warp.config import apply_overrides
+    from dpom_warp.loading import config_from_mapping
+
+    cfg = config_from_mapping(rig_mapping(tmp_path))
+    assert cfg.is_rig and [n for n, _ in cfg.cameras] == ["front", "side"]
+    side = cfg.cameras[1][1]
+    np.testing.assert_allclose(side.camera.centre, [3.5, 3.5, 1.4], atol=1e-12)
+    assert cfg.camera is cfg.cameras[0][1].camera and side.grid == cfg.grid
+    assert set(cfg.resolved) >= {"cameras", "rig"} and not {"input", "camera"} & set(cfg.resolved)
+    assert cfg.resolved["rig"] == {"tolerance": None}
+    moved = config_from_mapping(apply_overrides(rig_mapping(tmp_path), ["cameras.1.camera.extrinsics.x=3.0"]))
+    assert moved.cameras[1][1].camera.centre[0] == 3.0 and moved.cameras[0][1].camera.centre[0] == 0.0
+    from dpom_warp.config import parse_config
+
+    again = parse_config(cfg.resolved)  # a run's summary.json config parses back to the same rig
+    assert again.resolved == cfg.resolved
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda r: r["cameras"][1].update(name="front"),
+     r"^cameras\[1\]\.name: expected a name unlike the other cameras', found 'front' again \(cameras\[0\]\)$"),
+    (lambda r: r["cameras"][1].update(name="side camera"),
+     r"^cameras\[1\]\.name: expected a name of letters, digits, - and _, found 'side camera'$"),
+    (lambda r: r.update(input={"frames": "x"}),
+     r"^cameras: expected either a cameras: list or a single input and camera, found cameras: and a top-level input:"),
+    (lambda r: r.update(cameras=[]), r"^cameras: expected a list of cameras, each \{name, input, camera\}, found an empty list$"),
+    (lambda r: r["cameras"][1].pop("input"), r"^cameras\[1\]\.input: required key is missing"),
+    (lambda r: r["cameras"][1].update(lens=1), r"^cameras\[1\]: unknown key 'lens'; expected name, input and camera$"),
+    (lambda r: r["cameras"][1]["camera"].update(width=-1), r"^cameras\[1\]\.camera\.width: expected a value >= 1, found -1$"),
+    (lambda r: r["cameras"][1]["input"].update(stride=2),
+     r"^cameras\[1\]\.input\.stride: expected cameras\[0\]'s 'auto' \(a rig is inferred at one resolution\), found 2$"),
+    (lambda r: r["cameras"][1]["input"].update(play=True),
+     r"^cameras\[1\]\.input\.play: a rig runs on recorded frames; expected frame files or recordings, found a live"),
+    (lambda r: r["cameras"][1]["input"].update(frames="realsense"),
+     r"^cameras\[1\]\.input\.frames: a rig runs on recorded frames; expected frame files or recordings, found a live"),
+    (lambda r: r["cameras"][1]["camera"].update(extrinsics={"T_world_from_camera": [
+        [1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, -0.5], [0, 0, 0, 1]]}),
+     r"^cameras\[1\]\.camera\.extrinsics: expected a pose above the floor \(z = 0\), found the camera 0\.50 m under it$"),
+    (lambda r: r.update(rig={"tolerance": 0}), r"^rig\.tolerance: expected a value > 0, found 0$"),
+    (lambda r: r.update(grid={"x": [0, 0, 1], "y": [1.5, 5.5, 0.1]}), r"^grid\.x: expected min < max"),
+])
+def test_a_rigs_bad_config_names_the_camera_and_key(tmp_path, change, message):
+    from dpom_warp.config import ConfigError
+    from dpom_warp.loading import config_from_mapping
+
+    rig = rig_mapping(tmp_path)
+    change(rig)
+    with pytest.raises(ConfigError, match=message):
+        config_from_mapping(rig)
+
+
+def test_an_override_names_the_rig_camera_it_reached(tmp_path):
+    """A bad value given with --set cameras.N... is blamed on the --set item; an index beyond
+    the list is a one-line error."""
+    from dpom_warp.config import ConfigError
+    from dpom_warp.loading import load_config
+
+    path = tmp_path / "rig.yaml"
+    path.write_text(yaml.safe_dump(rig_mapping(tmp_path)))
+    with pytest.raises(ConfigError, match=r"^--set cameras\.1\.camera\.width=0: cameras\[1\]\.camera\.width: expected"):
+        load_config(path, ["cameras.1.camera.width=0"])
+    with pytest.raises(ConfigError, match=r"--set cameras\.2\.name: expected an index below 2 for the list, found '2'"):
+        load_config(path, ["cameras.2.name=x"])
+
+
+def test_frames_paired_by_time_and_by_order_by_hand():
+    """Each first-camera frame takes another camera's nearest frame in time when it is at most
+    the tolerance away (exactly the tolerance: paired), else none; by order, the frame at the
+    same place until the camera's frames run out. Times are multiples of 1/8 s (exact in binary)."""
+    from dpom_warp.frames import pair_by_index, pair_by_time
+
+    first = [0.0, 0.25, 0.5, 0.75]
+    other = [0.125, 0.625, 0.890625]  # each first frame 0.125 s from its nearest (0.75: 0.140625 from the third)
+    assert pair_by_time(first, [other], 0.125) == [[0], [0], [1], [1]]
+    assert pair_by_time(first, [other], 0.125 - 1 / 64) == [[None]] * 4
+    assert pair_by_time([1.0], [[0.9375, 1.015625]], 0.05) == [[1]]
+    assert pair_by_time(first, [np.array([])], 1.0) == [[None]] * 4
+    assert pair_by_time([0.0, 1.0], [[0.9], [0.1, 2.0]], 0.1) == [[None, 0], [0, None]]
+    assert pair_by_index(3, [2, 5]) == [[0, 0], [1, 1], [None, 2]]
+
+
+def test_the_pairing_tolerance_defaults_to_half_the_first_cameras_period(tmp_path):
+    from dpom_warp.frames import default_tolerance
+    from dpom_warp.loading import config_from_mapping
+
+    cfg = config_from_mapping(rig_mapping(tmp_path))
+    assert default_tolerance(cfg, np.arange(10) / 30.0) == pytest.approx(1 / 60, abs=1e-15)
+    assert default_tolerance(cfg, None) == 0.5 / 5  # input.fps 5: no timestamps
+    rig = rig_mapping(tmp_path)
+    rig["rig"] = {"tolerance": 0.02}
+    assert default_tolerance(config_from_mapping(rig), np.arange(10) / 30.0) == 0.02
+
+
+def test_a_camera_that_shares_no_cell_with_the_others_is_a_warning(tmp_path):
+    """A camera of a rig that sees none of the cells the others see (its rectangles' areas
+    against theirs) is one line naming it and its extrinsics key; views sharing one cell are
+    none. By hand on four cells."""
+    from types import SimpleNamespace
+
+    from dpom_warp.loading import config_from_mapping
+    from dpom_warp.session import lone_cameras
+
+    cfg = config_from_mapping(rig_mapping(tmp_path))
+
+    def views(*areas):
+        return [SimpleNamespace(rect_area=np.array(a)) for a in areas]
+
+    assert lone_cameras(cfg, views([5, 3, 0, 0], [0, 1, 2, 0])) == []
+    lines = lone_cameras(cfg, views([5, 3, 0, 0], [0, 0, 2, 7]))
+    assert lines == [f"cameras[{i}].camera.extrinsics: camera {n} sees none of the grid's cells another camera sees "
+                     f"(2 cells of its own); expected views that overlap, for one map" for i, n in ((0, "front"), (1, "side"))]
+    geoms = [build_geometry(m.camera, cfg.grid, cfg.obj) for _, m in cfg.cameras]
+    assert lone_cameras(cfg, geoms) == []  # the test scene's two cameras overlap

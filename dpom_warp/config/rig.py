@@ -12,6 +12,7 @@ from pydantic import Field, ValidationError
 
 from .camera import CameraSection
 from .sections import InputSection
+from ..names import is_live
 from ..values import ConfigError, Node, Num, Str, _first_error, _fmt
 
 NAME = re.compile(r"^[A-Za-z0-9_-]+$")
@@ -31,9 +32,9 @@ class RigCamera(Node):
     """One camera of a rig: its name (outputs and errors use it), its frames and its camera."""
 
     name: Str = Field(description="the camera's name: letters, digits, - and _, unique in the rig")
-    input: InputSection = Field(description="the camera's frames and background (a single camera's input section)")
+    input: InputSection = Field(description="the camera's frames and background: the keys of `input` above")
     camera: CameraSection | Str | None = Field(None, description=(
-        "the camera (a single camera's camera section, or a camera file; left out: the recording's)"))
+        "the camera: the keys of `camera` above, or a camera file; left out: the recording's"))
 
 
 def rig_key(index: int, message: str) -> str:
@@ -51,7 +52,8 @@ def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
     camera."""
     cams = raw["cameras"]
     if not isinstance(cams, list) or not cams:
-        raise ConfigError(f"cameras: expected a list of cameras, each {{name, input, camera}}, found {_fmt(cams)}")
+        found = "an empty list" if isinstance(cams, list) else _fmt(cams)
+        raise ConfigError(f"cameras: expected a list of cameras, each {{name, input, camera}}, found {found}")
     both = [s for s in PER_CAMERA if s in raw]
     if both:
         raise ConfigError(f"cameras: expected either a cameras: list or a single {' and '.join(PER_CAMERA)}, found "
@@ -72,6 +74,11 @@ def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
                               f"again (cameras[{names.index(name)}])")
         if "input" not in item:
             raise ConfigError(f"cameras[{i}].input: required key is missing (the camera's frames)")
+        inp = item["input"] if isinstance(item["input"], dict) else {}
+        if inp.get("play") is True or (isinstance(inp.get("frames"), str) and is_live(inp["frames"])):
+            raise ConfigError(f"cameras[{i}].input.{'play' if inp.get('play') is True else 'frames'}: a rig runs on "
+                              f"recorded frames; expected frame files or recordings, found a live camera (live rigs "
+                              f"are not supported yet)")
         names.append(name)
         singles.append({**shared, "input": item["input"], **({"camera": item["camera"]} if "camera" in item else {})})
     return names, singles
@@ -98,10 +105,9 @@ def parse_rig(raw: dict, single):
             if getattr(m.inputs, key) != getattr(first.inputs, key):
                 raise ConfigError(f"cameras[{i}].input.{key}: expected cameras[0]'s {getattr(first.inputs, key)!r} (a "
                                   f"rig is inferred at one resolution), found {getattr(m.inputs, key)!r}")
-        if m.live:
-            raise ConfigError(f"cameras[{i}].input.{'play' if m.inputs.play else 'frames'}: a rig runs on recorded "
-                              f"frames; expected frame files or recordings, found a live camera (live rigs are not "
-                              f"supported yet)")
+        if not m.pose_auto and m.camera.centre[2] <= 0:
+            raise ConfigError(f"cameras[{i}].camera.extrinsics: expected a pose above the floor (z = 0), found the "
+                              f"camera {-m.camera.centre[2]:.2f} m {'under' if m.camera.centre[2] < 0 else 'on'} it")
     try:
         rig = RigSection.model_validate(raw.get("rig"))
     except ValidationError as e:

@@ -1,0 +1,179 @@
+"""A rig run end to end (issue 61): a rendered scene seen by two cameras 1.4 m up (people hide
+each other whole from either), run as a `cameras:` config, each camera alone, a camera whose
+frames run out, a rig of one against the single-camera config, --workers, `track` and the
+Python API. The engine's fusion against the NumPy reference is in test_warp_vs_reference and
+test_rig."""
+
+import csv
+import json
+import math
+import shutil
+
+import numpy as np
+import pytest
+import yaml
+from PIL import Image
+
+from dpom_warp.cli import main
+from pictures import assert_picture
+
+CAMERA = {"width": 160, "height": 120, "intrinsics": {"fx": 115.0, "fy": 115.0, "cx": 79.5, "cy": 59.5}}
+POSES = {"front": {"height": 1.4, "pitch_deg": 8.0},  # at the grid's near end, looking along +y
+         "side": {"height": 1.4, "pitch_deg": 8.0, "yaw_deg": 90.0, "x": 3.5, "y": 3.5}}  # at its right, across
+
+
+def rig_config(folder, names=("front", "side"), out="out", **changes) -> dict:
+    """The rig's config (cameras `names`), its frames rendered into folder/scene (8 people,
+    6 frames); `changes` replace top-level sections."""
+    scene = folder / "scene"
+    cfg = {"device": "cpu",
+           "cameras": [{"name": n, "input": {"frames": f"{scene}/{n}/frames/*.png",
+                                             "background": f"{scene}/{n}/background/*.png", "fps": 5},
+                        "camera": {**CAMERA, "extrinsics": POSES[n]}} for n in names],
+           "grid": {"x": [-2.0, 2.0, 0.1], "y": [1.5, 5.5, 0.1]},
+           "object": {"width": 0.4, "height": 1.85, "shape": "solid"},
+           "evaluation": {"ground_truth": f"{scene}/ground_truth.json"},
+           "output": {"dir": str(folder / out)},
+           "synthetic": {"cache": str(scene), "seed": 2, "frames": 6, "background_frames": 4, "people": 8,
+                         "area": [-1.8, 1.8, 1.8, 5.2]}}
+    cfg.update(changes)
+    return cfg
+
+
+def write(path, cfg):
+    path.write_text(yaml.safe_dump(cfg))
+    return str(path)
+
+
+def detections(folder) -> dict:
+    out = {}
+    for row in csv.DictReader(open(folder / "detections.csv")):
+        out.setdefault(row["frame"], []).append((float(row["x"]), float(row["y"])))
+    return out
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """The rig run, and each camera alone (a rig of one) on the same frames."""
+    folder = tmp_path_factory.mktemp("rig")
+    for name, names in (("out", ("front", "side")), ("front", ("front",)), ("side", ("side",))):
+        rig = rig_config(folder, names, out=name)
+        if name != "out":
+            rig.pop("synthetic")  # the rig's scene: rendered by its run
+        assert main(["run", write(folder / f"{name}.yaml", rig), "--no-progress"]) == 0
+    return folder
+
+
+def test_people_hidden_from_one_camera_are_found_by_the_rig(runs):
+    """Every person under 5 % visible from one camera and at least half visible from the other
+    (the rendered truth says which) is detected by the rig within 0.3 m, and the camera they
+    are hidden from, alone, has no detection within 0.3 m of them: the other camera's pixels
+    found them in the one map. The rig scores at least each camera alone."""
+    truth = json.loads((runs / "scene" / "ground_truth.json").read_text())
+    rig, alone = detections(runs / "out"), {n: detections(runs / n) for n in ("front", "side")}
+
+    def nearest(dets, frame, o):
+        return min([math.hypot(x - o["x"], y - o["y"]) for x, y in dets.get(frame, [])] + [math.inf])
+
+    hidden = 0
+    for f in truth:
+        for o in f["objects"]:
+            seen = o["visible_in"]
+            for hid, other in (("front", "side"), ("side", "front")):
+                if seen.get(hid, 0.0) < 0.05 and seen.get(other, 0.0) >= 0.5:
+                    hidden += 1
+                    assert nearest(rig, f["frame"], o) < 0.3, (f["frame"], o)
+                    assert nearest(alone[hid], f["frame"], o) > 0.3, (f["frame"], o, hid)
+    assert hidden >= 2
+    moda = {n: json.loads((runs / n / "summary.json").read_text())["scores"]["moda"] for n in ("out", "front", "side")}
+    assert moda["out"] >= max(moda["front"], moda["side"]) and moda["out"] > 0.95
+
+
+def test_a_rig_runs_outputs(runs):
+    """summary.json has each camera's frames and the frames it missed (none here), each record
+    names each camera's file, the config written is the rig's; every frame's picture shows the
+    second camera's depth below the first camera's and the map."""
+    summary = json.loads((runs / "out" / "summary.json").read_text())
+    assert summary["cameras"] == {"front": {"frames": 6, "missing": []}, "side": {"frames": 6, "missing": []}}
+    assert [c["name"] for c in summary["config"]["cameras"]] == ["front", "side"]
+    assert "input" not in summary["config"] and "camera" not in summary["config"]
+    record = json.loads((runs / "out" / "frames" / "0002.json").read_text())
+    assert record["cameras"] == {"front": "0002.png", "side": "0002.png"}
+    one = np.asarray(Image.open(runs / "front" / "images" / "0002.png"))
+    rgb = assert_picture(runs / "out" / "images" / "0002.png")
+    assert rgb.shape[0] > one.shape[0] + 400  # the side camera's panel (424 px high) below
+    below = rgb[one.shape[0] + 40:one.shape[0] + 440, 40:600]
+    assert len(np.unique(below.reshape(-1, 3), axis=0)) > 50  # a depth image there, not a blank
+    assert main(["track", str(runs / "out"), "--set", "tracking.max_gap=2"]) == 0  # tracks made again
+    assert (runs / "out" / "tracks.csv").read_text().count("\n") > 6
+
+
+def test_a_camera_whose_frames_run_out_early(runs, tmp_path, capsys):
+    """The side camera's last two frames missing: a warning naming the camera, those frames'
+    records say it had none, and they are inferred from the front camera alone: their maps
+    are the front camera's own run's, bit for bit."""
+    scene = tmp_path / "scene"
+    shutil.copytree(runs / "scene", scene)
+    for name in ("0004.png", "0005.png"):
+        (scene / "side" / "frames" / name).unlink()
+    rig = rig_config(tmp_path)
+    rig.pop("synthetic")
+    assert main(["run", write(tmp_path / "rig.yaml", rig), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "warning: cameras[1] (side): no frame for 2 of the rig's 6 frames (first 0004.png)" in printed
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["cameras"]["side"] == {"frames": 4, "missing": ["0004.png", "0005.png"]}
+    for stem in ("0004", "0005"):
+        assert json.loads((tmp_path / "out" / "frames" / f"{stem}.json").read_text())["cameras"]["side"] is None
+        np.testing.assert_array_equal(np.load(tmp_path / "out" / "maps" / f"{stem}.npy"),
+                                      np.load(runs / "front" / "maps" / f"{stem}.npy"))
+    np.testing.assert_array_equal(np.load(tmp_path / "out" / "maps" / "0003.npy"),
+                                  np.load(runs / "out" / "maps" / "0003.npy"))
+
+
+def test_a_rig_of_one_is_the_single_camera_config(runs, tmp_path):
+    """`cameras:` with one camera gives the detections and maps of the same camera given as a
+    single input and camera."""
+    rig = rig_config(runs, ("front",))
+    single = {k: v for k, v in rig.items() if k not in ("cameras", "synthetic")}
+    single.update(input=rig["cameras"][0]["input"], camera=rig["cameras"][0]["camera"],
+                  output={"dir": str(tmp_path / "single")})
+    assert main(["run", write(tmp_path / "single.yaml", single), "--no-progress"]) == 0
+    assert (tmp_path / "single" / "detections.csv").read_bytes() == (runs / "front" / "detections.csv").read_bytes()
+    for stem in ("0000", "0005"):
+        assert (tmp_path / "single" / "maps" / f"{stem}.npy").read_bytes() == (
+            runs / "front" / "maps" / f"{stem}.npy").read_bytes()
+
+
+def test_workers_take_rig_frames_as_units(runs, tmp_path):
+    """--workers 2: the rig's frames inferred by two processes give the one-process run's bytes."""
+    rig = rig_config(runs, output={"dir": str(tmp_path / "two")})
+    rig.pop("synthetic")
+    assert main(["run", write(tmp_path / "rig.yaml", rig), "--no-progress", "--workers", "2"]) == 0
+    for name in ("detections.csv", "tracks.csv", "maps/0003.npy", "images/0003.png"):
+        assert (tmp_path / "two" / name).read_bytes() == (runs / "out" / name).read_bytes(), name
+
+
+def test_the_api_takes_one_frame_a_camera(runs):
+    """Detector.from_config(rig).detect: a list in the config's order or a dict by name gives
+    detections.csv's rows; a camera given None is inferred from the others (the front camera's
+    own map); a list of the wrong length or an unknown name is a one-line error."""
+    from dpom_warp import Detector
+    from dpom_warp.io import InputError, read_depth
+
+    rig = rig_config(runs)
+    rig.pop("synthetic")
+    det = Detector.from_config(rig)
+    frames = [read_depth(runs / "scene" / n / "frames" / "0003.png", 0.001, (120, 160)) for n in ("front", "side")]
+    got = det.detect(frames)
+    want = [row for row in csv.reader(open(runs / "out" / "detections.csv")) if row[0] == "0003.png"]
+    assert [f"{d.x:.4f},{d.y:.4f},{d.rho:.6f}" for d in got.detections] == [f"{r[1]},{r[2]},{r[4]}" for r in want]
+    by_name = det.detect({"side": frames[1], "front": frames[0]})
+    np.testing.assert_array_equal(by_name.rho_star, got.rho_star)
+    front_only = det.detect_batch([[frames[0], None]])[0]
+    np.testing.assert_array_equal(front_only.rho_star.astype(np.float32), np.load(runs / "front" / "maps" / "0003.npy")
+                                  .reshape(front_only.rho_star.shape))
+    with pytest.raises(InputError, match=r"expected a list of 2 frames, one a camera of the rig \(front, side\)"):
+        det.detect([frames[0]])
+    with pytest.raises(InputError, match=r"expected the rig's cameras \['front', 'side'\], found 'back'"):
+        det.detect({"back": frames[0]})
