@@ -4,6 +4,7 @@ commands:
   dpom-warp run CONFIG... [--output DIR] [--device D] [--set KEY.PATH=VALUE ...]
                 [--workers N] [--ray [ADDRESS]] [--resume | --overwrite] [--max-frames N] [--play]
   dpom-warp fit-ground DEPTH... --camera CAMERA.yaml | RECORDING [--output POSE.yaml]
+  dpom-warp calibrate CONFIG --output OUT.yaml [--set KEY.PATH=VALUE ...]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
   dpom-warp track RUN_DIR [--set tracking.KEY=VALUE ...]
   dpom-warp info SOURCE [--topic TOPIC] [--json]
@@ -365,6 +366,15 @@ def parser() -> argparse.ArgumentParser:
     g = command("fit-ground", "find the floor and the camera pose from depth frames",
                 "Fit the floor plane in depth frames of one camera and print (or write) the pose to\n"
                 "paste under a config's camera.extrinsics.")
+    c = command("calibrate", "place a rig's cameras in one world from what they see",
+                "Place every camera of a rig config (cameras:) in one world whose floor is z = 0: each\n"
+                "camera's floor fit gives its height, pitch and roll; its yaw and position on the floor\n"
+                "come from the static scene it sees in common with the others (README, Several cameras).\n"
+                "Writes the config with every camera's extrinsics to --output, which runs as it is.")
+    c.add_argument("config", help="a rig config (YAML with a cameras: list)")
+    c.add_argument("--output", required=True, help="the calibrated config written here")
+    c.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a config value before calibrating (as for run)")
     g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy; folders and globs of them) of the "
                                             "same camera, or one recording (ROS bag, Azure Kinect .mkv): its "
                                             "first --frames frames")
@@ -450,7 +460,14 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
                         "live camera (input.frames: realsense): stop after N frames (default: at Ctrl-C)")
 
 
-COMMANDS = {"run": _run, "fit-ground": _fit_ground, "eval": _eval, "schema": _schema, "track": _track, "info": _info}
+def _calibrate(args) -> int:
+    from .calibrate import calibrate
+
+    calibrate(args.config, args.output, args.set)
+    return 0
+
+
+COMMANDS = {"run": _run, "fit-ground": _fit_ground, "calibrate": _calibrate, "eval": _eval, "schema": _schema, "track": _track, "info": _info}
 
 
 def _closed_pipe(command: str) -> int:

@@ -177,3 +177,52 @@ def test_the_api_takes_one_frame_a_camera(runs):
         det.detect([frames[0]])
     with pytest.raises(InputError, match=r"expected the rig's cameras \['front', 'side'\], found 'back'"):
         det.detect({"back": frames[0]})
+
+
+def test_calibrate_places_the_cameras_from_their_frames(runs, tmp_path):
+    """No pose given: `dpom-warp calibrate` recovers each camera's pose from its floor fit and the
+    people both cameras see walking (heights within 0.03 m, positions within 0.05 m, rotations
+    within 1 degree of the rendered truth), writes a config that runs as it is (its paths made
+    relative to where it is written) and scores within 0.01 of the given-pose run."""
+    import dataclasses
+
+    from dpom_warp.calibrate import pose_angles
+    from dpom_warp.geometry import pose_from_angles
+    from dpom_warp.loading import load_config
+
+    rig = rig_config(runs)
+    rig.pop("synthetic")
+    for item in rig["cameras"]:
+        item["camera"].pop("extrinsics")  # auto: nothing measured
+    rig["output"] = {"dir": str(tmp_path / "calibrated_run")}
+    (tmp_path / "sub").mkdir()
+    assert main(["calibrate", write(tmp_path / "auto.yaml", rig), "--output", str(tmp_path / "sub" / "cal.yaml")]) == 0
+    cfg = load_config(tmp_path / "sub" / "cal.yaml")
+    for (name, m) in cfg.cameras:
+        p = POSES[name]
+        truth = pose_from_angles(p["height"], p["pitch_deg"], 0.0, p.get("yaw_deg", 0.0), p.get("x", 0.0), p.get("y", 0.0))
+        got = m.camera.T_world_from_camera
+        assert abs(got[2, 3] - truth[2, 3]) < 0.03, name
+        assert np.linalg.norm(got[:2, 3] - truth[:2, 3]) < 0.05, (name, got[:3, 3])
+        turn = np.rad2deg(np.arccos(np.clip((np.trace(got[:3, :3].T @ truth[:3, :3]) - 1) / 2, -1, 1)))
+        assert turn < 1.0, (name, turn, pose_angles(got))
+        assert not m.pose_auto and dataclasses.is_dataclass(m.camera)
+    assert main(["run", str(tmp_path / "sub" / "cal.yaml"), "--no-progress"]) == 0
+    moda = [json.loads((d / "summary.json").read_text())["scores"]["moda"] for d in (tmp_path / "calibrated_run", runs / "out")]
+    assert abs(moda[0] - moda[1]) <= 0.01
+
+
+def test_calibrate_refuses_a_camera_that_shares_too_little(runs, tmp_path, capsys):
+    """The side camera given only its empty-room frames: no person to match and too little of its
+    scene in common with the front camera's: a one-line error naming it, nothing written."""
+    rig = rig_config(runs)
+    rig.pop("synthetic")
+    for item in rig["cameras"]:
+        item["camera"].pop("extrinsics")
+    rig["cameras"][1]["input"]["frames"] = rig["cameras"][1]["input"]["background"]
+    out = tmp_path / "cal.yaml"
+    assert main(["calibrate", write(tmp_path / "auto.yaml", rig), "--output", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dpom-warp: error: cameras[1] (side): calibrate: shares too little with the cameras before "
+                          "it: 0 people matched across cameras (expected at least 8), and its static scene alone")
+    assert err.count("\n") == 1 and not out.exists()

@@ -1,0 +1,415 @@
+"""`dpom-warp calibrate CONFIG --output OUT.yaml`: a rig's cameras placed in one world without a
+tape measure (issue 61, item 3).
+
+Each camera's floor fit (ground.py, on the median of its background frames, else of frames
+spread over its sequence) gives its height, pitch and roll, and a frame whose floor is z = 0
+(the camera above its origin, looking along +y). What the fit cannot give, the turn about z
+(yaw) and the position on the floor, comes from what the cameras see at once:
+
+- people walking through the overlap: each camera alone finds them (the single-camera
+  Detector, in its floor frame, on a grid over the floor it sees), frame by frame; the same
+  person seen by two cameras in one rig frame is one point in two frames of reference, and a
+  planar turn and shift maps one set onto the other. Every pair of detections in a frame of
+  one camera against every pair as far apart in the same frame of the other is a hypothesis
+  (two points fix a turn and a shift); the hypothesis that lays the most detections of the
+  camera within MATCH of another camera's over all frames wins (deterministic, exhaustive),
+  and its matches give the least-squares turn and shift (Procrustes on the floor);
+- the static scene (walls, furniture) above the floor, as points: Open3D's point-to-plane ICP
+  refines the turn and shift from there (kept when it moves them little), and gives the
+  residual; with no frames of people seen by two cameras, the scene alone is registered (its
+  footprints correlated on the floor for every degree of turn, then ICP): a room whose walls
+  look alike from several places can fool that, so the people are the better cue.
+
+The first camera fixes the world: its given pose where it has one, else its floor frame. Each
+other camera is placed against those placed before it. A camera with fewer than MIN_MATCHES
+people matched and too little of its scene within NEAR of theirs (MIN_OVERLAP) shares too
+little with the others: a one-line error naming it."""
+
+from __future__ import annotations
+
+import copy
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .config import ConfigError, RunConfig, read_config, resolve_paths
+from .io import InputError, write_text_atomic
+
+CELL = 0.1  # metres: the top view's cells (the scene's coarse search)
+ABOVE_FLOOR = (0.15, 2.5)  # metres: the static scene registered (the floor itself carries no yaw or shift)
+NEAR = 0.05  # metres: a point's neighbour in the residual and the overlap
+MIN_OVERLAP = 0.5  # the static scene alone: the share of a camera's points that must lie within NEAR of the others'
+MEDIAN_FRAMES = 30  # frames spread over a sequence whose median is the static scene (no background frames)
+PEOPLE_FRAMES = 40  # rig frames spread over the sequence whose people are matched across cameras
+MATCH = 0.3  # metres: a camera's detection matches another's within this
+MIN_MATCHES = 8  # people matched across cameras that place a camera
+SPAN = 0.6  # metres: the least distance between the two detections of a hypothesis
+ALIKE = 0.8  # the scene alone: a second best this close to the best is ambiguous
+REFINE_MOVE = (0.15, 3.0)  # the scene's ICP is kept where it moves the people's estimate less than this (m, deg)
+
+
+@dataclass
+class Placed:
+    """A camera placed: its pose in the world, its static points there, and how well they
+    meet the cameras placed before (None for the first)."""
+
+    name: str
+    T_world_from_camera: np.ndarray
+    points: np.ndarray
+    residual_m: float | None = None
+    overlap: float | None = None
+    people: int | None = None  # people matched across cameras
+    people_rms_m: float | None = None
+
+    def report(self) -> dict:
+        h, pitch, roll, yaw = pose_angles(self.T_world_from_camera)
+        return {"camera": self.name, "height_m": round(h, 4), "pitch_deg": round(pitch, 3), "roll_deg": round(roll, 3),
+                "yaw_deg": round(yaw, 3), "x_m": round(float(self.T_world_from_camera[0, 3]), 4),
+                "y_m": round(float(self.T_world_from_camera[1, 3]), 4),
+                "residual_m": None if self.residual_m is None else round(self.residual_m, 4),
+                "overlap": None if self.overlap is None else round(self.overlap, 3),
+                "people_matched": self.people,
+                "people_rms_m": None if self.people_rms_m is None or not self.people else round(self.people_rms_m, 4)}
+
+
+def pose_angles(T: np.ndarray) -> tuple[float, float, float, float]:
+    """(height m, pitch, roll, yaw degrees) of a pose as geometry.pose_from_angles takes them."""
+    R = np.asarray(T, float)[:3, :3]
+    right, forward = R[:, 0], R[:, 2]
+    pitch = np.arcsin(np.clip(-forward[2], -1.0, 1.0))
+    yaw = np.arctan2(-forward[0], forward[1])
+    roll = np.arcsin(np.clip(-right[2] / max(np.cos(pitch), 1e-9), -1.0, 1.0))
+    return float(T[2][3]), float(np.rad2deg(pitch)), float(np.rad2deg(roll)), float(np.rad2deg(yaw))
+
+
+def static_frame(m: RunConfig, log=print) -> tuple[np.ndarray, str]:
+    """A camera's static scene in metres: the median of its background frames, else of up to
+    MEDIAN_FRAMES frames spread over its sequence; and what it was made of (for messages)."""
+    from .sources import expand, source_frames
+    from .structure import median_frame
+    from .worker import read_frame
+
+    if m.inputs.background and m.inputs.background != "auto":
+        files = expand(m.inputs.background, "input.background", m.inputs.topic, log)
+        what = f"{len(files)} background frames"
+    else:
+        if m.inputs.frames is None:
+            raise ConfigError("input.frames: required key is missing (calibrate needs frames or background frames)")
+        files, _ = source_frames(m.inputs.frames, "input.frames", m.inputs.topic, log)
+        files = [files[i] for i in np.unique(np.linspace(0, len(files) - 1, min(MEDIAN_FRAMES, len(files))).astype(int))]
+        what = f"the median of {len(files)} frames"
+    return median_frame([read_frame(m, f) for f in files]), what
+
+
+def floor_frame(m: RunConfig, depth: np.ndarray, where: str):
+    """The camera's floor fit: its pose in its own floor frame (floor z = 0, under it, looking
+    along +y) and where the floor it sees lies."""
+    from .ground import GroundFitError, fit_ground_frames
+
+    try:
+        return fit_ground_frames([depth], m.camera, m.ground)
+    except GroundFitError as e:
+        raise InputError(f"{where}: {e}") from None
+
+
+def people_seen(m: RunConfig, fit, files: list, device: str | None, log=print) -> list[np.ndarray]:
+    """Where the camera alone finds people in each of `files` (None: no frame), on the floor of
+    its own floor frame ((n, 2) a frame): the single-camera engine of its config (its background,
+    model and detection) over a grid on the floor it sees."""
+    from .config import parse_config
+    from .session import set_up
+    from .worker import FrameWorker, read_frame
+
+    x0, x1, y0, y1 = fit.floor_xy or (-3.0, 3.0, 0.5, 6.0)
+    step = 0.1
+    raw = {k: v for k, v in m.resolved.items() if k not in ("synthetic",)}
+    raw["camera"] = {**raw["camera"], "extrinsics": {"T_world_from_camera": fit.T_world_from_camera.tolist()}}
+    raw["grid"] = {"mode": "ground", "x": [max(x0, -5.0), min(x1, 5.0), step], "y": [max(y0, 0.3), min(y1, 8.0), step]}
+    raw["evaluation"] = {**raw["evaluation"], "ground_truth": None}
+    cfg = parse_config(raw)
+    setup = set_up(cfg, [f for f in files if f is not None], device, lambda *_: None)
+    worker = FrameWorker(setup.spec, engine=setup.engine)
+    out = []
+    for f in files:
+        if f is None:
+            out.append(np.zeros((0, 2)))
+            continue
+        _, dets = worker.detections(worker.engine.infer(read_frame(cfg, f)))
+        out.append(np.array([[d.x, d.y] for d in dets]).reshape(-1, 2))
+    return out
+
+
+def procrustes(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """The planar turn and shift (4x4) that lays the points `src` (n, 2) on `dst` in least squares."""
+    a, b = src - src.mean(0), dst - dst.mean(0)
+    yaw = np.arctan2(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]), np.sum(a * b))
+    c, s = np.cos(yaw), np.sin(yaw)
+    t = dst.mean(0) - src.mean(0) @ np.array([[c, s], [-s, c]])
+    return planar(yaw, *t)
+
+
+def _matches(T: np.ndarray, src: list, dst: list) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (src point, its nearest dst point of the same frame) closer than MATCH under T."""
+    a, b = [], []
+    for s_f, d_f in zip(src, dst):
+        if not len(s_f) or not len(d_f):
+            continue
+        moved = s_f @ T[:2, :2].T + T[:2, 3]
+        dist = np.linalg.norm(moved[:, None] - d_f[None], axis=-1)
+        near = dist.argmin(1)
+        ok = dist[np.arange(len(s_f)), near] < MATCH
+        a.append(s_f[ok])
+        b.append(d_f[near[ok]])
+    return (np.concatenate(a), np.concatenate(b)) if a else (np.zeros((0, 2)), np.zeros((0, 2)))
+
+
+def match_people(src: list, dst: list) -> tuple[np.ndarray | None, int, float]:
+    """The planar turn and shift laying the camera's people `src` (its floor frame, (n, 2) a
+    frame) on those of the cameras placed `dst` (the world), the number matched and their RMS
+    distance (module doc: every two-point hypothesis, the most matches, then least squares)."""
+    frames = [f for f in range(len(src)) if len(src[f]) >= 2 and len(dst[f]) >= 2]
+    hyps = []
+    for f in frames:
+        d, s_ = dst[f], src[f]
+        for i in range(len(d)):
+            for j in range(i + 1, len(d)):
+                span = np.linalg.norm(d[j] - d[i])
+                if span < SPAN:
+                    continue
+                for k in range(len(s_)):
+                    for m in range(len(s_)):
+                        if k != m and abs(np.linalg.norm(s_[m] - s_[k]) - span) < MATCH:
+                            hyps.append(procrustes(s_[[k, m]], d[[i, j]]))
+    if not hyps:
+        return None, 0, float("nan")
+    flat = [(f, p) for f in range(len(src)) for p in src[f]]
+    if not flat:
+        return None, 0, float("nan")
+    pts = np.array([p for _, p in flat])
+    at = np.array([f for f, _ in flat])
+    width = max(len(d) for d in dst) or 1
+    padded = np.full((len(dst), width, 2), np.inf)
+    for f, d in enumerate(dst):
+        padded[f, :len(d)] = d
+    best, count = None, -1
+    for start in range(0, len(hyps), 1024):  # each hypothesis's matches, 1024 at a time
+        H = np.stack(hyps[start:start + 1024])
+        moved = np.einsum("hij,nj->hni", H[:, :2, :2], pts) + H[:, None, :2, 3]
+        dist = np.linalg.norm(moved[:, :, None] - padded[at][None], axis=-1).min(-1)
+        counts = (dist < MATCH).sum(1)
+        k = int(np.argmax(counts))
+        if counts[k] > count:
+            best, count = H[k], int(counts[k])
+    T = best
+    for _ in range(5):  # least squares on the matches, matched again
+        a, b = _matches(T, src, dst)
+        if len(a) < 2:
+            break
+        T = procrustes(a, b)
+    a, b = _matches(T, src, dst)
+    rms = float(np.sqrt(np.mean(np.sum((a @ T[:2, :2].T + T[:2, 3] - b) ** 2, axis=1)))) if len(a) else float("nan")
+    return T, len(a), rms
+
+
+def scene_points(m: RunConfig, T: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """The static scene's points above the floor (ABOVE_FLOOR), in the frame T puts the camera in."""
+    import dataclasses
+
+    camera = dataclasses.replace(m.camera, T_world_from_camera=T)
+    ok = (depth > 0) & (depth <= m.model.z_max)
+    pts = camera.centre + depth[ok][:, None].astype(np.float64) * camera.rays()[ok]
+    return pts[(pts[:, 2] >= ABOVE_FLOOR[0]) & (pts[:, 2] <= ABOVE_FLOOR[1])]
+
+
+def planar(yaw: float, x: float, y: float) -> np.ndarray:
+    """The 4x4 turn by `yaw` radians about z followed by a shift (x, y) on the floor."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:2, 3] = x, y
+    return T
+
+
+def top_view(xy: np.ndarray, origin: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Occupancy of the floor cells (CELL) under `xy`, a grid of `shape` from `origin`, spread to
+    the cells beside (a wall seen from two places is read a few centimetres apart)."""
+    from scipy.ndimage import binary_dilation
+
+    img = np.zeros(shape, bool)
+    ij = np.floor((xy - origin) / CELL).astype(int)
+    ok = (ij[:, 0] >= 0) & (ij[:, 0] < shape[1]) & (ij[:, 1] >= 0) & (ij[:, 1] < shape[0])
+    img[ij[ok, 1], ij[ok, 0]] = True
+    return binary_dilation(img, np.ones((3, 3), bool)).astype(np.float64)
+
+
+def coarse_turn_and_shift(source: np.ndarray, target: np.ndarray) -> tuple[tuple[float, float, float], bool]:
+    """(yaw, x, y) that lays most of `source`'s top view on `target`'s: every whole degree of
+    turn about the origin, for each every shift at once (the views' cross-correlation by FFT,
+    padded so that shifts do not wrap); and whether a turn farther than 10 degrees, or a
+    shift farther than 0.5 m, lays at least ALIKE as much (the scene is ambiguous)."""
+    lo = np.minimum(source[:, :2].min(0), target[:, :2].min(0)) - 1.0
+    hi = np.maximum(np.abs(source[:, :2]).max(0), np.abs(target[:, :2]).max(0))
+    size = int(np.ceil(2 * max(np.max(hi - lo), np.max(np.abs(lo))) / CELL)) + 8
+    shape = (size, size)
+    origin = np.array([-size * CELL / 2, -size * CELL / 2])
+    T_img = np.fft.rfft2(top_view(target[:, :2], origin, shape), s=(2 * size, 2 * size))
+    found = []  # each degree's best (score, yaw, x, y)
+    for deg in range(360):
+        yaw = np.deg2rad(deg)
+        c, s = np.cos(yaw), np.sin(yaw)
+        turned = source[:, :2] @ np.array([[c, s], [-s, c]])
+        S_img = np.fft.rfft2(top_view(turned, origin, shape), s=(2 * size, 2 * size))
+        corr = np.fft.irfft2(T_img * np.conj(S_img), s=(2 * size, 2 * size))
+        k = int(np.argmax(corr))
+        di, dj = np.unravel_index(k, corr.shape)
+        di, dj = (di if di < size else di - 2 * size), (dj if dj < size else dj - 2 * size)
+        found.append((float(corr.flat[k]), yaw, dj * CELL, di * CELL))
+    best = max(found, key=lambda f: f[0])
+    others = [f for f in found if min(abs(np.rad2deg(f[1] - best[1])) % 360, 360 - abs(np.rad2deg(f[1] - best[1])) % 360)
+              > 10 or np.hypot(f[2] - best[2], f[3] - best[3]) > 0.5]
+    alike = bool(others) and max(f[0] for f in others) >= ALIKE * best[0]
+    return best[1:], alike
+
+
+def _icp(T: np.ndarray, source: np.ndarray, target: np.ndarray, distances=(0.2, 0.1, NEAR)) -> np.ndarray:
+    """Open3D's point-to-plane ICP from T, coarse to fine, each result kept to a turn and a shift."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    src, tgt = (o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p)).voxel_down_sample(NEAR / 2)
+                for p in (source, target))
+    tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.2, max_nn=30))
+    for distance in distances:
+        R = reg.registration_icp(src, tgt, distance, T, reg.TransformationEstimationPointToPlane(),
+                                 reg.ICPConvergenceCriteria(max_iteration=50)).transformation
+        T = planar(np.arctan2(R[1, 0], R[0, 0]), R[0, 3], R[1, 3])
+    return T
+
+
+def scene_fit(T: np.ndarray, source: np.ndarray, target: np.ndarray) -> tuple[float, float]:
+    """(residual: RMS distance of the source's points within NEAR of the target's, overlap: their
+    share) under T (Open3D's evaluate_registration)."""
+    import open3d as o3d
+
+    if not len(source) or not len(target):
+        return 0.0, 0.0
+    src, tgt = (o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p)).voxel_down_sample(NEAR / 2)
+                for p in (source, target))
+    check = o3d.pipelines.registration.evaluate_registration(src, tgt, NEAR, T)
+    return float(check.inlier_rmse), float(check.fitness)
+
+
+def refine_on_scene(T: np.ndarray, source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """T (from the people) refined by ICP on the static scenes, where that moves it less than
+    REFINE_MOVE and lays more of the scene within NEAR; else T."""
+    if len(source) < 100 or len(target) < 100:
+        return T
+    refined = _icp(T, source, target, (MATCH / 2, NEAR))
+    moved = np.linalg.norm(refined[:2, 3] - T[:2, 3])
+    turned = abs(np.rad2deg(np.arctan2(refined[1, 0], refined[0, 0]) - np.arctan2(T[1, 0], T[0, 0])))
+    turned = min(turned, 360 - turned)
+    if moved < REFINE_MOVE[0] and turned < REFINE_MOVE[1] and scene_fit(refined, source, target)[1] >= \
+            scene_fit(T, source, target)[1]:
+        return refined
+    return T
+
+
+def register(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, bool]:
+    """The scene alone: the turn and shift (4x4, planar) that lay `source` on `target`, their
+    footprints correlated, then ICP; and whether another turn and shift, farther than 0.5 m or
+    10 degrees, lays at least ALIKE as much of it (the scene cannot tell them apart)."""
+    (yaw, x, y), alike = coarse_turn_and_shift(source, target)
+    return _icp(planar(yaw, x, y), source, target), alike
+
+
+def place_cameras(cfg: RunConfig, device: str | None = None, log=print) -> list[Placed]:
+    """Every camera of the rig placed in one world (module doc); a one-line InputError naming a
+    camera that shares too little with those placed before it."""
+    from .frames import rig_frames
+
+    rig = rig_frames(cfg, log=lambda *_: None)
+    chosen = rig.frames
+    if len(chosen) > PEOPLE_FRAMES:
+        chosen = [chosen[i] for i in np.unique(np.linspace(0, len(chosen) - 1, PEOPLE_FRAMES).astype(int))]
+    placed, people = [], []
+    for c, (name, m) in enumerate(cfg.cameras):
+        where = f"cameras[{c}] ({name})"
+        depth, what = static_frame(m, log)
+        fit = floor_frame(m, depth, f"{where}: {what}")
+        own = fit.T_world_from_camera
+        seen = people_seen(m, fit, [f.paths[c] for f in chosen], device, log)
+        if c == 0:
+            T = own if m.pose_auto else m.camera.T_world_from_camera
+            W = T @ np.linalg.inv(own)  # the floor frame into the world: a turn and a shift
+            people.append([p @ W[:2, :2].T + W[:2, 3] for p in seen])
+            placed.append(Placed(name, T, scene_points(m, T, depth)))
+            continue
+        source, target = scene_points(m, own, depth), np.concatenate([p.points for p in placed])
+        dst = [np.concatenate([q[f] for q in people]) for f in range(len(chosen))]
+        W, matched, rms = match_people(seen, dst)
+        log(f"camera {name}: {matched} people matched across cameras in {len(chosen)} frames"
+            + (f" (rms {1000 * rms:.0f} mm)" if matched else ""))
+        if matched >= MIN_MATCHES:
+            W = refine_on_scene(W, source, target)
+            residual, overlap = scene_fit(W, source, target)
+        else:  # the static scene alone: refused where it fits little, or several places alike
+            W, alike = register(source, target) if len(source) >= 100 and len(target) >= 100 else (None, True)
+            residual, overlap = scene_fit(W, source, target) if W is not None else (0.0, 0.0)
+            if alike or overlap < MIN_OVERLAP:
+                scene = ("fits several places alike (walls that look the same from each)" if alike and W is not None
+                         else f"has {100 * overlap:.0f} % of its points within {NEAR:g} m of theirs (expected at least "
+                              f"{100 * MIN_OVERLAP:.0f} %)")
+                raise InputError(f"{where}: calibrate: shares too little with the cameras before it: {matched} people "
+                                 f"matched across cameras (expected at least {MIN_MATCHES}), and its static scene "
+                                 f"alone {scene}; record people walking where both see, or give "
+                                 f"cameras[{c}].camera.extrinsics")
+        T = W @ own
+        people.append([p @ W[:2, :2].T + W[:2, 3] for p in seen])
+        placed.append(Placed(name, T, scene_points(m, T, depth), residual, overlap, matched, rms))
+    return placed
+
+
+def calibrated_mapping(config_path: str | Path, placed: list[Placed], output: str | Path) -> dict:
+    """The config file's mapping with every camera's extrinsics the placed pose, its relative
+    paths made relative to the output's folder (the written file runs as it is)."""
+    raw = read_config(config_path)  # paths relative to the current folder
+    out = copy.deepcopy(raw)
+    for item, p in zip(out["cameras"], placed):
+        cam = item.setdefault("camera", {}) if isinstance(item.get("camera"), (dict, type(None))) else item["camera"]
+        if isinstance(cam, str):  # camera: FILE
+            cam = item["camera"] = {"file": cam}
+        if cam is None:
+            cam = item["camera"] = {}
+        cam["extrinsics"] = {"T_world_from_camera": [[round(float(v), 9) for v in row] for row in p.T_world_from_camera]}
+    here = os.path.relpath(".", Path(output).resolve().parent)
+    return resolve_paths(out, here)
+
+
+def calibrate(config_path: str | Path, output: str | Path, overrides: list[str] | None = None, log=print,
+              device: str | None = None) -> list[dict]:
+    """Place the rig's cameras and write the config with their poses to `output`; returns each
+    camera's report (its pose, residual and overlap), also printed."""
+    import yaml
+
+    from .loading import load_config
+
+    cfg = load_config(config_path, overrides)
+    if not cfg.is_rig:
+        raise ConfigError(f"{config_path}: calibrate places a rig's cameras; expected a cameras: list, found a "
+                          f"single camera (its floor fit is dpom-warp fit-ground)")
+    placed = place_cameras(cfg, device, log)
+    reports = [p.report() for p in placed]
+    for r in reports:
+        fit = "" if r["residual_m"] is None else (f"; {r['people_matched']} people matched, static scene residual "
+                                                   f"{1000 * r['residual_m']:.1f} mm over {100 * r['overlap']:.0f} % "
+                                                   f"of it")
+        log(f"camera {r['camera']}: {r['height_m']:.3f} m up, pitch {r['pitch_deg']:.2f} deg, roll {r['roll_deg']:.2f} "
+            f"deg, yaw {r['yaw_deg']:.2f} deg, at x {r['x_m']:.3f} m, y {r['y_m']:.3f} m{fit}")
+    mapping = calibrated_mapping(config_path, placed, output)
+    text = (f"# written by dpom-warp calibrate from {config_path}: every camera's extrinsics placed in one world\n"
+            + yaml.safe_dump(mapping, sort_keys=False, default_flow_style=None))
+    write_text_atomic(Path(output), text)
+    log(f"calibrated config written to {output}")
+    return reports
