@@ -456,7 +456,14 @@ def live_block(out: Path) -> str:
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.live`")])
 
 
-BUILDERS = {"config": lambda out, jobs: config_block(), "tests": lambda out, jobs: tests_block(), "demo": lambda out, jobs: demo_block(out),
+def rig_block(out: Path) -> str:
+    md = bench_markdown("bench.rig", out / "rig", "rig.md", "--frames", "10", "--repeats", "3")
+    return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.rig --frames 10 --repeats 3`; times: "
+                                    "engine and detections a frame, median of 3 per frame over the frames, each frame "
+                                    "by the rig and by each camera alone in turn, one process")])
+
+
+BUILDERS = {"rig": lambda out, jobs: rig_block(out), "config": lambda out, jobs: config_block(), "tests": lambda out, jobs: tests_block(), "demo": lambda out, jobs: demo_block(out),
             "robustness": robustness_block, "drones": lambda out, jobs: drones_block(out),
             "real": lambda out, jobs: real_block(out), "eval": lambda out, jobs: eval_block(out),
             "speed": lambda out, jobs: speed_block(out), "kernels": lambda out, jobs: kernels_block(out),

@@ -1,0 +1,168 @@
+"""What a rig of depth cameras gains over one (issue 61): rendered scenes seen by three cameras at
+once, each scored as every camera alone, as detection-level fusion of those single runs (what
+multi-camera trackers and body-tracking SDKs do: each camera decides, then detections within
+0.4 m are merged, kept when one camera, or two, found them; the better of the two), and as the
+rig's evidence fusion (one mean field over every camera's pixels); and the time of a rig frame
+against one camera's, measured in the same process on the same frames.
+
+    python -m bench.rig [--frames 10] [--output runs/rig] [--scenes rig3 rig3_tight] [--repeats 5]
+
+Scenes (the same cameras' layout in each: one at the near end looking along the area, one on
+each side looking across it; 256 x 212 pixels, Kinect v2's field of view):
+- rig3: 16 people walking in 6 x 5 m, cameras 2.2 m up, pitched 20 degrees;
+- rig3_tight: 26 people in 4.4 x 3.5 m, 0.5 m apart at least, cameras 1.9 m up, pitched 15:
+  people hide each other from each camera (the issue's crowd).
+The tables go to OUTPUT/rig.md and rig.json (bench.docs --only rig puts them in the README).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+CAMERA = {"width": 256, "height": 212, "intrinsics": {"fx": 182.5, "fy": 182.5, "cx": 127.5, "cy": 105.5}}
+MERGE = 0.4  # metres: detection-level fusion merges detections closer than this
+
+
+def layout(height: float, pitch: float, area) -> dict:
+    """The three cameras around `area` (x0, x1, y0, y1): near end, left side, right side."""
+    x0, x1, y0, y1 = area
+    mid = (y0 + y1) / 2
+    return {"near": {"height": height, "pitch_deg": pitch, "x": 0.0, "y": y0 - 1.6},
+            "left": {"height": height, "pitch_deg": pitch, "yaw_deg": -90.0, "x": x0 - 1.6, "y": mid},
+            "right": {"height": height, "pitch_deg": pitch, "yaw_deg": 90.0, "x": x1 + 1.6, "y": mid}}
+
+
+SCENES = {
+    "rig3": dict(height=2.2, pitch=20.0, area=(-3.0, 3.0, 2.0, 7.0), people=16, min_gap=0.6, seed=11),
+    "rig3_tight": dict(height=1.9, pitch=15.0, area=(-2.2, 2.2, 2.75, 6.25), people=26, min_gap=0.5, seed=12),
+}
+
+
+def rig_config(name: str, folder: Path, frames: int) -> dict:
+    s = SCENES[name]
+    x0, x1, y0, y1 = s["area"]
+    scene = folder / "scene"
+    poses = layout(s["height"], s["pitch"], s["area"])
+    return {"device": "cpu",
+            "cameras": [{"name": n, "input": {"frames": f"{scene}/{n}/frames/*.png",
+                                              "background": f"{scene}/{n}/background/*.png", "fps": 5},
+                         "camera": {**CAMERA, "extrinsics": p}} for n, p in poses.items()],
+            "grid": {"x": [x0 - 0.5, x1 + 0.5, 0.1], "y": [y0 - 0.5, y1 + 0.5, 0.1]},
+            "object": {"width": 0.4, "height": 1.85, "shape": "solid"},
+            "evaluation": {"ground_truth": f"{scene}/ground_truth.json"},
+            "output": {"dir": str(folder / "out"), "images": False},
+            "tracking": {"method": "off"},
+            "synthetic": {"cache": str(scene), "seed": s["seed"], "frames": frames, "background_frames": 5,
+                          "people": s["people"], "min_gap": s["min_gap"], "area": list(s["area"]), "furniture": 0,
+                          "room": [x0 - 2.0, x1 + 2.0, y0 - 2.0, y1 + 2.0, 3.0]}}
+
+
+def fuse_detections(per_camera: list[dict], agree: int) -> dict:
+    """Detection-level fusion: each frame's detections of every camera (name -> (n, 2)), strongest
+    camera order kept, merged greedily within MERGE into one (their mean), kept where at least
+    `agree` cameras found it."""
+    out = {}
+    for frame in per_camera[0]:
+        groups = []  # [points, cameras]
+        for c, dets in enumerate(per_camera):
+            for p in dets.get(frame, np.zeros((0, 2))):
+                near = [g for g in groups if np.linalg.norm(np.mean(g[0], axis=0) - p) < MERGE and c not in g[1]]
+                if near:
+                    near[0][0].append(p)
+                    near[0][1].add(c)
+                else:
+                    groups.append(([p], {c}))
+        out[frame] = np.array([np.mean(g[0], axis=0) for g in groups if len(g[1]) >= agree]).reshape(-1, 2)
+    return out
+
+
+def run_scene(name: str, folder: Path, frames: int, repeats: int) -> dict:
+    from dpom_warp import Detector
+    from dpom_warp.evaluate import load_ground_truth, score_frames
+    from dpom_warp.frames import run_frames, render_synthetic
+    from dpom_warp.loading import config_from_mapping
+    from dpom_warp.worker import read_rig_frame
+
+    raw = rig_config(name, folder, frames)
+    cfg = config_from_mapping(raw)
+    render_synthetic(cfg, lambda *_: None)
+    rig_frames = run_frames(cfg, log=lambda *_: None).frames
+    truth = load_ground_truth(raw["evaluation"]["ground_truth"])
+    depths = [read_rig_frame(cfg, f.paths) for f in rig_frames]
+    names = [n for n, _ in cfg.cameras]
+    rig = Detector.from_config({k: v for k, v in raw.items() if k != "synthetic"})
+    stride = rig.engine.resolution.stride  # each camera alone at the rig's resolution
+    singles = [Detector.from_config({**{k: v for k, v in raw.items() if k != "synthetic"},
+                                     "cameras": [{**c, "input": {**c["input"], "stride": stride}}
+                                                 for c in raw["cameras"] if c["name"] == n]}) for n in names]
+    dets = {"rig": {}, **{n: {} for n in names}}
+    times = {"rig": [], **{n: [] for n in names}}
+    for f, depth in zip(rig_frames, depths):  # each frame alternately by the rig and each camera alone
+        for _ in range(repeats):
+            t = time.perf_counter()
+            got = rig.detect(depth)
+            times["rig"].append(time.perf_counter() - t)
+            for n, det, d in zip(names, singles, depth):
+                t = time.perf_counter()
+                one = det.detect([d])
+                times[n].append(time.perf_counter() - t)
+                dets[n][f.name] = np.array([[x.x, x.y] for x in one.detections]).reshape(-1, 2)
+        dets["rig"][f.name] = np.array([[x.x, x.y] for x in got.detections]).reshape(-1, 2)
+    frames_truth = {f.name: truth[f.name] for f in rig_frames}
+    full = {k: score_frames(v, frames_truth, 0.5) for k, v in dets.items()}
+    scores = {k: v["moda"] for k, v in full.items()}
+    fused = {k: score_frames(fuse_detections([dets[n] for n in names], k), frames_truth, 0.5)["moda"] for k in (1, 2)}
+    median = {k: statistics.median(v) for k, v in times.items()}
+    hidden = sum(1 for f in rig_frames for o in truth[f.name]
+                 if min(o["visible_in"].get(n, 0.0) for n in names) < 0.1)
+    return {"scene": name, "people": SCENES[name]["people"], "frames": len(rig_frames),
+            "truth": sum(len(v) for v in frames_truth.values()), "hidden_from_one": hidden,
+            "moda": scores, "rig_counts": {k: full["rig"][k] for k in ("tp", "fp", "fn")}, "detection_fusion": {"any": fused[1], "two": fused[2], "best": max(fused.values())},
+            "median_s": median, "rig_over_camera": median["rig"] / statistics.mean(median[n] for n in names),
+            "rig_over_sum": median["rig"] / sum(median[n] for n in names)}
+
+
+def markdown(results: list[dict], machine: str) -> str:
+    names = [k for k in results[0]["moda"] if k != "rig"]
+    rows = ["| scene | people (truth) | " + " | ".join(f"camera {n} alone" for n in names)
+            + " | detection fusion (1 / 2 agree) | evidence fusion (rig) | rig frame / one camera's |",
+            "|---|---|" + "---|" * len(names) + "---|---|---|"]
+    for r in results:
+        rows.append(f"| {r['scene']} | {r['people']} ({r['truth']}; {r['hidden_from_one']} under 10 % visible "
+                    f"from a camera) | " + " | ".join(f"{r['moda'][n]:.3f}" for n in names)
+                    + f" | {r['detection_fusion']['any']:.3f} / {r['detection_fusion']['two']:.3f} | "
+                      f"**{r['moda']['rig']:.3f}** | {r['rig_over_camera']:.2f}x ({1000 * r['median_s']['rig']:.0f} ms; "
+                      f"{r['rig_over_sum']:.2f}x the three cameras' sum) |")
+    return "\n".join(rows) + f"\n\nMODA at 0.5 m, fast path; {machine}."
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--repeats", type=int, default=3, help="timings: each frame this many times, median")
+    ap.add_argument("--output", default="runs/rig")
+    ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
+    args = ap.parse_args()
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    from bench.docs import machine
+
+    results = []
+    for name in args.scenes:
+        r = run_scene(name, Path(".cache/bench") / f"{name}_{args.frames}", args.frames, args.repeats)
+        print(json.dumps(r))
+        results.append(r)
+    (out / "rig.json").write_text(json.dumps(results, indent=1))
+    text = markdown(results, machine())
+    (out / "rig.md").write_text(text + "\n")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
