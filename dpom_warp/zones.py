@@ -1,0 +1,238 @@
+"""Where people go (issue 62): counts in zones, crossings of lines and dwell times, from the tracks.
+
+Zones are polygons and lines are segments on the floor, in world metres (the config's `zones:`
+and `lines:`). `Zones.update(frame_index, tracks)` takes one frame's committed tracks (their
+identity and position, a person the tracker holds through a short occlusion included) and
+returns that frame's counts and crossings; the recorded run, the live run, `dpom-warp track` and
+the Python API's online tracker loop all feed it the same way.
+
+- A track is in a zone when its position is inside the polygon or on its edge.
+- A track crosses a line when its step from one frame to the next passes through the segment
+  (not the line beyond its ends): `in` when it goes from the right of from->to to its left, `out`
+  the other way, reported at the first frame on the new side. A track that jitters on the line
+  is counted once: the side it is on changes only once it is more than `hysteresis` metres from
+  the line (the step that crossed is remembered until then, and forgotten if it comes back).
+- A stay in a zone runs from the first frame a track is inside to the last (`dwell`): its
+  seconds are from the time of its first frame to the time of the frame after its last
+  (the recording's timestamps where it has them, else frame / fps), at the run's end to the
+  last frame's time plus a frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Zone:
+    name: str
+    polygon: np.ndarray  # (n, 2) metres
+
+
+@dataclass(frozen=True)
+class Line:
+    name: str
+    start: np.ndarray  # (2,) metres: `from`
+    end: np.ndarray  # (2,) `to`
+
+
+EDGE = 1e-9  # metres: a point this close to a polygon's edge is on it
+
+
+def on_segment(points: np.ndarray, a: np.ndarray, b: np.ndarray, tol: float = EDGE) -> np.ndarray:
+    """(n,) whether each point lies on the segment a-b (within `tol` metres)."""
+    d = b - a
+    t = np.clip(((points - a) @ d) / max(float(d @ d), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(points - (a + t[:, None] * d), axis=1) <= tol
+
+
+def inside(polygon: np.ndarray, points) -> np.ndarray:
+    """(n,) whether each point (n, 2) is inside the polygon or on its edge (even-odd rule, by
+    matplotlib's Path, plus the edges themselves)."""
+    from matplotlib.path import Path
+
+    points = np.asarray(points, float).reshape(-1, 2)
+    if not len(points):
+        return np.zeros(0, bool)
+    hit = Path(polygon).contains_points(points)
+    for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
+        hit |= on_segment(points, a, b)
+    return hit
+
+
+def side(line: Line, points) -> np.ndarray:
+    """(n,) signed distance of each point from the line through from->to: > 0 on its left."""
+    d = line.end - line.start
+    p = np.asarray(points, float).reshape(-1, 2) - line.start
+    return (d[0] * p[:, 1] - d[1] * p[:, 0]) / np.linalg.norm(d)
+
+
+def steps_through(line: Line, p: np.ndarray, q: np.ndarray) -> bool:
+    """Whether the step p->q meets the segment from->to (ends included)."""
+    a, b = line.start, line.end
+    r, s = q - p, b - a
+    den = r[0] * s[1] - r[1] * s[0]
+    if abs(den) < 1e-12:  # parallel: it meets only by touching an end
+        return bool(on_segment(np.array([p, q]), a, b).any() or on_segment(np.array([a, b]), p, q).any())
+    ap = a - p
+    t = (ap[0] * s[1] - ap[1] * s[0]) / den
+    u = (ap[0] * r[1] - ap[1] * r[0]) / den
+    return -1e-12 <= t <= 1 + 1e-12 and -1e-12 <= u <= 1 + 1e-12
+
+
+def segments_cross(a, b, c, d) -> bool:
+    """Whether the closed segments a-b and c-d share a point."""
+    return steps_through(Line("", np.asarray(c, float), np.asarray(d, float)), np.asarray(a, float),
+                         np.asarray(b, float))
+
+
+def self_crossing(polygon: np.ndarray) -> tuple[int, int] | None:
+    """The first two edges of a polygon that are not neighbours and share a point, else None."""
+    n = len(polygon)
+    edges = [(polygon[i], polygon[(i + 1) % n]) for i in range(n)]
+    for i in range(n):
+        for j in range(i + 1, n):
+            if j == i + 1 or (i == 0 and j == n - 1):
+                continue
+            if segments_cross(*edges[i], *edges[j]):
+                return i, j
+    return None
+
+
+def meets_rectangle(points: np.ndarray, rect, closed: bool) -> bool:
+    """Whether a polygon (`closed`) or a segment (its two points) has a point in the rectangle
+    (x0, x1, y0, y1)."""
+    x0, x1, y0, y1 = rect
+    pts = np.asarray(points, float)
+    if np.any((pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)):
+        return True
+    corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+    if closed and inside(pts, corners).any():
+        return True
+    edges = list(zip(pts, np.roll(pts, -1, axis=0))) if closed else [(pts[0], pts[1])]
+    return any(segments_cross(a, b, c, d) for a, b in edges for c, d in zip(corners, np.roll(corners, -1, axis=0)))
+
+
+@dataclass
+class Crossing:
+    frame: int  # the first frame on the new side
+    line: str
+    track: int
+    direction: str  # in: right of from->to to its left; out: the other way
+
+
+@dataclass
+class Stay:
+    track: int
+    zone: str
+    enter_frame: int
+    exit_frame: int
+    seconds: float
+
+
+@dataclass
+class FrameEvents:
+    """One frame's counts ({zone: tracks inside}) and the crossings confirmed at it (each dated
+    by its first frame on the new side, which may be earlier under the hysteresis)."""
+
+    frame: int
+    counts: dict
+    crossings: list
+
+
+@dataclass
+class _LineState:
+    confirmed: int = 0  # the side the track is on, beyond the hysteresis (0: not yet known)
+    pending: tuple | None = None  # (first frame on the other side, whether that step passed the segment)
+
+
+@dataclass
+class Zones:
+    """The zones and lines of a run, and their bookkeeping over the frames fed to `update`."""
+
+    zones: list[Zone]
+    lines: list[Line]
+    hysteresis: float = 0.15
+    fps: float = 15.0
+    stays: list[Stay] = field(default_factory=list)  # closed stays, in the order they closed
+    _last: dict = field(default_factory=dict)  # track -> (frame, xy) last seen
+    _lines: dict = field(default_factory=dict)  # (track, line) -> _LineState
+    _open: dict = field(default_factory=dict)  # (track, zone) -> enter frame
+    _times: dict = field(default_factory=dict)  # frame -> seconds
+    _frame: int | None = None
+
+    @classmethod
+    def from_config(cls, cfg) -> "Zones":
+        """From a run config's zones, lines, counting.hysteresis and input.fps."""
+        zones = [Zone(z.name, np.asarray(z.polygon, float)) for z in cfg.zones]
+        lines = [Line(x.name, np.asarray(x.start, float), np.asarray(x.end, float)) for x in cfg.lines]
+        return cls(zones, lines, cfg.counting.hysteresis, cfg.inputs.fps)
+
+    def time(self, frame: int) -> float:
+        return self._times.get(frame, frame / self.fps)
+
+    def update(self, frame: int, tracks, timestamp: float | None = None) -> FrameEvents:
+        """One frame's committed tracks, [(id, xyz, bridged)] or dicts with id and xyz, frames
+        in increasing order; returns the frame's counts and the crossings confirmed now."""
+        if self._frame is not None and frame <= self._frame:
+            raise ValueError(f"zones: frames must come in increasing order; found {frame} after {self._frame}")
+        self._frame = frame
+        if timestamp is not None:
+            self._times[frame] = float(timestamp)
+        rows = [(int(t["id"]), t["xyz"]) if isinstance(t, dict) else (int(t[0]), t[1]) for t in tracks]
+        ids = [tid for tid, _ in rows]
+        xy = np.array([np.asarray(p, float)[:2] for _, p in rows]).reshape(-1, 2)
+        counts, now_in = {}, set()
+        for z in self.zones:
+            hit = inside(z.polygon, xy)
+            counts[z.name] = int(hit.sum())
+            for tid in np.asarray(ids)[hit]:
+                now_in.add((int(tid), z.name))
+                self._open.setdefault((int(tid), z.name), frame)
+        for key in [k for k in self._open if k not in now_in]:  # left the zone, or the track ended
+            self._close(key, frame)
+        crossings = []
+        for line in self.lines:
+            d = side(line, xy)
+            for (tid, p), dist in zip(zip(ids, xy), d):
+                crossing = self._step(line, tid, p, float(dist), frame)
+                if crossing is not None:
+                    crossings.append(crossing)
+        self._last = {tid: (frame, p) for tid, p in zip(ids, xy)}
+        return FrameEvents(frame, counts, crossings)
+
+    def _step(self, line: Line, tid: int, p: np.ndarray, dist: float, frame: int) -> Crossing | None:
+        state = self._lines.setdefault((tid, line.name), _LineState())
+        sign = 1 if dist > 0 else -1 if dist < 0 else 0
+        beyond = abs(dist) > self.hysteresis
+        if state.confirmed == 0:
+            if beyond:
+                state.confirmed = sign
+            return None
+        if sign == state.confirmed or sign == 0 and state.pending is None:
+            state.pending = None  # back on its side (or on the line, not over it yet)
+            return None
+        if state.pending is None:  # the first frame on the other side: did the step pass the segment?
+            last = self._last.get(tid)
+            state.pending = (frame, last is not None and steps_through(line, last[1], p))
+        if beyond:
+            first, through = state.pending
+            state.confirmed, state.pending = sign, None
+            if through:
+                return Crossing(first, line.name, tid, "in" if sign > 0 else "out")
+        return None
+
+    def _close(self, key, frame: int) -> None:
+        """A stay that ended: its track is not inside at `frame`."""
+        enter = self._open.pop(key)
+        self.stays.append(Stay(key[0], key[1], enter, frame - 1, self.time(frame) - self.time(enter)))
+
+    def finish(self) -> list[Stay]:
+        """The stays still open closed at the last frame (to its time plus a frame); every stay."""
+        last = self._frame
+        for key in list(self._open):
+            enter = self._open.pop(key)
+            self.stays.append(Stay(key[0], key[1], enter, last, self.time(last) + 1.0 / self.fps - self.time(enter)))
+        return self.stays
