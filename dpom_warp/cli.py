@@ -6,7 +6,7 @@ commands:
   dpom-warp fit-ground DEPTH... --camera CAMERA.yaml | RECORDING [--output POSE.yaml]
   dpom-warp calibrate CONFIG --output OUT.yaml [--set KEY.PATH=VALUE ...]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
-  dpom-warp track RUN_DIR [--set tracking.KEY=VALUE ...]
+  dpom-warp track RUN_DIR [--set tracking.KEY=VALUE ...] [--zones ZONES.yaml]
   dpom-warp info SOURCE [--topic TOPIC] [--json]
   dpom-warp schema [--output FILE]
 
@@ -53,7 +53,8 @@ def _run(args) -> int:
         from .view import _rerun
 
         _rerun()  # not installed: say so before any work
-    sets = args.set + ["output.view=true"] * args.view + ["input.play=true"] * args.play
+    sets = (args.set + ["output.view=true"] * args.view + ["input.play=true"] * args.play
+            + ([f"counting.events={args.events}"] if args.events else []))
     cfgs = [load_config(c, sets) for c in args.config]
     outputs = output_dirs(args.config, cfgs, args.output)
     many = len(cfgs) > 1
@@ -253,7 +254,21 @@ def _eval(args) -> int:
 def _track(args) -> int:
     from .pipeline import retrack
 
-    report = retrack(args.run, args.set)
+    sets = list(args.set)
+    if args.zones:  # the file's zones, lines and counting, as --set items
+        import json
+
+        from pathlib import Path
+
+        from .values import _read_yaml
+
+        given = _read_yaml(Path(args.zones), "zones file (--zones)")
+        if not isinstance(given, dict) or not set(given) <= {"zones", "lines", "counting"} or not given:
+            raise ConfigError(f"--zones {args.zones}: expected a mapping of zones:, lines: and counting:, found "
+                              f"{sorted(given) if isinstance(given, dict) else type(given).__name__}")
+        sets += [f"{k}={json.dumps(v)}" for k, v in given.items()] + [f"{k}=[]" for k in ("zones", "lines")
+                                                                        if k not in given]
+    report = retrack(args.run, sets)
     print(f"{report.get('tracks', 0)} tracks ({report['method']}); tracks.csv and track_table.csv in "
           f"{args.run}" if report["method"] != "off" else
           f"no tracks in {args.run}: {report['why']} (--set tracking.method=ksp|online tracks any run)")
@@ -410,8 +425,10 @@ def parser() -> argparse.ArgumentParser:
                 "track_table.csv, the pictures, summary.json's tracking block and eval.json.")
     t.add_argument("run", metavar="RUN_DIR", help="a dpom-warp run folder")
     t.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
-                   help="override tracking.*, input.fps or output.images, e.g. --set "
+                   help="override tracking.*, input.fps, output.images, zones, lines or counting.*, e.g. --set "
                         "tracking.method=online; repeatable")
+    t.add_argument("--zones", metavar="FILE", help="a YAML file of zones:, lines: (and counting:) counted instead of "
+                                                  "the run's")
     n = command("info", "what a recording or a folder of frames holds",
                 "Print what a recording (.bag, .db3, .mcap, a ROS 2 bag folder, .mkv) or a glob of\n"
                 "depth frames holds: depth stream, frames, size, intrinsics, distortion, depth scale,\n"
@@ -436,6 +453,8 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="override a config value (parsed as YAML), e.g. --set model.damping=0.2; "
                         "repeatable")
+    p.add_argument("--events", metavar="PATH", help="stream each committed frame's zone counts and line crossings "
+                                                  "as JSON lines to PATH (-: standard output; counting.events)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--strict", action="store_true", help="a bad frame is fatal instead of skipped")
     p.add_argument("--workers", type=int, default=None, metavar="N",

@@ -20,7 +20,7 @@ from .session import Setup, set_up
 from .sources import expand
 from .worker import FrameItem, FrameWorker, pool_outcomes
 from .loop import FrameLoop, open_loop
-from .writers import FrameDone, Pictures, Rerun, RunEnd, RunView, Summary, TrackTables, Writers, jsonable
+from .writers import FrameDone, Pictures, Rerun, RunEnd, RunView, Summary, TrackTables, Writers, ZoneTables, jsonable
 
 
 @dataclasses.dataclass
@@ -348,7 +348,7 @@ def tracked_frames(view: RunView, writers: Writers, done: list[Path], maps, trut
     writers.tracked_all(frame, shown)
 
 
-RETRACK_KEYS = ("tracking.", "input.fps", "output.images", "output.rerun", "output.view")
+RETRACK_KEYS = ("tracking.", "input.fps", "output.images", "output.rerun", "output.view", "zones", "lines", "counting")
 
 
 def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
@@ -368,8 +368,8 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     for o in overrides:
         key = o.split("=", 1)[0].strip()
         if not any(key.startswith(k) for k in RETRACK_KEYS):
-            raise ConfigError(f"--set {key}: expected a tracking.* key, input.fps, output.images, output.rerun or output.view "
-                              f"(the rest of a run changes only by inferring again)")
+            raise ConfigError(f"--set {key}: expected a tracking.* key, input.fps, output.images, output.rerun, output.view, "
+                              f"zones, lines or counting.* (the rest of a run changes only by inferring again)")
     cfg = parse_config(apply_overrides(raw, overrides))
     fits = summary.get("ground_fit") if cfg.is_rig else [summary.get("ground_fit")]
     cameras = []
@@ -410,7 +410,7 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     # tracks' tables and summary.json
     writers = Writers(([Pictures(view)] if cfg.output.images else []) +
                       ([Rerun(view)] if cfg.output.rerun or cfg.output.view else []) +
-                      [TrackTables(view), Summary(view)])
+                      [TrackTables(view), ZoneTables(view), Summary(view)])
     try:
         report, end = track_run(view, writers, done, truth, log,
                                 fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]),

@@ -238,8 +238,18 @@ def _g(x):
     return f"{x:g}" if isinstance(x, (int, float)) else str(x)
 
 
+LISTS = ("zones", "lines", "cameras", "polygon")  # the config's lists of sections: an item is named NAME[i]
+
+
 def _one_line(error: dict) -> str:
-    loc = [str(p) for p in error["loc"] if not str(p).startswith("<")]
+    loc = []
+    for p in error["loc"]:
+        if str(p).startswith("<"):
+            continue
+        if isinstance(p, int) and loc and loc[-1] in LISTS:  # zones[1], as the checks across sections say it
+            loc[-1] += f"[{p}]"
+        else:
+            loc.append(str(p))
     ctx = error.get("ctx") or {}
     if ctx.get("key"):
         loc.append(ctx["key"])

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import RunConfig
+from .zone_tables import ZoneTables
 from .io import read_depth, write_bytes_atomic, write_json_atomic, write_npy_atomic, write_text_atomic
 
 CSV_HEADER = "frame,x,y,z,rho,u0,v0,u1,v1"
@@ -325,7 +326,7 @@ def writers_for(run: RunView, rerun: bool = True) -> Writers:
     chosen.append(Records(run))
     if rerun and (cfg.output.rerun or cfg.output.view):
         chosen.append(Rerun(run))
-    chosen += [DetectionsCsv(run), TrackTables(run), Summary(run)]
+    chosen += [DetectionsCsv(run), TrackTables(run), ZoneTables(run), Summary(run)]
     return Writers(chosen)
 
 

@@ -98,7 +98,7 @@ def resolve_paths(raw: dict, base: str | Path) -> dict:
         if not isinstance(node, dict):
             continue
         v = node.get(last)
-        if (isinstance(v, str) and v != "auto" and not is_live(v)
+        if (isinstance(v, str) and v not in ("auto", "-") and not is_live(v)
                 and not os.path.isabs(os.path.expanduser(v))):
             node[last] = os.path.normpath(os.path.join(base, v))
     if isinstance(out.get("cameras"), list):  # a rig: each camera's input and camera sections too

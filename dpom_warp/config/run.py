@@ -59,6 +59,9 @@ class RunConfig:
     # and camera), in the config's order; the rig's inputs and camera are the first camera's
     cameras: tuple = ()
     rig: Any = None  # config.rig.RigSection of a rig
+    zones: tuple = ()  # config.sections.ZoneSection each
+    lines: tuple = ()  # config.sections.LineSection each
+    counting: Any = None  # config.sections.CountingSection
 
     @property
     def is_rig(self) -> bool:
@@ -86,7 +89,7 @@ class RunConfig:
         return f"{self.source_of(key)}: {message}" if key else message
 
 
-KEY_AT_START = re.compile(r"^([a-z_]+(?:\[\d+\])?(?:\.[a-z_]+)*): ")
+KEY_AT_START = re.compile(r"^([a-z_]+(?:\[\d+\])?(?:\.[a-z_]+(?:\[\d+\])?)*): ")
 
 
 def config_key(message: str) -> str | None:
@@ -153,6 +156,11 @@ def parse_config(raw: dict[str, Any]) -> RunConfig:
     }
     if synthetic is not None:
         resolved["synthetic"] = {"cache": cache, **{k: plain(v) for k, v in synthetic.model_dump().items()}}
+    if c.zones or c.lines:  # (a config without them resolves as before)
+        resolved["zones"] = [{"name": z.name, "polygon": [list(p) for p in z.polygon]} for z in c.zones]
+        resolved["lines"] = [{"name": x.name, "from": list(x.start), "to": list(x.end)} for x in c.lines]
+        resolved["counting"] = c.counting.model_dump()
     return RunConfig(c.device, inputs, camera, grid, obj, model, detection, evaluation, output,
-                     engine, synthetic, cache, resolved, cam.extrinsics == "auto", ground, cam.ground.frames, tracking)
+                     engine, synthetic, cache, resolved, cam.extrinsics == "auto", ground, cam.ground.frames, tracking,
+                     zones=tuple(c.zones), lines=tuple(c.lines), counting=c.counting)
 

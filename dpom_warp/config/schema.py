@@ -9,7 +9,10 @@ from .camera import CameraSection
 from .model_section import ModelSection
 from .rig import RigCamera, RigSection
 from .sections import (
+    CountingSection,
     DetectionSection,
+    LineSection,
+    ZoneSection,
     EngineSection,
     EvaluationSection,
     GridSection,
@@ -44,6 +47,10 @@ class ConfigFile(Node):
     output: OutputSection = OutputSection()
     engine: EngineSection = EngineSection()
     synthetic: SyntheticSection | None = None
+    zones: list[ZoneSection] = Field([], description="zones on the floor whose tracks are counted every frame "
+                                                     "(README, Where people go)")
+    lines: list[LineSection] = Field([], description="counting lines on the floor whose crossings are recorded")
+    counting: CountingSection = CountingSection()
 
     @model_validator(mode="after")
     def _across_sections(self):
@@ -63,10 +70,48 @@ class ConfigFile(Node):
         if any(h >= obj.height for h in heights):
             raise _fail(f"expected heights below object.height ({obj.height:g} m), found {list(heights)}",
                         "model.top_heights")
+        check_zones(self.zones, self.lines, grid)
+        if (self.zones or self.lines) and self.tracking.method == "off":
+            raise _fail("zones and lines count the tracks; expected tracking.method ksp, online or auto, found off",
+                        "tracking.method")
         if self.synthetic is not None and self.camera.extrinsics == "auto":
             raise _fail("rendering needs a camera pose; expected camera.extrinsics given as "
                         "{height, pitch_deg, ...} or a matrix, found auto", "synthetic")
         return self
+
+
+def check_zones(zones, lines, grid) -> None:
+    """Zones and lines that mean something: a polygon of 3 points or more that does not cross
+    itself, a line of some length, names unique, each meeting the grid's rectangle."""
+    import numpy as np
+
+    from ..zones import meets_rectangle, self_crossing
+
+    rect = (grid.x[0], grid.x[1], grid.y[0], grid.y[1])
+    for kind, items in (("zones", zones), ("lines", lines)):
+        seen = {}
+        for i, item in enumerate(items):
+            if item.name in seen:
+                raise _fail(f"expected a name unlike the other {kind}', found {item.name!r} again ({kind}[{seen[item.name]}])",
+                            f"{kind}[{i}].name")
+            seen[item.name] = i
+            if kind == "zones":
+                pts = np.asarray(item.polygon, float)
+                if len(pts) < 3:
+                    raise _fail(f"expected at least 3 points [x, y], found {len(pts)}", f"zones[{i}].polygon")
+                crossed = self_crossing(pts)
+                if crossed is not None:
+                    a, b = crossed
+                    raise _fail(f"expected a polygon that does not cross itself, found its edges {a} and {b} meeting "
+                                f"(points {a}-{(a + 1) % len(pts)} and {b}-{(b + 1) % len(pts)})", f"zones[{i}].polygon")
+            else:
+                pts = np.array([item.start, item.end], float)
+                if np.allclose(pts[0], pts[1]):
+                    raise _fail(f"expected a line of some length, found from and to both {list(item.start)}",
+                                f"lines[{i}]")
+            if not meets_rectangle(pts, rect, kind == "zones"):
+                raise _fail(f"expected a {kind[:-1]} over the grid (x {rect[0]:g} to {rect[1]:g} m, y {rect[2]:g} to "
+                            f"{rect[3]:g} m), found it wholly outside", f"{kind}[{i}]")
 
 
 def json_schema() -> dict:

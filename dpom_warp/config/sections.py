@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Union
 
-from pydantic import Field
+from pydantic import ConfigDict, Field, model_validator
 
 from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
 from ..drift import DriftOptions
@@ -23,9 +23,12 @@ from ..values import (
     Int,
     Node,
     Num,
+    Pair,
     Str,
     Stride,
     Switch,
+    _fail,
+    _fmt,
 )
 
 
@@ -150,3 +153,40 @@ class SyntheticSection(SceneSpec):
     def spec(self) -> SceneSpec:
         """What to render (the scene without the folder it is kept in)."""
         return SceneSpec(**self.model_dump(exclude={"cache"}))
+
+
+class ZoneSection(Node):
+    """A zone on the floor: the tracks inside it are counted every frame (zones.csv)."""
+
+    name: Str = Field(description="the zone's name (zones.csv, dwell.csv, summary.json)")
+    polygon: list[Pair] = Field(description="[[x, y], ...] world metres on the floor, at least 3 points, "
+                                            "not crossing itself; a point on its edge is inside")
+
+
+class LineSection(Node):
+    """A counting line on the floor: each track crossing it is a row of crossings.csv."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+    name: Str = Field(description="the line's name (crossings.csv, summary.json)")
+    start: Pair = Field(alias="from", description="[x, y] world metres: one end")
+    end: Pair = Field(alias="to", description="[x, y] the other end; in: from the right of from->to to its left")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _mapping(cls, raw):  # its keys are `from` and `to` (Python words: the fields are start and end)
+        if not isinstance(raw, dict):
+            raise _fail(f"expected a mapping {{name, from, to}}, found {_fmt(raw)}")
+        unknown = [str(k) for k in raw if k not in ("name", "from", "to")]
+        if unknown:
+            raise _fail("unknown key (expected one of name, from, to)", unknown[0])
+        return raw
+
+
+class CountingSection(Node):
+    """How zones and lines count the tracks."""
+
+    hysteresis: Num = Field(0.15, ge=0, description="metres: a track changes side of a line only once this far "
+                                                     "beyond it, so one that jitters on the line is counted once")
+    events: FilePath | None = Field(None, description="also stream each committed frame's counts and crossings as "
+                                                      "JSON lines to this file (-: standard output; --events)")
