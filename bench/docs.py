@@ -141,7 +141,7 @@ def config_block() -> str:
 
     def walk(model, prefix):
         for name, info in model.model_fields.items():
-            key = f"{prefix}{name}"
+            key = f"{prefix}{info.alias or name}"  # (lines' from and to: Python words, fields start and end)
             subs = [a for a in _members(info.annotation) if isinstance(a, type) and issubclass(a, Node)]
             nested = subs and not all(s.__name__.startswith("Pose") for s in subs)  # extrinsics: one row
             nested = nested and not key.startswith("cameras.")  # a rig camera's input and camera: the sections above
@@ -463,7 +463,13 @@ def rig_block(out: Path) -> str:
                                     "by the rig and by each camera alone in turn, one process")])
 
 
-BUILDERS = {"rig": lambda out, jobs: rig_block(out), "config": lambda out, jobs: config_block(), "tests": lambda out, jobs: tests_block(), "demo": lambda out, jobs: demo_block(out),
+def zones_block(out: Path) -> str:
+    md = bench_markdown("bench.zones", out / "zones", "zones.md", "--frames", "60")
+    return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.zones --frames 60`; the bookkeeping: "
+                                    "zones.Zones.update a frame over the run's tracks, median of 3 passes")])
+
+
+BUILDERS = {"zones": lambda out, jobs: zones_block(out), "rig": lambda out, jobs: rig_block(out), "config": lambda out, jobs: config_block(), "tests": lambda out, jobs: tests_block(), "demo": lambda out, jobs: demo_block(out),
             "robustness": robustness_block, "drones": lambda out, jobs: drones_block(out),
             "real": lambda out, jobs: real_block(out), "eval": lambda out, jobs: eval_block(out),
             "speed": lambda out, jobs: speed_block(out), "kernels": lambda out, jobs: kernels_block(out),

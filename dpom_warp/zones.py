@@ -49,8 +49,8 @@ def on_segment(points: np.ndarray, a: np.ndarray, b: np.ndarray, tol: float = ED
 
 
 def inside(polygon: np.ndarray, points) -> np.ndarray:
-    """(n,) whether each point (n, 2) is inside the polygon or on its edge (even-odd rule, by
-    matplotlib's Path, plus the edges themselves)."""
+    """(n,) whether each point (n, 2) is inside the polygon or on its edge: matplotlib's Path
+    (even-odd rule) plus the edges themselves. Regions does the same for many zones at once."""
     from matplotlib.path import Path
 
     points = np.asarray(points, float).reshape(-1, 2)
@@ -60,6 +60,37 @@ def inside(polygon: np.ndarray, points) -> np.ndarray:
     for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
         hit |= on_segment(points, a, b)
     return hit
+
+
+class Regions:
+    """Many polygons made ready to test points against all at once (the bookkeeping's cost a
+    frame: a few array operations whatever the number of zones): every edge of every polygon
+    in one array, each point's crossings of the edges to its right counted per polygon (odd:
+    inside, the even-odd rule) and its distance to each edge (on one: inside)."""
+
+    def __init__(self, polygons: list[np.ndarray]):
+        polys = [np.asarray(p, float) for p in polygons]
+        self.n = len(polys)
+        self.a = np.concatenate(polys) if polys else np.zeros((0, 2))
+        self.d = (np.concatenate([np.roll(p, -1, axis=0) - p for p in polys]) if polys else np.zeros((0, 2)))
+        self.dd = np.maximum(np.einsum("ij,ij->i", self.d, self.d), 1e-300)
+        self.start = np.cumsum([0] + [len(p) for p in polys])[:-1]  # each polygon's first edge
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """(polygons, n) whether each point (n, 2) is inside each polygon or on its edge."""
+        if not len(points) or not self.n:
+            return np.zeros((self.n, len(points)), bool)
+        px, py = points[:, 0, None], points[:, 1, None]  # (n, 1) against (edges,)
+        ax, ay, dx, dy = self.a[:, 0], self.a[:, 1], self.d[:, 0], self.d[:, 1]
+        spans = (ay > py) != (ay + dy > py)  # the edge spans the point's height
+        with np.errstate(divide="ignore", invalid="ignore"):
+            right = px < ax + (py - ay) * dx / dy  # where it meets that height lies to the point's right
+        crossings = np.add.reduceat((spans & right).astype(np.int64), self.start, axis=1)
+        rx, ry = px - ax, py - ay
+        t = np.clip((rx * dx + ry * dy) / self.dd, 0.0, 1.0)
+        near = ((rx - t * dx) ** 2 + (ry - t * dy) ** 2 <= EDGE * EDGE).astype(np.int64)
+        on_edge = np.add.reduceat(near, self.start, axis=1) > 0
+        return ((crossings % 2 == 1) | on_edge).T
 
 
 def side(line: Line, points) -> np.ndarray:
@@ -154,7 +185,7 @@ class Zones:
 
     zones: list[Zone]
     lines: list[Line]
-    hysteresis: float = 0.15
+    hysteresis: float = 0.1
     fps: float = 15.0
     stays: list[Stay] = field(default_factory=list)  # closed stays, in the order they closed
     _last: dict = field(default_factory=dict)  # track -> (frame, xy) last seen
@@ -162,6 +193,10 @@ class Zones:
     _open: dict = field(default_factory=dict)  # (track, zone) -> enter frame
     _times: dict = field(default_factory=dict)  # frame -> seconds
     _frame: int | None = None
+    _regions: Regions | None = None
+
+    def __post_init__(self):
+        self._regions = Regions([z.polygon for z in self.zones])
 
     @classmethod
     def from_config(cls, cfg) -> "Zones":
@@ -185,8 +220,8 @@ class Zones:
         ids = [tid for tid, _ in rows]
         xy = np.array([np.asarray(p, float)[:2] for _, p in rows]).reshape(-1, 2)
         counts, now_in = {}, set()
-        for z in self.zones:
-            hit = inside(z.polygon, xy)
+        hits = self._regions.inside(xy)
+        for z, hit in zip(self.zones, hits):
             counts[z.name] = int(hit.sum())
             for tid in np.asarray(ids)[hit]:
                 now_in.add((int(tid), z.name))

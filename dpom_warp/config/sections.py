@@ -186,7 +186,8 @@ class LineSection(Node):
 class CountingSection(Node):
     """How zones and lines count the tracks."""
 
-    hysteresis: Num = Field(0.15, ge=0, description="metres: a track changes side of a line only once this far "
-                                                     "beyond it, so one that jitters on the line is counted once")
+    hysteresis: Num = Field(0.1, ge=0, description="metres: a track changes side of a line only once this far "
+                                                    "beyond it, so one that jitters on the line is counted once "
+                                                    "(README, Where people go: the measured trade-off)")
     events: FilePath | None = Field(None, description="also stream each committed frame's counts and crossings as "
                                                       "JSON lines to this file (-: standard output; --events)")
