@@ -384,7 +384,7 @@ def parser() -> argparse.ArgumentParser:
     c = command("calibrate", "place a rig's cameras in one world from what they see",
                 "Place every camera of a rig config (cameras:) in one world whose floor is z = 0: each\n"
                 "camera's floor fit gives its height, pitch and roll; its yaw and position on the floor\n"
-                "come from the static scene it sees in common with the others (README, Several cameras).\n"
+                "come from the static scene it sees in common with the others (docs/rig.md).\n"
                 "Writes the config with every camera's extrinsics to --output, which runs as it is.")
     c.add_argument("config", help="a rig config (YAML with a cameras: list)")
     c.add_argument("--output", required=True, help="the calibrated config written here")

@@ -36,7 +36,7 @@ class ConfigFile(Node):
     # a rig instead of input and camera (loading.rig_from_mapping validates it camera by camera)
     cameras: list[RigCamera] | None = Field(None, description=(
         "a rig: several cameras on one map, each {name, input, camera}, in place of input and camera "
-        "(README, Several cameras)"))
+        "(docs/rig.md)"))
     rig: RigSection = RigSection()
     grid: GridSection
     object: ObjectSection = ObjectSection()
@@ -48,7 +48,7 @@ class ConfigFile(Node):
     engine: EngineSection = EngineSection()
     synthetic: SyntheticSection | None = None
     zones: list[ZoneSection] = Field([], description="zones on the floor whose tracks are counted every frame "
-                                                     "(README, Where people go)")
+                                                     "(docs/zones.md)")
     lines: list[LineSection] = Field([], description="counting lines on the floor whose crossings are recorded")
     counting: CountingSection = CountingSection()
 

@@ -188,6 +188,6 @@ class CountingSection(Node):
 
     hysteresis: Num = Field(0.1, ge=0, description="metres: a track changes side of a line only once this far "
                                                     "beyond it, so one that jitters on the line is counted once "
-                                                    "(README, Where people go: the measured trade-off)")
+                                                    "(docs/zones.md: the measured trade-off)")
     events: FilePath | None = Field(None, description="also stream each committed frame's counts and crossings as "
                                                       "JSON lines to this file (-: standard output; --events)")
