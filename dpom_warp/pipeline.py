@@ -408,9 +408,9 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
                    cameras if cfg.is_rig else cameras[0])
     # the writers of what tracking changes: the pictures (all drawn again), the Rerun log, the
     # tracks' tables and summary.json
-    writers = Writers(([Pictures(view)] if cfg.output.images else []) +
+    writers = Writers([ZoneTables(view)] + ([Pictures(view)] if cfg.output.images else []) +
                       ([Rerun(view)] if cfg.output.rerun or cfg.output.view else []) +
-                      [TrackTables(view), ZoneTables(view), Summary(view)])
+                      [TrackTables(view), Summary(view)])
     try:
         report, end = track_run(view, writers, done, truth, log,
                                 fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]),

@@ -247,7 +247,7 @@ def draw_tracks(draw, panel: MapPanel, ox, oy, tracks, trail: int, side: bool = 
 
 
 def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, title="",
-                  z_max=None, in_view=None, tracks=None, trail: int = 30) -> bytes:
+                  z_max=None, in_view=None, tracks=None, trail: int = 30, overlay: dict | None = None) -> bytes:
     """A PNG file's bytes: left the depth frame with detection boxes (solid, with rho*) and
     ground-truth boxes (dashed); right the occupancy map rho* seen from above, with
     detections (circles), ground truth (crosses) and the camera position; for a voxel grid
@@ -257,7 +257,9 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     id, box (image rectangle), bridged (no detection: the box is drawn dashed) and trail (its
     positions over the last `trail` frames, this one last): identities on the boxes, fading
     trails on the maps. What is the same in every frame of a run (axes, titles, colour bars,
-    legend) is drawn once per layout (picture_template) and copied."""
+    legend) is drawn once per layout (picture_template) and copied. `overlay`: zones and lines
+    on the top map ({"zones": [(polygon (n, 2), label)], "lines": [(from, to, label)]},
+    zone_tables.ZoneTables' of the frame: each zone's count, each line's crossings so far)."""
     voxel = rho_map.ndim == 3
     has_truth, truth = truth is not None, truth or []
     depth = np.asarray(depth_m, dtype=np.float32)
@@ -320,6 +322,8 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     top.marks(draw, ox, oy, [(o["x"], o["y"]) for o in truth], [(d.x, d.y) for d in detections])
     if tracks:
         draw_tracks(draw, top, ox, oy, tracks, trail)
+    if overlay:
+        draw_overlay(draw, top, ox, oy, overlay)
     cx, cy = top.to_px(camera_xy[0], camera_xy[1], ox, oy)
     draw.polygon([(cx, cy - 8), (cx - 7, cy + 5), (cx + 7, cy + 5)], fill=(255, 255, 255), outline=INK)
     if voxel:
@@ -333,6 +337,27 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
 
 
 BAR_SPACE = BAR_W + 44  # a colour bar with its values
+ZONE_INK, LINE_INK = (80, 200, 255), (120, 255, 120)
+
+
+def draw_overlay(draw: ImageDraw.ImageDraw, panel: MapPanel, ox: int, oy: int, overlay: dict) -> None:
+    """Zones (outlines, their label at their centre) and lines (an arrow from `from` to `to`,
+    their label at the middle) on a top map panel."""
+    for polygon, label in overlay.get("zones", ()):
+        pts = [panel.to_px(x, y, ox, oy) for x, y in polygon]
+        draw.line(pts + pts[:1], fill=ZONE_INK, width=2)
+        cx, cy = np.mean(pts, axis=0)
+        draw.text((cx, cy), label, fill=ZONE_INK, font=font(11), anchor="mm")
+    for start, end, label in overlay.get("lines", ()):
+        (ax, ay), (bx, by) = panel.to_px(*start, ox, oy), panel.to_px(*end, ox, oy)
+        draw.line((ax, ay, bx, by), fill=LINE_INK, width=2)
+        u = np.array([bx - ax, by - ay]) / max(np.hypot(bx - ax, by - ay), 1e-9)
+        tip = np.array([bx, by])
+        for turn in (0.5, -0.5):  # the arrow's head at `to`
+            c, s = np.cos(np.pi - turn), np.sin(np.pi - turn)
+            wing = tip + 9 * np.array([c * u[0] - s * u[1], s * u[0] + c * u[1]])
+            draw.line((bx, by, *wing), fill=LINE_INK, width=2)
+        draw.text(((ax + bx) / 2 + 4, (ay + by) / 2), label, fill=LINE_INK, font=font(11), anchor="lm")
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ def depth_panel(depth: np.ndarray, boxes: list, title: str, vmax: float | None) 
 
 
 def rig_picture(depths: list, rho_map: np.ndarray, cfg, geometries: list, detections: list, truth=None,
-                title: str = "", tracks=None) -> bytes:
+                title: str = "", tracks=None, overlay: dict | None = None) -> bytes:
     """A PNG file's bytes of a rig's frame: `depths` and `geometries` (full resolution) one a
     camera, `detections` located on the first camera's geometry (their boxes its rectangles);
     `tracks` (outputs.ShownTracks) on the first camera's panel and the map."""
@@ -40,7 +40,7 @@ def rig_picture(depths: list, rho_map: np.ndarray, cfg, geometries: list, detect
     truth = None if truth is None else [{k: v for k, v in o.items() if k != "bbox"} for o in truth]  # (boxes: one camera's)
     main = Image.open(io.BytesIO(frame_picture(
         depths[0] if depths[0] is not None else np.zeros(geometries[0].rays.shape[:2]), rho_map, cfg.grid, detections, geometries[0].centre[:2], truth, f"{title}  camera {names[0]}",
-        in_view=in_view, tracks=tracks, trail=cfg.tracking.trail)))
+        in_view=in_view, tracks=tracks, trail=cfg.tracking.trail, overlay=overlay)))
     panels = []
     for name, depth, g in zip(names[1:], depths[1:], geometries[1:]):
         boxes = [g.rect[d.k] for d in detections if g.rect_area[d.k] > 0]

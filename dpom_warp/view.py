@@ -4,8 +4,9 @@ boxes with identities and rho*, the occupancy map, and the tracks with their tra
 
 Entities: `world/camera` (pinhole and pose), `world/camera/depth`, `world/camera/depth/detections`
 (boxes), `world/occupancy` (the map as an image, magma), `world/tracks` (points labelled with
-the identity), `world/trails` (line strips), on the `frame` timeline (and `time` in seconds
-when the frames have timestamps).
+the identity), `world/trails` (line strips), with zones and lines `world/zones` and
+`world/lines` (on the floor, labelled with each frame's count and crossings so far), on the
+`frame` timeline (and `time` in seconds when the frames have timestamps).
 """
 
 from __future__ import annotations
@@ -36,13 +37,15 @@ class RerunLog:
         if spawn:
             self.rec.spawn(connect=not path)
 
-    def camera(self, camera) -> None:
+    def camera(self, camera, names: list[str] | None = None) -> None:
+        """The posed camera at `world/camera`; a rig's (a list, `names`) at `world/cameras/NAME`."""
         rr, rec = self.rr, self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        rec.log("world/camera", rr.Transform3D(translation=camera.centre, mat3x3=camera.R_wc), static=True)
-        rec.log("world/camera", rr.Pinhole(resolution=[camera.width, camera.height],
-                                           focal_length=[camera.fx, camera.fy],
-                                           principal_point=[camera.cx, camera.cy]), static=True)
+        self.paths = [f"world/cameras/{n}" for n in names] if names else ["world/camera"]
+        for path, cam in zip(self.paths, camera if names else [camera]):
+            rec.log(path, rr.Transform3D(translation=cam.centre, mat3x3=cam.R_wc), static=True)
+            rec.log(path, rr.Pinhole(resolution=[cam.width, cam.height], focal_length=[cam.fx, cam.fy],
+                                     principal_point=[cam.cx, cam.cy]), static=True)
 
     def frame(self, index: int, timestamp: float | None, depth_m: np.ndarray, dets: list, rho_map: np.ndarray,
               tracks: list | None = None) -> None:
@@ -51,7 +54,10 @@ class RerunLog:
 
         rr, rec = self.rr, self.rec
         self._at(index, timestamp)
-        rec.log("world/camera/depth", rr.DepthImage(np.asarray(depth_m, np.float32), meter=1.0))
+        paths = getattr(self, "paths", ["world/camera"])
+        for path, depth in zip(paths, depth_m if len(paths) > 1 else [depth_m]):  # a rig's: one a camera
+            if depth is not None:
+                rec.log(f"{path}/depth", rr.DepthImage(np.asarray(depth, np.float32), meter=1.0))
         top = rho_map.max(axis=0) if rho_map.ndim == 3 else rho_map
         rec.log("world/occupancy", rr.Image(colourise(top[::-1], 0.0, 1.0, "magma")))
         self.tracks(index, timestamp, dets, tracks)
@@ -67,7 +73,7 @@ class RerunLog:
         ident = track_identities(dets, tracks or [])
         boxes = np.array([d.box for d in dets], float).reshape(-1, 4)
         labels = [(f"#{ident[i]} " if i in ident else "") + f"{d.rho:.2f}" for i, d in enumerate(dets)]
-        rec.log("world/camera/depth/detections",
+        rec.log(f"{getattr(self, 'paths', ['world/camera'])[0]}/depth/detections",  # (a rig's: its first camera's)
                 rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, labels=labels))
         if tracks is not None:
             pos = np.array([t["xyz"] for t in tracks], float).reshape(-1, 3)
@@ -76,6 +82,20 @@ class RerunLog:
                                                 radii=0.15))
             rec.log("world/trails", rr.LineStrips3D([np.asarray(t["trail"], float).reshape(-1, 3) for t in tracks],
                                                     colors=colours))
+
+    def zones(self, index: int, timestamp: float | None, overlay: dict) -> None:
+        """Frame `index`'s zones and lines on the floor with their labels (zone_tables.ZoneTables'
+        overlay: each zone's count, each line's crossings so far)."""
+        rr, rec = self.rr, self.rec
+        self._at(index, timestamp)
+        zones, lines = overlay.get("zones", ()), overlay.get("lines", ())
+        if zones:
+            strips = [np.column_stack([np.vstack([p, p[:1]]), np.zeros(len(p) + 1)]) for p, _ in zones]
+            rec.log("world/zones", rr.LineStrips3D(strips, labels=[label for _, label in zones], colors=[(80, 200, 255)]))
+        if lines:
+            strips = [np.array([[*a, 0.0], [*b, 0.0]]) for a, b, _ in lines]
+            rec.log("world/lines", rr.LineStrips3D(strips, labels=[label for _, _, label in lines],
+                                                   colors=[(120, 255, 120)]))
 
     def _at(self, index: int, timestamp: float | None) -> None:
         self.rec.set_time("frame", sequence=index)

@@ -167,6 +167,9 @@ class Pictures(Files):
     def __init__(self, run: RunView):
         super().__init__(run, "images")
         self.wants_tracked = not run.worker_pictures
+        # with zones or lines each picture shows their counts so far, which ZoneTables (before
+        # this writer) has put on the frame: the pictures are drawn in frame order after it
+        self.parallel = not (run.cfg.zones or run.cfg.lines)
 
     def tracked(self, done, shown):
         if not self.wants_tracked:
@@ -176,7 +179,8 @@ class Pictures(Files):
             path.unlink(missing_ok=True)
             return
         write_bytes_atomic(path, tracked_picture(self.run.cfg, self.run.geometry, done.depth, done.rho_map,
-                                                 done.dets, done.name, done.truth, shown))
+                                                 done.dets, done.name, done.truth, shown,
+                                                 getattr(done, "zone_overlay", None)))
 
 
 class Records(Writer):
@@ -200,7 +204,10 @@ class Rerun(Writer):
 
         super().__init__(run)
         self.log = RerunLog(run.cfg.output.rerun, spawn=run.cfg.output.view)
-        self.log.camera(run.camera or run.cfg.camera)
+        if run.cfg.is_rig:  # each camera at world/cameras/NAME
+            self.log.camera(run.camera or [m.camera for _, m in run.cfg.cameras], [n for n, _ in run.cfg.cameras])
+        else:
+            self.log.camera(run.camera or run.cfg.camera)
         self.logged: set[int] = set()
         self.closed = False
 
@@ -220,6 +227,9 @@ class Rerun(Writer):
             self.logged.discard(done.index)
         else:
             self.log.frame(done.index, done.timestamp, done.depth, done.dets, done.rho_map, shown)
+        overlay = getattr(done, "zone_overlay", None)
+        if overlay:  # zones and lines with their counts (ZoneTables, before this writer)
+            self.log.zones(done.index, done.timestamp, overlay)
 
     def finish(self, end):
         self.close()
@@ -318,7 +328,7 @@ def writers_for(run: RunView, rerun: bool = True) -> Writers:
     other files; summary.json last). `rerun`: False where the Rerun log is opened later (a
     recorded run's, once its frames are tracked)."""
     cfg = run.cfg
-    chosen: list[Writer] = [Maps(run)]
+    chosen: list[Writer] = [Maps(run), ZoneTables(run)]  # (the zones' counts before the pictures show them)
     if cfg.output.images:
         chosen.append(Pictures(run))
     if cfg.output.ply:
@@ -326,21 +336,23 @@ def writers_for(run: RunView, rerun: bool = True) -> Writers:
     chosen.append(Records(run))
     if rerun and (cfg.output.rerun or cfg.output.view):
         chosen.append(Rerun(run))
-    chosen += [DetectionsCsv(run), TrackTables(run), ZoneTables(run), Summary(run)]
+    chosen += [DetectionsCsv(run), TrackTables(run), Summary(run)]
     return Writers(chosen)
 
 
-def tracked_picture(cfg: RunConfig, geometry, depth, rho_map, dets, name: str, truth, shown) -> bytes:
-    """A frame's picture with the tracks `shown` on it (ShownTracks; None: no tracks), as a
-    finished run and a live run draw it."""
+def tracked_picture(cfg: RunConfig, geometry, depth, rho_map, dets, name: str, truth, shown,
+                    overlay: dict | None = None) -> bytes:
+    """A frame's picture with the tracks `shown` on it (ShownTracks; None: no tracks) and the
+    zones and lines with their counts (`overlay`, ZoneTables'), as a finished run and a live run
+    draw it."""
     if cfg.is_rig:
         from .render_rig import rig_picture
 
-        return rig_picture(depth, rho_map, cfg, geometry.parts, dets, truth, name, tracks=shown)
+        return rig_picture(depth, rho_map, cfg, geometry.parts, dets, truth, name, tracks=shown, overlay=overlay)
     from .render import frame_picture
 
     return frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2], truth, name,
-                         in_view=geometry.rect_area > 0, tracks=shown, trail=cfg.tracking.trail)
+                         in_view=geometry.rect_area > 0, tracks=shown, trail=cfg.tracking.trail, overlay=overlay)
 
 
 def track_table_files(out: Path, tracks, names: list[str], fps: float, times: list | None = None) -> None:

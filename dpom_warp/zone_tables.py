@@ -75,6 +75,10 @@ class ZoneTables:
                 "dwell.csv": [self._stay(s) for s in closed]}
         for c in events.crossings:
             self.totals[c.line][c.direction] += 1
+        done.zone_overlay = {  # what the frame's picture shows (writers.Pictures, after this writer)
+            "zones": [(z.polygon, f"{z.name}: {events.counts[z.name]}") for z in self.zones.zones],
+            "lines": [(x.start, x.end, f"{x.name}: {self.totals[x.name]['in']} in, {self.totals[x.name]['out']} out")
+                      for x in self.zones.lines]}
         self.counts.append(events.counts)
         self.per_frame_crossings.append({x.name: dict(self.totals[x.name]) for x in self.zones.lines})
         g = self.run.cfg.grid

@@ -104,7 +104,14 @@ def test_a_rig_runs_outputs(runs):
     assert rgb.shape[0] > one.shape[0] + 400  # the side camera's panel (424 px high) below
     below = rgb[one.shape[0] + 40:one.shape[0] + 440, 40:600]
     assert len(np.unique(below.reshape(-1, 3), axis=0)) > 50  # a depth image there, not a blank
-    assert main(["track", str(runs / "out"), "--set", "tracking.max_gap=2"]) == 0  # tracks made again
+    assert main(["track", str(runs / "out"), "--set", "tracking.max_gap=2", "--set",
+                 f"output.rerun={runs / 'rig.rrd'}"]) == 0  # tracks made again, and a Rerun log of the rig
+    from rerun.chunk import RrdReader
+
+    rows = {}
+    for chunk in RrdReader(str(runs / "rig.rrd")).stream():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    assert rows["/world/cameras/front/depth"] == rows["/world/cameras/side/depth"] == 6
     assert (runs / "out" / "tracks.csv").read_text().count("\n") > 6
 
 

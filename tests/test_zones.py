@@ -132,7 +132,7 @@ def test_a_rendered_run_counts_as_its_trajectories_do(tmp_path):
     from pictures import assert_picture
 
     path = small_zoned(tmp_path)
-    assert main(["run", str(path), "--no-progress"]) == 0
+    assert main(["run", str(path), "--no-progress", "--set", f"output.rerun={tmp_path / 'run.rrd'}"]) == 0
     out = tmp_path / "out"
     truth = json.loads((tmp_path / "scene" / "ground_truth.json").read_text())
     rows = read_rows(out / "zones.csv")
@@ -177,6 +177,19 @@ def test_a_rendered_run_counts_as_its_trajectories_do(tmp_path):
     assert stays and all(float(s["seconds"]) > 0 for s in stays)
     assert summary["zones"]["left"]["stays"] == len(stays)
     assert_picture(out / "heatmap.png") is not None and assert_picture(out / "counts.png", plot=True) is not None
+    # every frame's picture shows the zone's outline and the line (their colours, on the map), and
+    # the Rerun log has them each frame
+    from dpom_warp.render import LINE_INK, ZONE_INK
+
+    rgb = assert_picture(out / "images" / "0010.png")
+    for ink in (ZONE_INK, LINE_INK):
+        assert np.all(rgb == ink, axis=-1).sum() > 200, ink
+    from rerun.chunk import RrdReader
+
+    rows = {}
+    for chunk in RrdReader(str(tmp_path / "run.rrd")).stream():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    assert rows["/world/zones"] == rows["/world/lines"] == len(truth)
 
 
 def test_track_counts_other_zones_without_inferring(tmp_path, capsys):
