@@ -273,7 +273,9 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
 
     x0, x1 = grid.x[0], grid.x[0] + grid.shape[-1] * grid.x[2]
     y0, y1 = grid.y[0], grid.y[0] + grid.shape[-2] * grid.y[2]
-    view = (min(x0, camera_xy[0] - 0.3), max(x1, camera_xy[0] + 0.3), min(y0, camera_xy[1] - 0.3), y1)
+    cams = np.asarray(camera_xy, float).reshape(-1, 2)  # a rig's: every camera's, each drawn
+    view = (min(x0, cams[:, 0].min() - 0.3), max(x1, cams[:, 0].max() + 0.3), min(y0, cams[:, 1].min() - 0.3),
+            max(y1, cams[:, 1].max() + 0.3))
     scale = PANEL_H / (view[3] - view[2])
     seen_top = seen_side = None
     if in_view is not None:
@@ -324,8 +326,9 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
         draw_tracks(draw, top, ox, oy, tracks, trail)
     if overlay:
         draw_overlay(draw, top, ox, oy, overlay)
-    cx, cy = top.to_px(camera_xy[0], camera_xy[1], ox, oy)
-    draw.polygon([(cx, cy - 8), (cx - 7, cy + 5), (cx + 7, cy + 5)], fill=(255, 255, 255), outline=INK)
+    for cam in cams:
+        cx, cy = top.to_px(cam[0], cam[1], ox, oy)
+        draw.polygon([(cx, cy - 8), (cx - 7, cy + 5), (cx + 7, cy + 5)], fill=(255, 255, 255), outline=INK)
     if voxel:
         side = panels[1]
         ox += top.w + PAD + 10

@@ -39,7 +39,8 @@ def rig_picture(depths: list, rho_map: np.ndarray, cfg, geometries: list, detect
     in_view = np.any([g.rect_area > 0 for g in geometries], axis=0)
     truth = None if truth is None else [{k: v for k, v in o.items() if k != "bbox"} for o in truth]  # (boxes: one camera's)
     main = Image.open(io.BytesIO(frame_picture(
-        depths[0] if depths[0] is not None else np.zeros(geometries[0].rays.shape[:2]), rho_map, cfg.grid, detections, geometries[0].centre[:2], truth, f"{title}  camera {names[0]}",
+        depths[0] if depths[0] is not None else np.zeros(geometries[0].rays.shape[:2]), rho_map, cfg.grid, detections,
+        np.array([g.centre[:2] for g in geometries]), truth, f"{title}  camera {names[0]}",
         in_view=in_view, tracks=tracks, trail=cfg.tracking.trail, overlay=overlay)))
     panels = []
     for name, depth, g in zip(names[1:], depths[1:], geometries[1:]):

@@ -90,11 +90,19 @@ def read_frame(cfg: RunConfig, path, data: bytes | None = None) -> np.ndarray:
     return read_depth(path, cfg.inputs.depth_scale, (cfg.camera.height, cfg.camera.width), data)
 
 
-def read_rig_frame(cfg: RunConfig, paths, data: tuple | None = None) -> list[np.ndarray | None]:
+def read_rig_frame(cfg: RunConfig, paths, data: tuple | None = None, seconds: dict | None = None
+                   ) -> list[np.ndarray | None]:
     """A rig's frame in metres, one a camera (read with its own input section; `data`: the
-    files' bytes); None for a camera with no frame there."""
+    files' bytes); None for a camera with no frame there. `seconds`: filled with each camera's
+    read time, by name."""
     data = data or (None,) * len(paths)
-    return [read_frame(m, p, b) if p is not None else None for (_, m), p, b in zip(cfg.cameras, paths, data)]
+    out = []
+    for (name, m), p, b in zip(cfg.cameras, paths, data):
+        t = time.perf_counter()
+        out.append(read_frame(m, p, b) if p is not None else None)
+        if seconds is not None and p is not None:
+            seconds[name] = time.perf_counter() - t
+    return out
 
 
 def make_engine(cfg: RunConfig, camera: Camera, device: str, batch: int,
@@ -139,6 +147,7 @@ class FrameWorker:
         self.pictures = spec.cfg.output.images and spec.pictures
         self.rig, self.spec = isinstance(spec.camera, list), spec
         self.partial: dict[tuple, Engine] = {}  # a rig's cameras that have a frame -> their engine
+        self.read_cameras: dict[str, dict] = {}  # a rig's frame (path) -> each camera's read time
         self.geometry = (RigGeometry([build_geometry(c, spec.cfg.grid, spec.cfg.obj) for c in spec.camera]) if self.rig
                          else build_geometry(spec.camera, spec.cfg.grid, spec.cfg.obj))  # full resolution
         if engine is None:
@@ -157,8 +166,8 @@ class FrameWorker:
         for item in items:
             t = time.perf_counter()
             try:
-                depth = (read_rig_frame(self.cfg, item.paths, item.data) if item.paths is not None
-                         else read_frame(self.cfg, item.path, item.data))
+                depth = (read_rig_frame(self.cfg, item.paths, item.data, self.read_cameras.setdefault(item.path, {}))
+                         if item.paths is not None else read_frame(self.cfg, item.path, item.data))
             except InputError as e:
                 outcomes.append((Path(item.path).name, None, str(e)))
                 continue
@@ -265,6 +274,7 @@ class FrameWorker:
         if self.rig:  # each camera's file (None: inferred from the others) and drift
             names = [n for n, _ in cfg.cameras]
             record["cameras"] = {n: (Path(p).name if p is not None else None) for n, p in zip(names, item.paths)}
+            record["stats"]["read_s_cameras"] = self.read_cameras.pop(item.path, {})
             if res.drift is not None:
                 record["stats"]["drift"] = {n: (d.record() if d is not None else None) for n, d in zip(names, res.drift)}
         elif res.drift is not None:  # the frame's depth scale against the background (drift.py)
