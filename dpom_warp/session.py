@@ -13,6 +13,7 @@ import numpy as np
 
 from .camera_setup import camera_background, prepare_camera
 from .config import ConfigError, RunConfig
+from .io import InputError
 from .engine import Engine, MemoryBudgetError, resolve_device
 from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
 from .geometry import RigGeometry
@@ -131,7 +132,10 @@ def set_up_rig(cfg: RunConfig, frames: list, device: str | None = None, log=prin
     dev, cfg = run_device(cfg, device, recorded)
     preps = []
     for c, (name, m) in enumerate(cfg.cameras):
-        preps.append(prepare_camera(m, camera_frames(frames, c), dev, _named(log, name)))
+        try:
+            preps.append(prepare_camera(m, camera_frames(frames, c), dev, _named(log, name)))
+        except (ConfigError, InputError) as e:  # said of the camera (its floor fit, its view of the grid)
+            raise type(e)(f"cameras[{c}] ({name}): {e}") from None
     for line in lone_cameras(cfg, [p.geometry for p in preps]):
         log(f"warning: {line}")
     t = time.perf_counter()

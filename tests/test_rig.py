@@ -232,3 +232,26 @@ def test_a_camera_that_shares_no_cell_with_the_others_is_a_warning(tmp_path):
                      f"(2 cells of its own); expected views that overlap, for one map" for i, n in ((0, "front"), (1, "side"))]
     geoms = [build_geometry(m.camera, cfg.grid, cfg.obj) for _, m in cfg.cameras]
     assert lone_cameras(cfg, geoms) == []  # the test scene's two cameras overlap
+
+
+def test_a_rig_camera_that_sees_none_of_the_grid_is_named(tmp_path, capsys):
+    """The side camera turned away from the grid (yaw 270: it looks out of the room): the run
+    stops with the grid's one-line error said of that camera, before anything is written."""
+    from dpom_warp.cli import main
+
+    rig = rig_mapping(tmp_path)
+    rig["cameras"][1]["camera"]["extrinsics"]["yaw_deg"] = 270.0
+    rig["evaluation"] = {}
+    path = tmp_path / "rig.yaml"
+    path.write_text(yaml.safe_dump(rig))
+    scene = tmp_path / "scene"
+    for name in ("front", "side"):  # frames of the right size (what they show does not matter here)
+        for sub in ("frames", "background"):
+            (scene / name / sub).mkdir(parents=True)
+            from dpom_warp.io import write_depth_png
+
+            write_depth_png(scene / name / sub / "0000.png", np.full((120, 160), 3.0))
+    assert main(["run", str(path), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dpom-warp: error: cameras[1] (side): grid: none of its 1600 locations is in the camera's view")
+    assert err.count("\n") == 1 and not (tmp_path / "out").exists()
