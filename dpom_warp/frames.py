@@ -204,7 +204,7 @@ def rig_frames(cfg: RunConfig, strict: bool = False, log=print, max_frames: int 
     frames checked (a bad one leaves its camera out of that rig frame; the first camera's skips
     the rig frame), the first camera's timestamps; a warning per camera that misses frames."""
     render_synthetic(cfg, log)
-    listed, stamps = [], []
+    listed, stamps, unread = [], [], []
     for i, (name, m) in enumerate(cfg.cameras):
         key = f"cameras[{i}].input.frames"
         if m.inputs.frames is None:
@@ -215,6 +215,8 @@ def rig_frames(cfg: RunConfig, strict: bool = False, log=print, max_frames: int 
                 log(f"{camera_words(cfg, i)}: {note}")
         listed.append(files)
         stamps.append(np.array([f["timestamp"] for f in meta["frames"]]) if meta is not None else None)
+        if i == 0 and meta is not None:  # the first camera's recording's unreadable messages: no rig frame
+            unread = list(meta["skipped"])
     first = listed[0][:max_frames] if max_frames is not None else listed[0]
     if max_frames is not None and len(listed[0]) > max_frames:
         log(f"--max-frames: the first {max_frames} of {len(listed[0])} frames")
@@ -225,7 +227,7 @@ def rig_frames(cfg: RunConfig, strict: bool = False, log=print, max_frames: int 
     else:
         pairs = pair_by_index(len(first), [len(f) for f in listed[1:]])
     chosen = [[f] + [None if j is None else listed[c + 1][j] for c, j in enumerate(row)] for f, row in zip(first, pairs)]
-    good = []
+    good, why = [], {}
     for c, (name, m) in enumerate(cfg.cameras):
         mine = [row[c] for row in chosen if row[c] is not None]
         if not mine:
@@ -239,10 +241,12 @@ def rig_frames(cfg: RunConfig, strict: bool = False, log=print, max_frames: int 
         good.append(set(ok))
         for item in bad:
             log(f"{camera_words(cfg, c)}: skipping {item['reason']}")
-    frames, skipped = [], []
+            if c == 0:
+                why[item["frame"]] = item["reason"]
+    frames, skipped = [], list(unread)
     for row in chosen:
-        if row[0] not in good[0]:
-            skipped.append({"frame": row[0].name, "reason": f"{row[0]}: {camera_words(cfg, 0)}'s frame unreadable"})
+        if row[0] not in good[0]:  # the first camera's frame names and times the rig's: none, no rig frame
+            skipped.append({"frame": row[0].name, "reason": f"{camera_words(cfg, 0)}: {why.get(row[0].name, row[0])}"})
             continue
         frames.append(RigFrame(tuple(p if p in good[c] else None for c, p in enumerate(row))))
     for c in range(1, len(cfg.cameras)):

@@ -236,3 +236,21 @@ def test_calibrate_refuses_a_camera_that_shares_too_little(runs, tmp_path, capsy
     assert err.startswith("dpom-warp: error: cameras[1] (side): calibrate: shares too little with the cameras before "
                           "it: 0 people matched across cameras (expected at least 8), and its static scene alone")
     assert err.count("\n") == 1 and not out.exists()
+
+
+def test_a_bad_frame_of_the_first_camera_skips_the_rig_frame(runs, tmp_path):
+    """The front camera's frame 0002 unreadable: the rig frame it names is skipped with the
+    file's reason (summary.json's skipped); the side camera's bad frame 0003 leaves the side
+    camera out of that rig frame only, inferred from the front camera (its own run's map)."""
+    scene = tmp_path / "scene"
+    shutil.copytree(runs / "scene", scene)
+    (scene / "front" / "frames" / "0002.png").write_bytes(b"not a png")
+    (scene / "side" / "frames" / "0003.png").write_bytes(b"not a png")
+    rig = rig_config(tmp_path)
+    rig.pop("synthetic")
+    assert main(["run", write(tmp_path / "rig.yaml", rig), "--no-progress"]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert [s["frame"] for s in summary["skipped"]] == ["0002.png"]
+    assert summary["skipped"][0]["reason"].startswith("cameras[0] (front): ") and "0002.png" in summary["skipped"][0]["reason"]
+    assert summary["cameras"]["side"]["missing"] == ["0003.png"] and summary["frames"] == 5
+    np.testing.assert_array_equal(np.load(tmp_path / "out" / "maps" / "0003.npy"), np.load(runs / "front" / "maps" / "0003.npy"))
