@@ -3,6 +3,7 @@
     from dpom_warp import Detector
     det = Detector.from_config("configs/demo_people.yaml")
     result = det.detect(depth)      # result.detections, result.rho_star, result.timings
+    zones = Zones.from_config(det.config)   # counts and crossings of committed tracks (zones:, lines:)
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ try:
 except _metadata.PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0+unknown"
 
-__all__ = ["Detector", "Result", "__version__"]
+__all__ = ["Detector", "Result", "Zones", "__version__"]
 
 
 def __getattr__(name):  # Warp and Open3D load only when the API is used, not for `--help`
@@ -22,4 +23,8 @@ def __getattr__(name):  # Warp and Open3D load only when the API is used, not fo
         from . import api
 
         return getattr(api, name)
+    if name == "Zones":
+        from .zones import Zones
+
+        return Zones
     raise AttributeError(f"module 'dpom_warp' has no attribute {name!r}")

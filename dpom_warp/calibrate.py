@@ -371,10 +371,13 @@ def place_cameras(cfg: RunConfig, device: str | None = None, log=print) -> list[
     return placed
 
 
-def calibrated_mapping(config_path: str | Path, placed: list[Placed], output: str | Path) -> dict:
-    """The config file's mapping with every camera's extrinsics the placed pose, its relative
-    paths made relative to the output's folder (the written file runs as it is)."""
-    raw = read_config(config_path)  # paths relative to the current folder
+def calibrated_mapping(config_path: str | Path, placed: list[Placed], output: str | Path,
+                       overrides: list[str] | None = None) -> dict:
+    """The config file's mapping (`overrides` applied) with every camera's extrinsics the placed
+    pose, its relative paths made relative to the output's folder (the written file runs as it is)."""
+    from .config import apply_overrides
+
+    raw = apply_overrides(read_config(config_path), overrides or [])  # paths relative to the current folder
     out = copy.deepcopy(raw)
     for item, p in zip(out["cameras"], placed):
         cam = item.setdefault("camera", {}) if isinstance(item.get("camera"), (dict, type(None))) else item["camera"]
@@ -407,7 +410,7 @@ def calibrate(config_path: str | Path, output: str | Path, overrides: list[str] 
                                                    f"of it")
         log(f"camera {r['camera']}: {r['height_m']:.3f} m up, pitch {r['pitch_deg']:.2f} deg, roll {r['roll_deg']:.2f} "
             f"deg, yaw {r['yaw_deg']:.2f} deg, at x {r['x_m']:.3f} m, y {r['y_m']:.3f} m{fit}")
-    mapping = calibrated_mapping(config_path, placed, output)
+    mapping = calibrated_mapping(config_path, placed, output, overrides)
     text = (f"# written by dpom-warp calibrate from {config_path}: every camera's extrinsics placed in one world\n"
             + yaml.safe_dump(mapping, sort_keys=False, default_flow_style=None))
     write_text_atomic(Path(output), text)

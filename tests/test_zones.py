@@ -258,12 +258,13 @@ def test_the_live_stream_writes_as_it_commits(tmp_path):
 def test_the_api_counts_an_online_tracker_loop(tmp_path):
     """Zones.from_config(detector.config).update(i, committed tracks) over the Detector's online
     tracker gives the counts of each committed frame (the tracks inside the zone, by hand)."""
+    import dpom_warp
     from dpom_warp import Detector
     from dpom_warp.io import read_depth
 
     path = small_zoned(tmp_path, frames=6)
     det = Detector.from_config(path)
-    zones = Zones.from_config(det.config)
+    zones = dpom_warp.Zones.from_config(det.config)
     online = det.online_tracker()
     frames = sorted((tmp_path / "scene" / "frames").glob("*.png"))
     got = []
