@@ -7,9 +7,8 @@ frame with 20 zones and 20 lines (zones.Zones.update on the run's own tracks).
 
     python -m bench.zones [--frames 60] [--seeds 1 2] [--output runs/zones]
 
-The truth lists the people the renderer saw some pixels of in a frame (wholly hidden people are
-in no frame's truth, so a track that holds someone behind a cabinet counts against itself here).
-Writes OUTPUT/zones.md and zones.json (bench.docs --only zones puts the table in the README)."""
+The truth is the renderer's trajectories (trajectories.json: every person every frame, hidden
+behind a cabinet or another person or not). Writes OUTPUT/zones.md and zones.json (bench.docs --only zones puts the table in the README)."""
 
 from __future__ import annotations
 
@@ -46,8 +45,8 @@ def truth_counts(truth: list) -> dict:
 
 
 def truth_crossings(truth: list) -> list[tuple[int, str, str]]:
-    """(frame, line, direction) each time a person seen in two consecutive frames changes side of
-    a line, within its segment (where the step meets the line)."""
+    """(frame, line, direction) each time a person changes side of a line from one frame to the
+    next, within its segment (where the step meets the line)."""
     out, last = [], {}
     for f, frame in enumerate(truth):
         for o in frame["objects"]:
@@ -118,7 +117,7 @@ def run_seed(folder: Path, frames: int, seed: int) -> dict:
     cfg = load_config("configs/demo_people.yaml", config(folder, frames, seed))
     run(cfg, str(folder / "out"), progress=False, log=lambda *_: None, overwrite=True)
     out = folder / "out"
-    truth = json.loads((folder / "scene" / "ground_truth.json").read_text())
+    truth = json.loads((folder / "scene" / "trajectories.json").read_text())
     want = truth_counts(truth)
     rows = list(csv.DictReader(open(out / "zones.csv")))
     exact = float(np.mean([int(r["count"]) == want[(r["frame"], r["zone"])] for r in rows]))

@@ -436,6 +436,16 @@ def _walk_pairs(spec: SceneSpec, ok, heights, builds, rng: np.random.Generator):
     return frames
 
 
+TRAJECTORIES = "trajectories.json"  # every object's position every frame, hidden or not (ground_truth.json: seen)
+
+
+def trajectory_row(name: str, people: list) -> dict:
+    """A frame's entry of trajectories.json: each object's id (its place in the sequence, as in
+    ground_truth.json) and position, whether any camera sees it or not."""
+    return {"frame": name, "objects": [{"id": n, "x": round(p["x"], 4), "y": round(p["y"], 4),
+                                        "z": round(p.get("z", 0.0), 4)} for n, p in enumerate(people)]}
+
+
 def furnish(spec: SceneSpec, rng: np.random.Generator):
     """(the room's meshes, the footprints people keep off, the boxes drones keep clear of)."""
     room, footprints = room_meshes(spec, rng)
@@ -517,7 +527,7 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
                        "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
                        "T_world_from_camera": np.asarray(camera.T_world_from_camera).tolist()}}
     meta = out / "scene.json"
-    if meta.exists():
+    if meta.exists() and (out / TRAJECTORIES).exists():  # (a scene rendered before trajectories were written: again)
         try:
             if json.loads(meta.read_text()) == json.loads(json.dumps(desc)):
                 return desc
@@ -539,8 +549,9 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
     for f in range(spec.background_frames):
         write_depth_png(out / "background" / f"{f:04d}.png",
                         sensor_noise(t_static, spec, rng) * scales["background"][f])
-    truth = []
+    truth, paths = [], []
     for f, people in enumerate(moves(spec, camera, footprints, boxes, rng)):
+        paths.append(trajectory_row(f"{f:04d}.png", people))
         meshes = placed_meshes(spec, people)
         scene, ids = _scene(room + meshes)
         t, gid = render(scene, camera)
@@ -549,6 +560,7 @@ def generate(spec: SceneSpec, camera: Camera, out_dir: str | Path) -> dict:
         objects = [o for o in seen_objects(meshes, people, ids[len(room):], gid, camera) if o is not None]
         truth.append({"frame": name, "objects": objects})
     write_json_atomic(out / "ground_truth.json", truth)
+    write_json_atomic(out / TRAJECTORIES, paths)
     drift_file = out / "drift.json"
     if any(spec.drift):
         write_json_atomic(drift_file, {"background": scales["background"],

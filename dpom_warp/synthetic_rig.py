@@ -14,8 +14,8 @@ import numpy as np
 from .geometry import Camera
 from .io import write_depth_png, write_json_atomic
 from .scene_spec import SceneSpec, drift_scales
-from .synthetic import (GENERATOR_VERSION, _scene, clear_frames, furnish, moves, placed_meshes, render,
-                        seen_objects, sensor_noise)
+from .synthetic import (GENERATOR_VERSION, TRAJECTORIES, _scene, clear_frames, furnish, moves, placed_meshes,
+                        render, seen_objects, sensor_noise, trajectory_row)
 
 
 def camera_description(camera: Camera) -> dict:
@@ -34,7 +34,7 @@ def generate_rig(spec: SceneSpec, cameras: list[tuple[str, Camera]], out_dir: st
     desc = {"version": GENERATOR_VERSION, "spec": described,
             "cameras": [{"name": n, **camera_description(c)} for n, c in cameras]}
     meta = out / "scene.json"
-    if meta.exists():
+    if meta.exists() and (out / TRAJECTORIES).exists():
         try:
             if json.loads(meta.read_text()) == json.loads(json.dumps(desc)):
                 return desc
@@ -52,8 +52,9 @@ def generate_rig(spec: SceneSpec, cameras: list[tuple[str, Camera]], out_dir: st
         for f in range(spec.background_frames):
             write_depth_png(out / name / "background" / f"{f:04d}.png",
                             sensor_noise(t_static, spec, rng_c) * scales["background"][f])
-    truth = []
+    truth, paths = [], []
     for f, people in enumerate(moves(spec, [c for _, c in cameras], footprints, boxes, rng)):
+        paths.append(trajectory_row(f"{f:04d}.png", people))
         meshes = placed_meshes(spec, people)
         scene, ids = _scene(room + meshes)
         seen = []
@@ -70,5 +71,6 @@ def generate_rig(spec: SceneSpec, cameras: list[tuple[str, Camera]], out_dir: st
             objects.append({**best, "visible_in": {n: o["visibility"] for n, o in views.items()}})
         truth.append({"frame": f"{f:04d}.png", "objects": objects})
     write_json_atomic(out / "ground_truth.json", truth)
+    write_json_atomic(out / TRAJECTORIES, paths)
     write_json_atomic(meta, desc)
     return desc

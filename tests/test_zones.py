@@ -134,7 +134,12 @@ def test_a_rendered_run_counts_as_its_trajectories_do(tmp_path):
     path = small_zoned(tmp_path)
     assert main(["run", str(path), "--no-progress", "--set", f"output.rerun={tmp_path / 'run.rrd'}"]) == 0
     out = tmp_path / "out"
-    truth = json.loads((tmp_path / "scene" / "ground_truth.json").read_text())
+    truth = json.loads((tmp_path / "scene" / "trajectories.json").read_text())  # every person, hidden or not
+    seen = json.loads((tmp_path / "scene" / "ground_truth.json").read_text())
+    assert all(len(f["objects"]) == 3 for f in truth)  # the renderer's trajectories: each person every frame
+    for f, g in zip(truth, seen):  # the ground truth: those seen, at the same places
+        at = {o["id"]: (o["x"], o["y"]) for o in f["objects"]}
+        assert f["frame"] == g["frame"] and all(at[o["id"]] == (o["x"], o["y"]) for o in g["objects"])
     rows = read_rows(out / "zones.csv")
     assert [r["frame"] for r in rows] == [f["frame"] for f in truth] and {r["zone"] for r in rows} == {"left"}
 
