@@ -148,7 +148,8 @@ class EngineSection(Node):
 class SyntheticSection(SceneSpec):
     """Render a synthetic sequence before the run (once; later runs reuse it)."""
 
-    cache: FilePath = Field(description="folder of the rendered frames, background and ground truth")
+    cache: FilePath = Field(description="folder of the rendered frames, background, ground truth (the objects "
+                                        "seen) and trajectories.json (every object every frame, hidden or not)")
 
     def spec(self) -> SceneSpec:
         """What to render (the scene without the folder it is kept in)."""
