@@ -4,6 +4,7 @@ frames run out, a rig of one against the single-camera config, --workers, `track
 Python API. The engine's fusion against the NumPy reference is in test_warp_vs_reference and
 test_rig."""
 
+import copy
 import csv
 import json
 import math
@@ -37,7 +38,7 @@ def rig_config(folder, names=("front", "side"), out="out", **changes) -> dict:
            "synthetic": {"cache": str(scene), "seed": 2, "frames": 6, "background_frames": 4, "people": 8,
                          "area": [-1.8, 1.8, 1.8, 5.2]}}
     cfg.update(changes)
-    return cfg
+    return copy.deepcopy(cfg)  # (callers change it: never the module's POSES and CAMERA)
 
 
 def write(path, cfg):
