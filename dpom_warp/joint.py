@@ -68,12 +68,17 @@ class JointLists:
     def log_odds(self, cells) -> np.ndarray:
         """(len(cells),) float64: each cell's log posterior odds with the other `cells` present
         and every other location empty (joint_log_odds); every cell must be a candidate."""
+        cells = self.candidates(cells)
+        return self.logit_prior + (self.pixel_terms(cells) - self.exclusion_terms(cells))
+
+    def candidates(self, cells) -> np.ndarray:
+        """`cells` as int64, a ValueError where one is not among the frame's candidates."""
         cells = np.asarray(cells, np.int64)
         outside = cells[~np.isin(cells, self.cells)]
         if len(outside):
             raise ValueError(f"joint test: cells {sorted(set(outside.tolist()))} are not among the frame's "
                              f"candidates (rho* at or above the detection threshold)")
-        return self.logit_prior + (self.pixel_terms(cells) - self.exclusion_terms(cells))
+        return cells
 
     def pixel_terms(self, cells) -> np.ndarray:
         """(len(cells),) the part of log_odds this camera's pixels give: each cell's evidence at
@@ -124,5 +129,5 @@ class RigJointLists:
     def log_odds(self, cells) -> np.ndarray:
         """(len(cells),) each cell's log posterior odds with the other `cells` present (JointLists.log_odds)."""
         first = self.cameras[0]
-        first.log_odds(cells)  # (refuses cells that are not candidates)
+        cells = first.candidates(cells)
         return first.logit_prior + (sum(c.pixel_terms(cells) for c in self.cameras) - first.exclusion_terms(cells))
