@@ -326,7 +326,8 @@ class RigGeometry:
     """A rig's full-resolution geometries (`parts`, one a camera, over one grid) as what reads one
     geometry needs of them: the locations; the first camera's rectangles (detections.csv's box);
     each location's largest rectangle area and share in view over the cameras (in view of any
-    one: detections, tracking's entry cells, the map's footprint); the first camera's centre."""
+    one: detections, tracking's entry cells, the map's footprint: worked out once, they are read
+    every frame); the first camera's centre."""
 
     parts: list
 
@@ -338,11 +339,11 @@ class RigGeometry:
     def rect(self) -> np.ndarray:
         return self.parts[0].rect
 
-    @property
+    @cached_property
     def rect_area(self) -> np.ndarray:
         return np.max([g.rect_area for g in self.parts], axis=0)
 
-    @property
+    @cached_property
     def view_part(self) -> np.ndarray:
         return np.max([g.view_part for g in self.parts], axis=0)
 

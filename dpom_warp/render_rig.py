@@ -30,13 +30,13 @@ def depth_panel(depth: np.ndarray, boxes: list, title: str, vmax: float | None) 
     return panel
 
 
-def rig_picture(depths: list, rho_map: np.ndarray, cfg, geometries: list, detections: list, truth=None,
+def rig_picture(depths: list, rho_map: np.ndarray, cfg, rig, detections: list, truth=None,
                 title: str = "", tracks=None, overlay: dict | None = None) -> bytes:
-    """A PNG file's bytes of a rig's frame: `depths` and `geometries` (full resolution) one a
-    camera, `detections` located on the first camera's geometry (their boxes its rectangles);
-    `tracks` (outputs.ShownTracks) on the first camera's panel and the map."""
-    names = [n for n, _ in cfg.cameras]
-    in_view = np.any([g.rect_area > 0 for g in geometries], axis=0)
+    """A PNG file's bytes of a rig's frame: `depths` one a camera, `rig` their full-resolution
+    geometry.RigGeometry, `detections` located on the first camera's geometry (their boxes its
+    rectangles); `tracks` (outputs.ShownTracks) on the first camera's panel and the map."""
+    names, geometries = [n for n, _ in cfg.cameras], rig.parts
+    in_view = rig.rect_area > 0  # in view of any camera
     truth = None if truth is None else [{k: v for k, v in o.items() if k != "bbox"} for o in truth]  # (boxes: one camera's)
     main = Image.open(io.BytesIO(frame_picture(
         depths[0] if depths[0] is not None else np.zeros(geometries[0].rays.shape[:2]), rho_map, cfg.grid, detections,

@@ -249,7 +249,7 @@ class FrameWorker:
         if self.pictures and self.rig:
             from .render_rig import rig_picture
 
-            files[f"images/{f.stem}.png"] = rig_picture(depth, rho_map, cfg, geometry.parts, dets, item.truth, f.name)
+            files[f"images/{f.stem}.png"] = rig_picture(depth, rho_map, cfg, geometry, dets, item.truth, f.name)
         elif self.pictures:
             from .render import frame_picture
 

@@ -348,7 +348,7 @@ def tracked_picture(cfg: RunConfig, geometry, depth, rho_map, dets, name: str, t
     if cfg.is_rig:
         from .render_rig import rig_picture
 
-        return rig_picture(depth, rho_map, cfg, geometry.parts, dets, truth, name, tracks=shown, overlay=overlay)
+        return rig_picture(depth, rho_map, cfg, geometry, dets, truth, name, tracks=shown, overlay=overlay)
     from .render import frame_picture
 
     return frame_picture(depth, rho_map, cfg.grid, dets, geometry.centre[:2], truth, name,
