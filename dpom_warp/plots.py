@@ -13,7 +13,8 @@ from .io import atomic_path  # noqa: E402
 PROTOCOLS = {"penalise_hidden": "hidden people penalised", "ignore_hidden": "hidden people not penalised"}
 
 
-def _save(fig, path):
+def save_figure(fig, path):
+    """A figure written as a PNG, atomically, and closed."""
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
@@ -37,7 +38,7 @@ def moda_figure(results: list[dict], path, key: str, xlabel: str):
         ax.set_ylim(min(0.0, ax.get_ylim()[0]), 1.02)
     axes[0].set_ylabel("score (best detection threshold per point)")
     axes[1].legend(fontsize=8, loc="lower left")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def pr_figure(results: list[dict], path, key: str, title: str):
@@ -60,7 +61,7 @@ def pr_figure(results: list[dict], path, key: str, title: str):
         else:
             ax.text(0.5, 0.5, "no detections", ha="center", va="center", transform=ax.transAxes)
     axes[0].set_ylabel("precision")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def write_figures(results: list[dict], folder) -> list[str]:

@@ -29,6 +29,7 @@ class RerunLog:
         rr = _rerun()
         self.rr = rr
         self.rec = rr.RecordingStream(name)
+        self.paths = ["world/camera"]  # each camera's entity (a rig's: world/cameras/NAME, set by `camera`)
         if path:
             from pathlib import Path
 
@@ -54,8 +55,7 @@ class RerunLog:
 
         rr, rec = self.rr, self.rec
         self._at(index, timestamp)
-        paths = getattr(self, "paths", ["world/camera"])
-        for path, depth in zip(paths, depth_m if len(paths) > 1 else [depth_m]):  # a rig's: one a camera
+        for path, depth in zip(self.paths, depth_m if len(self.paths) > 1 else [depth_m]):  # a rig's: one a camera
             if depth is not None:
                 rec.log(f"{path}/depth", rr.DepthImage(np.asarray(depth, np.float32), meter=1.0))
         top = rho_map.max(axis=0) if rho_map.ndim == 3 else rho_map
@@ -73,7 +73,7 @@ class RerunLog:
         ident = track_identities(dets, tracks or [])
         boxes = np.array([d.box for d in dets], float).reshape(-1, 4)
         labels = [(f"#{ident[i]} " if i in ident else "") + f"{d.rho:.2f}" for i, d in enumerate(dets)]
-        rec.log(f"{getattr(self, 'paths', ['world/camera'])[0]}/depth/detections",  # (a rig's: its first camera's)
+        rec.log(f"{self.paths[0]}/depth/detections",  # (a rig's: its first camera's)
                 rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, labels=labels))
         if tracks is not None:
             pos = np.array([t["xyz"] for t in tracks], float).reshape(-1, 3)

@@ -22,7 +22,7 @@ import sys
 
 import numpy as np
 
-from .io import atomic_path, write_text_atomic
+from .io import write_text_atomic
 from .zones import Zones
 
 FILES = ("zones.csv", "crossings.csv", "dwell.csv", "heatmap.png", "counts.png")
@@ -154,9 +154,8 @@ def zone_figures(cfg, zones: Zones, seconds: np.ndarray, counts: list[dict], cro
     """heatmap.png (seconds people stood on each cell, the zones outlined, the lines drawn with
     their in/out totals) and counts.png (each zone's count per frame; each line's cumulative
     crossings in and out)."""
-    import matplotlib
+    from .plots import save_figure  # (first: it sets matplotlib's Agg backend)
 
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     g = cfg.grid
@@ -176,7 +175,7 @@ def zone_figures(cfg, zones: Zones, seconds: np.ndarray, counts: list[dict], cro
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title("where people stood")
-    _save(fig, heat_path)
+    save_figure(fig, heat_path)
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), dpi=90, sharex=True)
     frames = np.arange(len(counts))
     for z in zones.zones:
@@ -192,13 +191,4 @@ def zone_figures(cfg, zones: Zones, seconds: np.ndarray, counts: list[dict], cro
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8, loc="upper left")
-    _save(fig, counts_path)
-
-
-def _save(fig, path) -> None:
-    import matplotlib.pyplot as plt
-
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
+    save_figure(fig, counts_path)
