@@ -184,9 +184,7 @@ def match_people(src: list, dst: list) -> tuple[np.ndarray | None, int, float]:
                             hyps.append(procrustes(s_[[k, m]], d[[i, j]]))
     if not hyps:
         return None, 0, float("nan")
-    flat = [(f, p) for f in range(len(src)) for p in src[f]]
-    if not flat:
-        return None, 0, float("nan")
+    flat = [(f, p) for f in range(len(src)) for p in src[f]]  # (not empty: a hypothesis took two of them)
     pts = np.array([p for _, p in flat])
     at = np.array([f for f, _ in flat])
     width = max(len(d) for d in dst) or 1
@@ -267,10 +265,24 @@ def coarse_turn_and_shift(source: np.ndarray, target: np.ndarray) -> tuple[tuple
         di, dj = (di if di < size else di - 2 * size), (dj if dj < size else dj - 2 * size)
         found.append((float(corr.flat[k]), yaw, dj * CELL, di * CELL))
     best = max(found, key=lambda f: f[0])
-    others = [f for f in found if min(abs(np.rad2deg(f[1] - best[1])) % 360, 360 - abs(np.rad2deg(f[1] - best[1])) % 360)
-              > 10 or np.hypot(f[2] - best[2], f[3] - best[3]) > 0.5]
+    others = [f for f in found if _turn_deg(planar(f[1], 0, 0), planar(best[1], 0, 0)) > 10
+              or np.hypot(f[2] - best[2], f[3] - best[3]) > 0.5]
     alike = bool(others) and max(f[0] for f in others) >= ALIKE * best[0]
     return best[1:], alike
+
+
+def _clouds(source: np.ndarray, target: np.ndarray):
+    """The two point sets as Open3D clouds, thinned to NEAR / 2."""
+    import open3d as o3d
+
+    return (o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p)).voxel_down_sample(NEAR / 2)
+            for p in (source, target))
+
+
+def _turn_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Degrees between the turns about z of two planar poses (4x4), 0 to 180."""
+    d = abs(np.rad2deg(np.arctan2(a[1, 0], a[0, 0]) - np.arctan2(b[1, 0], b[0, 0]))) % 360
+    return min(d, 360 - d)
 
 
 def _icp(T: np.ndarray, source: np.ndarray, target: np.ndarray, distances=(0.2, 0.1, NEAR)) -> np.ndarray:
@@ -278,8 +290,7 @@ def _icp(T: np.ndarray, source: np.ndarray, target: np.ndarray, distances=(0.2, 
     import open3d as o3d
 
     reg = o3d.pipelines.registration
-    src, tgt = (o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p)).voxel_down_sample(NEAR / 2)
-                for p in (source, target))
+    src, tgt = _clouds(source, target)
     tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.2, max_nn=30))
     for distance in distances:
         R = reg.registration_icp(src, tgt, distance, T, reg.TransformationEstimationPointToPlane(),
@@ -295,25 +306,24 @@ def scene_fit(T: np.ndarray, source: np.ndarray, target: np.ndarray) -> tuple[fl
 
     if not len(source) or not len(target):
         return 0.0, 0.0
-    src, tgt = (o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p)).voxel_down_sample(NEAR / 2)
-                for p in (source, target))
+    src, tgt = _clouds(source, target)
     check = o3d.pipelines.registration.evaluate_registration(src, tgt, NEAR, T)
     return float(check.inlier_rmse), float(check.fitness)
 
 
-def refine_on_scene(T: np.ndarray, source: np.ndarray, target: np.ndarray) -> np.ndarray:
+def refine_on_scene(T: np.ndarray, source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, float, float]:
     """T (from the people) refined by ICP on the static scenes, where that moves it less than
-    REFINE_MOVE and lays more of the scene within NEAR; else T."""
+    REFINE_MOVE and lays more of the scene within NEAR; else T. Returns the pose kept and its
+    scene_fit."""
+    fit = scene_fit(T, source, target)
     if len(source) < 100 or len(target) < 100:
-        return T
+        return (T, *fit)
     refined = _icp(T, source, target, (MATCH / 2, NEAR))
-    moved = np.linalg.norm(refined[:2, 3] - T[:2, 3])
-    turned = abs(np.rad2deg(np.arctan2(refined[1, 0], refined[0, 0]) - np.arctan2(T[1, 0], T[0, 0])))
-    turned = min(turned, 360 - turned)
-    if moved < REFINE_MOVE[0] and turned < REFINE_MOVE[1] and scene_fit(refined, source, target)[1] >= \
-            scene_fit(T, source, target)[1]:
-        return refined
-    return T
+    if np.linalg.norm(refined[:2, 3] - T[:2, 3]) < REFINE_MOVE[0] and _turn_deg(refined, T) < REFINE_MOVE[1]:
+        better = scene_fit(refined, source, target)
+        if better[1] >= fit[1]:
+            return (refined, *better)
+    return (T, *fit)
 
 
 def register(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -352,8 +362,7 @@ def place_cameras(cfg: RunConfig, device: str | None = None, log=print) -> list[
         log(f"camera {name}: {matched} people matched across cameras in {len(chosen)} frames"
             + (f" (rms {1000 * rms:.0f} mm)" if matched else ""))
         if matched >= MIN_MATCHES:
-            W = refine_on_scene(W, source, target)
-            residual, overlap = scene_fit(W, source, target)
+            W, residual, overlap = refine_on_scene(W, source, target)
         else:  # the static scene alone: refused where it fits little, or several places alike
             W, alike = register(source, target) if len(source) >= 100 and len(target) >= 100 else (None, True)
             residual, overlap = scene_fit(W, source, target) if W is not None else (0.0, 0.0)
@@ -380,11 +389,7 @@ def calibrated_mapping(config_path: str | Path, placed: list[Placed], output: st
     raw = apply_overrides(read_config(config_path), overrides or [])  # paths relative to the current folder
     out = copy.deepcopy(raw)
     for item, p in zip(out["cameras"], placed):
-        cam = item.setdefault("camera", {}) if isinstance(item.get("camera"), (dict, type(None))) else item["camera"]
-        if isinstance(cam, str):  # camera: FILE
-            cam = item["camera"] = {"file": cam}
-        if cam is None:
-            cam = item["camera"] = {}
+        cam = item["camera"] = item.get("camera") or {}  # (read_config made `camera: FILE` {file: FILE})
         cam["extrinsics"] = {"T_world_from_camera": [[round(float(v), 9) for v in row] for row in p.T_world_from_camera]}
     here = os.path.relpath(".", Path(output).resolve().parent)
     return resolve_paths(out, here)
