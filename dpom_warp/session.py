@@ -17,7 +17,7 @@ from .io import InputError
 from .engine import Engine, MemoryBudgetError, resolve_device
 from .frames import render_synthetic, run_frames  # noqa: F401 - render_synthetic: the API's
 from .geometry import RigGeometry
-from .worker import WorkerSpec, make_engine
+from .worker import WorkerSpec, compile_kernels, make_engine
 
 
 @dataclasses.dataclass
@@ -94,9 +94,7 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
     dev, cfg = run_device(cfg, device, recorded)
     prep = prepare_camera(cfg, frames, dev, log)
     t = time.perf_counter()
-    if parallel and cfg.model.warm_start:
-        raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
-                          "must run in order in one process; expected no --workers or --ray with it")
+    refuse_warm_start(cfg, parallel)
     log("setting up the engine (mask index; Warp kernels compiled on first use, then cached) ...")
     engine, cfg = budget_engine(cfg, prep.camera, dev, batch_auto)
     view = engine.views[0]  # the run's camera
@@ -104,11 +102,19 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
     inference = inference_report(cfg, engine)
     if structure is not None:
         inference["structure"] = structure
-    if parallel:  # an empty frame compiles every kernel into the cache the workers are given
-        engine.infer_batch(np.zeros((1, view.height, view.width), np.float32))
+    if parallel:  # every kernel compiled into the cache the workers are given
+        compile_kernels(engine)
         engine = engine if keep_engine else None
     return Setup(dev, WorkerSpec(cfg, prep.camera, dev, given), prep.geometry, prep.ground, background, auto_report,
                  inference, engine, time.perf_counter() - t)
+
+
+def refuse_warm_start(cfg: RunConfig, parallel: bool) -> None:
+    """model.warm_start chains each frame to the one before: not with frames inferred by other
+    processes (a one-line ConfigError)."""
+    if parallel and cfg.model.warm_start:
+        raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
+                          "must run in order in one process; expected no --workers or --ray with it")
 
 
 def inference_report(cfg: RunConfig, engine: Engine) -> dict:
@@ -139,9 +145,7 @@ def set_up_rig(cfg: RunConfig, frames: list, device: str | None = None, log=prin
     for line in lone_cameras(cfg, [p.geometry for p in preps]):
         log(f"warning: {line}")
     t = time.perf_counter()
-    if parallel and cfg.model.warm_start:
-        raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
-                          "must run in order in one process; expected no --workers or --ray with it")
+    refuse_warm_start(cfg, parallel)
     log(f"setting up the engine for {len(preps)} cameras (mask index; Warp kernels compiled on first use, then "
         f"cached) ...")
     engine, cfg = budget_engine(cfg, [p.camera for p in preps], dev, batch_auto)
@@ -158,8 +162,8 @@ def set_up_rig(cfg: RunConfig, frames: list, device: str | None = None, log=prin
     inference["image"] = [[v.width, v.height] for v in engine.views]
     if structures:
         inference["structure"] = structures
-    if parallel:  # empty frames compile every kernel into the cache the workers are given
-        engine.infer_batch([np.zeros((1, v.height, v.width), np.float32) for v in engine.views])
+    if parallel:  # every kernel compiled into the cache the workers are given
+        compile_kernels(engine)
         engine = engine if keep_engine else None
     grounds = [p.ground for p in preps]
     return Setup(dev, WorkerSpec(cfg, [p.camera for p in preps], dev, given if any(g is not None for g in given)

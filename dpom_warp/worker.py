@@ -283,6 +283,13 @@ class FrameWorker:
                                    list(grown)), None
 
 
+def compile_kernels(engine: Engine) -> None:
+    """An empty frame (a rig's: one a camera) through `engine`: every kernel compiled, into the
+    cache other processes are given."""
+    empty = [np.zeros((1, v.height, v.width), np.float32) for v in engine.views]
+    engine.infer_batch(empty if len(empty) > 1 else empty[0])
+
+
 def every_camera(res, present):
     """A rig's result with its drift a list over every camera of the rig (None where a camera
     had no frame, or no estimate), whichever engine inferred it."""
@@ -547,7 +554,7 @@ class Helpers:
     def __init__(self, spec, engine, n: int):
         spec = dataclasses.replace(spec, background=engine.background_state())
         shape = (engine.views[0].height, engine.views[0].width)  # the run's camera's (one today)
-        engine.infer_batch(np.zeros((1,) + shape, np.float32))  # every kernel compiled
+        compile_kernels(engine)
         self.n, self.running = n, []
         self.pool, self.start_file = helper_pool(spec, n, _helper_start)
         try:
