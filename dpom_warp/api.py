@@ -77,7 +77,7 @@ class Detector:
         self.worker = FrameWorker(setup.spec, engine=setup.engine)
         self.engine = self.worker.engine
         self.frames_given = 0  # frames passed to detect / detect_batch: errors and warnings number them so
-        self._units_wrong = False  # the last frame with readings had a median no depth camera gives
+        self._units_wrong: set[str] = set()  # the cameras whose last frame with readings had a median no depth camera gives
 
     @classmethod
     def from_config(cls, config: str | Path | Mapping, overrides: list[str] | Mapping | None = None,
@@ -250,16 +250,16 @@ class Detector:
         metres = array_to_metres(depth, cfg.inputs.depth_scale)  # integers as read_depth reads them
         if metres.min(initial=0) < 0:
             raise InputError(f"depth ({who}frame {index}): expected metres >= 0, found {metres.min():g}")
-        self._check_units(metres, depth.dtype, index, cfg)
+        self._check_units(metres, depth.dtype, index, cfg, who)
         return metres
 
-    def _check_units(self, metres: np.ndarray, dtype, index: int, cfg: RunConfig | None = None) -> None:
+    def _check_units(self, metres: np.ndarray, dtype, index: int, cfg: RunConfig | None = None, who: str = "") -> None:
         """Every frame's units, from the median of every 4th pixel of every 4th row (about
         0.2 ms at 512x424): a warning naming the frame when its median is one no depth camera
         gives (as `dpom-warp run` warns), the first such frame and again at the first after
         frames that were right. A frame in millimetres passed as floats, or integer units at
         the wrong input.depth_scale, leaves every reading out of the grid's reach and nothing is
-        found, without a word of why."""
+        found, without a word of why. A rig's cameras (`who`, "camera NAME, ") each on their own."""
         sample = metres[::4, ::4]
         if not np.any(sample > 0):
             return
@@ -270,9 +270,9 @@ class Detector:
             hint = None if median is None else (
                 f"a float array is read as metres, and its readings' median is {median:.4g} m: expected "
                 f"{low:g} to {high:g} m; pass metres, or the sensor's integer units (input.depth_scale)")
-        if hint and not self._units_wrong:
-            warnings.warn(f"depth (frame {index}): {hint}", UserWarning, stacklevel=4)
-        self._units_wrong = hint is not None
+        if hint and who not in self._units_wrong:
+            warnings.warn(f"depth ({who}frame {index}): {hint}", UserWarning, stacklevel=4)
+        (self._units_wrong.add if hint else self._units_wrong.discard)(who)
 
 
 class OnlineTracks:

@@ -255,3 +255,23 @@ def test_a_bad_frame_of_the_first_camera_skips_the_rig_frame(runs, tmp_path):
     assert summary["skipped"][0]["reason"].startswith("cameras[0] (front): ") and "0002.png" in summary["skipped"][0]["reason"]
     assert summary["cameras"]["side"]["missing"] == ["0003.png"] and summary["frames"] == 5
     np.testing.assert_array_equal(np.load(tmp_path / "out" / "maps" / "0003.npy"), np.load(runs / "front" / "maps" / "0003.npy"))
+
+
+def test_the_api_warns_of_each_cameras_units_on_its_own(runs):
+    """A rig frame whose side camera comes in millimetres as floats: one warning naming that
+    camera and the frame; the next such frame does not warn again, though the front camera's
+    right frames come between (each camera's units are judged on their own)."""
+    import warnings
+
+    from dpom_warp import Detector
+    from dpom_warp.io import read_depth
+
+    rig = rig_config(runs)
+    rig.pop("synthetic")
+    det = Detector.from_config(rig)
+    front, side = (read_depth(runs / "scene" / n / "frames" / "0001.png", 0.001, (120, 160)) for n in ("front", "side"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        det.detect_batch([[front, side * 1000], [front, side * 1000]])
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and said[0].startswith("depth (camera side, frame 0): a float array is read as metres")
