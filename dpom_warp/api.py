@@ -115,7 +115,7 @@ class Detector:
         if cfg.is_rig:  # the cameras' frames, paired, where one needs them (auto, or a floor fit on them)
             from .frames import rig_frames
 
-            frames = rig_frames(cfg, log=quiet).frames if any(needs) else []
+            frames = rig_frames(cfg, log=quiet, check=False).frames if any(needs) else []
         else:
             frames = expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, quiet) if needs[0] and cfg.inputs.frames else []
         return cls(cfg, set_up(cfg, frames, device, quiet))

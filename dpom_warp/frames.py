@@ -199,10 +199,12 @@ def camera_words(cfg: RunConfig, i: int) -> str:
     return f"cameras[{i}] ({cfg.cameras[i][0]})"
 
 
-def rig_frames(cfg: RunConfig, strict: bool = False, log=print, max_frames: int | None = None):
+def rig_frames(cfg: RunConfig, strict: bool = False, log=print, max_frames: int | None = None, check: bool = True):
     """frames.RunFrames of a rig: its frames RigFrames in the first camera's order, each camera's
     frames checked (a bad one leaves its camera out of that rig frame; the first camera's skips
-    the rig frame), the first camera's timestamps; a warning per camera that misses frames."""
+    the rig frame), the first camera's timestamps; a warning per camera that misses frames.
+    `check` False: the frames paired, none read (what a finished run's `track` and the API need:
+    the run, or the reader, meets a bad one)."""
     render_synthetic(cfg, log)
     listed, stamps, unread = [], [], []
     for i, (name, m) in enumerate(cfg.cameras):
@@ -235,7 +237,8 @@ def rig_frames(cfg: RunConfig, strict: bool = False, log=print, max_frames: int 
             raise InputError(f"cameras[{c}].input.frames: none of its {len(listed[c])} frames pairs with one of "
                              f"cameras[0]'s {len(first)} ({how})")
         try:
-            ok, bad = check_frames(mine, m.inputs.depth_scale, (m.camera.height, m.camera.width), strict)
+            ok, bad = (check_frames(mine, m.inputs.depth_scale, (m.camera.height, m.camera.width), strict) if check
+                       else (mine, []))
         except (InputError, ConfigError) as e:
             raise type(e)(f"{camera_words(cfg, c)}: {e}") from None
         good.append(set(ok))

@@ -388,7 +388,7 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
         if cfg.is_rig:  # each camera's frames paired again
             from .frames import rig_frames
 
-            by_name = {f.name: f for f in rig_frames(cfg, log=lambda *_: None).frames}
+            by_name = {f.name: f for f in rig_frames(cfg, log=lambda *_: None, check=False).frames}
         else:
             by_name = {f.name: f for f in expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, log)}
         missing = [n for n in names if n not in by_name]
