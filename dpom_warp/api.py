@@ -47,8 +47,9 @@ class Result:
         iterations: mean-field iterations run.
         converged: False when the frame stopped at model.max_iterations above the tolerance.
         timings: seconds: the engine's stages (`lists_s`, `iterations_s`, `threshold_s` and
-            within it `joint_lists_s`), `infer_s` (this frame's share of its engine call),
-            `detect_s` and `total_s`.
+            within it `joint_lists_s`; a list a camera of the engine's: `lists_s_cameras`, and
+            `iterations_s_cameras`, each camera's launches in the loop, None on a GPU), `infer_s`
+            (this frame's share of its engine call), `detect_s` and `total_s`.
     """
 
     detections: list[Detected]

@@ -159,13 +159,16 @@ def summarise(cfg, done, records, skipped, truth, geometry, dev, background, gro
     elif drifts:  # each frame's estimate is in its record (and per_frame); here their range
         summary["drift"] = drift_summary(drifts)
     if rig:  # each camera's frames, and the rig frames it had none for (inferred from the others)
-        def read_s(n):
-            times = [p["read_s_cameras"][n] for p in per_frame if n in p.get("read_s_cameras", {})]
+        def camera_median(key, n):
+            times = [p[key][n] for p in per_frame if n in p.get(key, {})]
             return statistics.median(times) if times else None
 
         summary["cameras"] = {n: {"frames": sum(records[f.name]["cameras"][n] is not None for f in done),
                                   "missing": [f.name for f in done if records[f.name]["cameras"][n] is None],
-                                  "median_read_s": read_s(n)} for n, _ in cfg.cameras}
+                                  "median_read_s": camera_median("read_s_cameras", n),
+                                  "median_lists_s": camera_median("lists_s_cameras", n),
+                                  "median_iterations_s": camera_median("iterations_s_cameras", n)}
+                              for n, _ in cfg.cameras}
     if truth is not None and done:
         dims = 3 if cfg.grid.mode == "voxel" else 2
         det_xy = {f.name: np.array(records[f.name]["xy"]).reshape(-1, dims) for f in done}

@@ -259,6 +259,8 @@ class FrameWorker:
         if cfg.output.ply:
             files.update(ply_files(f.stem, depth, geometry, dets, cfg))
         t3 = time.perf_counter()
+        timings = dict(res.timings)
+        per_camera = {k: timings.pop(k, None) for k in ("lists_s_cameras", "iterations_s_cameras")}
         record = {
             "frame": f.name,
             "rows": [f"{f.name},{d.x:.4f},{d.y:.4f},{d.z:.4f},{d.rho:.6f},{d.box[0]},{d.box[1]},"
@@ -269,12 +271,15 @@ class FrameWorker:
                       "live": res.live, "entries": res.entries, "kept_entries": res.kept_entries,
                       "read_s": read_s,
                       "infer_s": infer_s, "detect_s": t2 - t1, "render_s": t3 - t2,
-                      "worker": self.name, **{f"engine_{k}": v for k, v in res.timings.items()}},
+                      "worker": self.name, **{f"engine_{k}": v for k, v in timings.items()}},
         }
         if self.rig:  # each camera's file (None: inferred from the others) and drift
             names = [n for n, _ in cfg.cameras]
             record["cameras"] = {n: (Path(p).name if p is not None else None) for n, p in zip(names, item.paths)}
             record["stats"]["read_s_cameras"] = self.read_cameras.pop(item.path, {})
+            present = [n for n, p in zip(names, item.paths) if p is not None]  # the engine's cameras
+            for key, times in per_camera.items():  # each camera's engine time by name (engine.infer_batch)
+                record["stats"][key] = dict(zip(present, times)) if times is not None else {}
             if res.drift is not None:
                 record["stats"]["drift"] = {n: (d.record() if d is not None else None) for n, d in zip(names, res.drift)}
         elif res.drift is not None:  # the frame's depth scale against the background (drift.py)

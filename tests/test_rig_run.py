@@ -9,6 +9,7 @@ import csv
 import json
 import math
 import shutil
+import statistics
 
 import numpy as np
 import pytest
@@ -98,6 +99,16 @@ def test_a_rig_runs_outputs(runs):
     assert {n: {k: c[k] for k in ("frames", "missing")} for n, c in summary["cameras"].items()} == {
         "front": {"frames": 6, "missing": []}, "side": {"frames": 6, "missing": []}}
     assert all(0 < c["median_read_s"] < 1 for c in summary["cameras"].values())
+    # each camera's engine time: its lists and its pixels' launches in the loop, within the engine's
+    # whole stage of each frame; summary.json's medians are those of the frames' records
+    stats = summary["per_frame"]
+    for p in stats:
+        for key, whole in (("lists_s_cameras", "engine_lists_s"), ("iterations_s_cameras", "engine_iterations_s")):
+            assert sorted(p[key]) == ["front", "side"] and all(t > 0 for t in p[key].values())
+            assert sum(p[key].values()) <= p[whole]
+    for n, c in summary["cameras"].items():
+        assert c["median_lists_s"] == statistics.median(p["lists_s_cameras"][n] for p in stats)
+        assert c["median_iterations_s"] == statistics.median(p["iterations_s_cameras"][n] for p in stats)
     assert [c["name"] for c in summary["config"]["cameras"]] == ["front", "side"]
     assert "input" not in summary["config"] and "camera" not in summary["config"]
     record = json.loads((runs / "out" / "frames" / "0002.json").read_text())
@@ -135,7 +146,9 @@ def test_a_camera_whose_frames_run_out_early(runs, tmp_path, capsys):
     assert {k: summary["cameras"]["side"][k] for k in ("frames", "missing")} == {"frames": 4,
                                                                                 "missing": ["0004.png", "0005.png"]}
     for stem in ("0004", "0005"):
-        assert json.loads((tmp_path / "out" / "frames" / f"{stem}.json").read_text())["cameras"]["side"] is None
+        record = json.loads((tmp_path / "out" / "frames" / f"{stem}.json").read_text())
+        assert record["cameras"]["side"] is None
+        assert list(record["stats"]["lists_s_cameras"]) == ["front"]  # the engine time of the camera that ran
         np.testing.assert_array_equal(np.load(tmp_path / "out" / "maps" / f"{stem}.npy"),
                                       np.load(runs / "front" / "maps" / f"{stem}.npy"))
     np.testing.assert_array_equal(np.load(tmp_path / "out" / "maps" / "0003.npy"),

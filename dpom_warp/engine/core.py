@@ -241,16 +241,20 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
             raise ValueError(f"depths: expected as many frames from every camera, found {[len(f) for f in per_camera]}")
         t0 = time.perf_counter()
         self.tallies.zero_()  # (the entries counted now: the bound's pruning changes the counts)
-        drift = []
+        drift, camera_lists = [], []
         for v, frames in zip(self.views, per_camera):
+            tc = time.perf_counter()
             frames, estimates = v.correct_drift(frames)
             drift.append(estimates)
             v.build_lists(frames)
             v.launch(K.frame_tally, self.batch * v.n_pixels,
                      [v.lists.counts, v.n_pixels, K.TALLY_SUM, self.tallies, 0])
+            wp.synchronize_device(dev)  # (each camera's time: once a camera, outside the loop)
+            camera_lists.append(time.perf_counter() - tc)
         wp.synchronize_device(dev)
         t1 = time.perf_counter()
         logit_prior, bound = self._start(n, start)
+        before = [v.launch.seconds for v in self.views]
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()
@@ -278,6 +282,10 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
                    "total_s": t3 - t0}
         if self.batch > 1:
             timings["batch"] = n
+        # each camera's lists, and its pixels' launches in the loop (the CPU's: a GPU's return at once)
+        timings["lists_s_cameras"] = camera_lists
+        timings["iterations_s_cameras"] = ([v.launch.seconds - b for v, b in zip(self.views, before)]
+                                           if self.views[0].launch.timed else None)
         return [FrameResult(rho=rho[f], rho_star=rho_star[f], evidence_share=share[f],
                             iterations=int(iterations[f]), entries=int(entries[f]),
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),

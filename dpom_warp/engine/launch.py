@@ -7,6 +7,7 @@ so a camera's never thrash another's."""
 from __future__ import annotations
 
 import ctypes
+import time
 
 import warp as wp
 
@@ -49,11 +50,15 @@ class Launcher:
     """wp.launch of a frame's kernels on one device, each recorded at its first launch (one
     record a kernel) and replayed after. `direct`: on the CPU outside a capture, replays call
     the kernel's entry point with an argument block kept between launches (`_direct`); off
-    under a graph capture, where every launch must be Warp's."""
+    under a graph capture, where every launch must be Warp's. On the CPU, where a launch
+    returns when its kernel is done, `seconds` adds up the time its launches took (a rig's
+    time camera by camera); elsewhere it stays 0 (a GPU's launches return at once)."""
 
     def __init__(self, device: str, direct: bool = True):
         self.device, self.direct = device, direct
         self.recorded: dict = {}
+        self.timed = str(device).startswith("cpu")
+        self.seconds = 0.0
 
     def reset(self, direct: bool | None = None) -> None:
         """Forget the recorded launches (new buffers, or a capture to come)."""
@@ -62,6 +67,14 @@ class Launcher:
         self.recorded = {}
 
     def __call__(self, kernel, dim: int, inputs: list):
+        """launch(), timed on the CPU (`seconds`)."""
+        if not self.timed:
+            return self.launch(kernel, dim, inputs)
+        t = time.perf_counter()
+        self.launch(kernel, dim, inputs)
+        self.seconds += time.perf_counter() - t
+
+    def launch(self, kernel, dim: int, inputs: list):
         """wp.launch of one of a frame's kernels, recorded at its first launch (one record a
         kernel) and replayed after with only the arguments that changed: a launch from Python
         takes ~15 to 30 us on the CPU, and a frame makes ~200. On the CPU outside a capture a
