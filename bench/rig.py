@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 CAMERA = {"width": 256, "height": 212, "intrinsics": {"fx": 182.5, "fy": 182.5, "cx": 127.5, "cy": 105.5}}
+WIDTH = 0.5  # object.width, metres: chosen on the tuning draw (--tuning; docs/rig.md)
 MERGE = 0.4  # metres: detection-level fusion merges detections closer than this
 
 
@@ -44,7 +45,9 @@ SCENES = {
 }
 
 
-def rig_config(name: str, folder: Path, frames: int) -> dict:
+def rig_config(name: str, folder: Path, frames: int, tuning: bool = False, width: float = WIDTH) -> dict:
+    """The scene's rig config (its frames rendered into folder/scene); `tuning`: the tuning draw
+    (seed + 1000), `width`: the object's."""
     s = SCENES[name]
     x0, x1, y0, y1 = s["area"]
     scene = folder / "scene"
@@ -54,11 +57,11 @@ def rig_config(name: str, folder: Path, frames: int) -> dict:
                                               "background": f"{scene}/{n}/background/*.png", "fps": 5},
                          "camera": {**CAMERA, "extrinsics": p}} for n, p in poses.items()],
             "grid": {"x": [x0 - 0.5, x1 + 0.5, 0.1], "y": [y0 - 0.5, y1 + 0.5, 0.1]},
-            "object": {"width": 0.4, "height": 1.85, "shape": "solid"},
+            "object": {"width": width, "height": 1.85, "shape": "solid"},
             "evaluation": {"ground_truth": f"{scene}/ground_truth.json"},
             "output": {"dir": str(folder / "out"), "images": False},
             "tracking": {"method": "off"},
-            "synthetic": {"cache": str(scene), "seed": s["seed"], "frames": frames, "background_frames": 5,
+            "synthetic": {"cache": str(scene), "seed": s["seed"] + (1000 if tuning else 0), "frames": frames, "background_frames": 5,
                           "people": s["people"], "min_gap": s["min_gap"], "area": list(s["area"]), "furniture": 0,
                           "room": [x0 - 2.0, x1 + 2.0, y0 - 2.0, y1 + 2.0, 3.0]}}
 
@@ -82,14 +85,14 @@ def fuse_detections(per_camera: list[dict], agree: int) -> dict:
     return out
 
 
-def run_scene(name: str, folder: Path, frames: int, repeats: int) -> dict:
+def run_scene(name: str, folder: Path, frames: int, repeats: int, tuning: bool = False, width: float = WIDTH) -> dict:
     from dpom_warp import Detector
     from dpom_warp.evaluate import load_ground_truth, score_frames
     from dpom_warp.frames import run_frames, render_synthetic
     from dpom_warp.loading import config_from_mapping
     from dpom_warp.worker import read_rig_frame
 
-    raw = rig_config(name, folder, frames)
+    raw = rig_config(name, folder, frames, tuning, width)
     cfg = config_from_mapping(raw)
     render_synthetic(cfg, lambda *_: None)
     rig_frames = run_frames(cfg, log=lambda *_: None).frames
@@ -121,7 +124,7 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int) -> dict:
     median = {k: statistics.median(v) for k, v in times.items()}
     hidden = sum(1 for f in rig_frames for o in truth[f.name]
                  if min(o["visible_in"].get(n, 0.0) for n in names) < 0.1)
-    return {"scene": name, "people": SCENES[name]["people"], "frames": len(rig_frames),
+    return {"scene": name, "tuning": tuning, "object_width": width, "people": SCENES[name]["people"], "frames": len(rig_frames),
             "truth": sum(len(v) for v in frames_truth.values()), "hidden_from_one": hidden,
             "moda": scores, "rig_counts": {k: full["rig"][k] for k in ("tp", "fp", "fn")}, "detection_fusion": {"any": fused[1], "two": fused[2], "best": max(fused.values())},
             "median_s": median, "rig_over_camera": median["rig"] / statistics.mean(median[n] for n in names),
@@ -148,6 +151,9 @@ def main():
     ap.add_argument("--repeats", type=int, default=3, help="timings: each frame this many times, median")
     ap.add_argument("--output", default="runs/rig")
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
+    ap.add_argument("--tuning", action="store_true", help="the tuning draw (every scene's seed + 1000, cached apart), "
+                                                          "on which the object's width was chosen")
+    ap.add_argument("--object-width", type=float, default=WIDTH, help="object.width of the rig and of each camera alone")
     args = ap.parse_args()
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -155,7 +161,8 @@ def main():
 
     results = []
     for name in args.scenes:
-        r = run_scene(name, Path(".cache/bench") / f"{name}_{args.frames}", args.frames, args.repeats)
+        folder = Path(".cache/bench") / f"{name}_{args.frames}{'_tuning' if args.tuning else ''}"
+        r = run_scene(name, folder, args.frames, args.repeats, args.tuning, args.object_width)
         print(json.dumps(r))
         results.append(r)
     (out / "rig.json").write_text(json.dumps(results, indent=1))
