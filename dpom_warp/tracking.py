@@ -212,8 +212,8 @@ class PeakCache:
 
 
 def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, dt: float,
-                 anchors: dict | None = None, nodes: list | None = None, steps: np.ndarray | None = None
-                 ) -> tuple[list[list[tuple[int, int]]], dict]:
+                 anchors: dict | None = None, nodes: list | None = None, steps: np.ndarray | None = None,
+                 run_start: bool = False, run_end: bool = False) -> tuple[list[list[tuple[int, int]]], dict]:
     """The optimal tracks over `maps` (T, K) rho*: a list of paths, each a list of (t, k)
     in frame order (frames a path skips are bridged). `anchors` (online): cell k -> the
     only cells where a path may start at t = 0 (the tracks committed there); without it a
@@ -221,7 +221,11 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     frame's peaks when the caller has them (PeakCache). `steps` (T,): each map's time in
     camera frames of dt (frame_steps; frames dropped or skipped lie between the maps): a
     move from map a to map b reaches max_speed (steps[b] - steps[a]) dt + jitter instead of
-    max_speed (b - a) dt + jitter (the same where the steps are a, a + 1, ...)."""
+    max_speed (b - a) dt + jitter (the same where the steps are a, a + 1, ...). `run_start`
+    (`run_end`): the window's first (last) frame is the run's: a path may begin (end) at a
+    peak away from the entry cells up to max_gap frames after it (before it) as hidden there
+    until then (from then), for the gap cost a frame, as a bridge pays: its path then begins
+    (ends) with the same cell at the window's first (last) frame."""
     from scipy.spatial import cKDTree
 
     T = maps.shape[0]
@@ -285,11 +289,26 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     leave = np.where(last, 0.0, np.where(entry, opt.entry_cost, opt.appear_cost))
     if anchors is not None:  # a committed track pays its end as offline: dropping it is not free
         enter[first] = -leave[first]
+    # hidden since the run's start (until its end): a track first seen in the middle of the floor
+    # a few frames in was there, hidden, as one unseen for a few frames mid-run is bridged
+    hid_in = (is_peak & ~entry & (all_t >= 1) & (all_t <= opt.max_gap) & (all_t * gap < enter)
+              if run_start and anchors is None else np.zeros(n, bool))
+    hid_out = (is_peak & ~entry & (all_t <= T - 2) & (T - 1 - all_t <= opt.max_gap) & ((T - 1 - all_t) * gap < leave)
+               if run_end else np.zeros(n, bool))
+    enter = np.where(hid_in, all_t * gap, enter)
+    leave = np.where(hid_out, (T - 1 - all_t) * gap, leave)
     tails += [np.full(n, src), np.arange(n) * 2 + 1, [src]]
     heads += [np.arange(n) * 2, np.full(n, snk), [snk]]
     supply = max(1, int(np.sum(cost < 0)) + (len(anchors) if anchors is not None else 0))
     costs += [enter, leave, [0.0]]
-    return _min_cost_paths(tails, heads, costs, supply, all_t, all_k, stats)
+    paths, stats = _min_cost_paths(tails, heads, costs, supply, all_t, all_k, stats)
+    node = {(int(t), int(k)): i for i, (t, k) in enumerate(zip(all_t, all_k))}
+    for p in paths:  # a hidden start (end): the same cell at the window's first (last) frame, bridged
+        if hid_in[node[p[0]]]:
+            p.insert(0, (0, p[0][1]))
+        if hid_out[node[p[-1]]]:
+            p.append((T - 1, p[-1][1]))
+    return paths, stats
 
 
 def _min_cost_paths(tails: list, heads: list, costs: list, supply: int, all_t, all_k, stats: dict):
@@ -388,7 +407,7 @@ def track_offline(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpt
         e = min(T, s + win)
         window = maps[s:e]
         paths, st = solve_window(window, cells, shape, opt, dt, nodes=cache.window(s, window),
-                                 steps=None if steps is None else steps[s:e])
+                                 steps=None if steps is None else steps[s:e], run_start=s == 0, run_end=e == T)
         for key in ("nodes", "arcs"):
             stats[key] += st[key]
             stats[f"max_{key}"] = max(stats[f"max_{key}"], st[key])
@@ -465,7 +484,7 @@ class OnlineTracker:
 
     def finish(self) -> tuple[list[Track], dict]:
         if self.t > self.committed:
-            self._commit(self.t)
+            self._commit(self.t, run_end=True)
         return _tracks_from({k: v for k, v in self.ids.items() if v}), self.stats
 
     def take_committed(self) -> list[tuple[int, list]]:
@@ -474,13 +493,13 @@ class OnlineTracker:
         out, self.newly = self.newly, []
         return out
 
-    def _commit(self, c: int) -> None:
+    def _commit(self, c: int, run_end: bool = False) -> None:
         committed, cells = self.committed, self.cells
         a = committed if committed >= 0 else 0
         anchors = dict(self.at) if committed >= 0 else None
         window = np.stack(self.window)
         paths, st = solve_window(window, cells, self.shape, self.opt, self.dt, anchors, self.cache.window(a, window),
-                                 frame_steps(self.times, self.dt))
+                                 frame_steps(self.times, self.dt), run_start=committed < 0, run_end=run_end)
         self.stats["solves"] += 1
         self.stats["max_nodes"] = max(self.stats["max_nodes"], st["nodes"])
         self.stats["max_arcs"] = max(self.stats["max_arcs"], st["arcs"])

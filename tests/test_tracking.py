@@ -92,13 +92,48 @@ def test_people_crossing_keep_their_identities():
 def test_entries_at_the_border_and_appearing_inside():
     """A person walking in from the border mid-sequence gets a track from there; a two-frame
     blip in the middle of the room (cheaper to explain away than appear_cost) gets none; a
-    person standing inside for 20 frames from frame 10 does (appear_cost paid once)."""
+    person standing inside for 20 frames from frame 10 does (appear_cost paid once). The one
+    who walked in is last seen at frame 24 in the middle of the room, 5 frames before the run
+    ends: held there, hidden, to the end (5 gap costs, 5 log 49 = 19.46, under appear_cost 20)."""
     inner = walk(2.0, 1.5, 0.0, 0.0, 2, t0=5)
     enter = walk(0.0, 0.5, 0.1, 0.0, 15, t0=10)
     stand = walk(3.0, 2.0, 0.0, 0.0, 20, t0=10)
     tracks = solve(maps_of([inner, enter, stand], 30))
     spans = sorted((tr.frames[0], tr.frames[-1], round(float(tr.xyz[0][0]), 1)) for tr in tracks)
-    assert spans == [(10, 24, 0.0), (10, 29, 3.0)]
+    assert spans == [(10, 29, 0.0), (10, 29, 3.0)]
+    walked = min(tracks, key=lambda tr: tr.xyz[0][0])
+    assert walked.bridged.tolist() == [t > 24 for t in range(10, 30)]
+    np.testing.assert_allclose(walked.xyz[15:, :2], [[1.4, 0.5]] * 5, atol=1e-9)
+
+
+@pytest.mark.parametrize("method", ["ksp", "online"])
+@pytest.mark.parametrize("first, want", [(5, 0), (6, 6)])
+def test_a_person_hidden_at_the_start_was_there_from_the_first_frame(method, first, want):
+    """Someone standing in the middle of the room first seen at frame `first` was there hidden
+    before, as a person unseen for a few frames mid-run is bridged: each hidden frame costs the
+    gap cost, log(0.98 / 0.02) = 3.8918, against appear_cost 20 for appearing there: 5 hidden
+    frames (19.46) are cheaper, 6 (23.35) are not. The frames before are bridged at the first
+    position. At the border (an entry cell) a person first seen at frame 3 walked in then."""
+    stand = walk(2.0, 1.5, 0.0, 0.0, 30 - first, t0=first)
+    border = walk(0.0, 1.0, 0.0, 0.0, 27, t0=3)
+    tracks = solve(maps_of([stand, border], 30), method=method)
+    spans = sorted((tr.frames[0], tr.frames[-1], round(float(tr.xyz[0][0]), 1)) for tr in tracks)
+    assert spans == sorted([(3, 29, 0.0), (want, 29, 2.0)])
+    inside = max(tracks, key=lambda tr: tr.xyz[0][0])
+    assert inside.bridged.tolist() == [t < first for t in range(want, 30)]
+    np.testing.assert_allclose(inside.xyz[:, :2], [[2.0, 1.5]] * (30 - want), atol=1e-9)
+
+
+@pytest.mark.parametrize("last, want", [(24, 29), (23, 23)])
+def test_a_person_hidden_at_the_end_stays_to_the_last_frame(last, want):
+    """The same at the run's end: last seen at frame `last` of 30 in the middle of the room,
+    held there hidden to the end when 29 - last gap costs are under appear_cost (5: 19.46),
+    not for 6 (23.35); the online tracker does the same once the run ends."""
+    stand = walk(2.0, 1.5, 0.0, 0.0, last + 1)
+    for method in ("ksp", "online"):
+        tracks = solve(maps_of([stand], 30), method=method)
+        assert [(tr.frames[0], tr.frames[-1]) for tr in tracks] == [(0, want)]
+        assert tracks[0].bridged.tolist() == [t > last for t in range(want + 1)]
 
 
 def test_flow_is_the_optimum_of_a_small_case_by_enumeration():
@@ -586,12 +621,13 @@ def test_bridge_or_split_worked_out_by_hand(appear_cost, max_gap, want):
 
 @pytest.mark.parametrize("appear_cost, inner_track", [(40.0, False), (30.0, True)])
 def test_entries_beside_unseen_cells_and_in_regions_by_hand(appear_cost, inner_track):
-    """Issue 63: three people appear mid-sequence and stand still, rho* 0.98 in frames 4-11 of
-    12 (8 x log 49 = 31.13 to gain), at cells of a real geometry's Cells.of: one beside a cell
+    """Issue 63: three people appear mid-sequence and stand still, rho* 0.98 in frames 20-27 of
+    28 (8 x log 49 = 31.13 to gain; past max_gap from the start, so not hidden since then), at
+    cells of a real geometry's Cells.of: one beside a cell
     the camera does not see, one inside a tracking.regions rectangle, one inside the view away
     from both. A track there pays its start, entry_cost 7 at an entry cell or appear_cost
     elsewhere, and its end at the last frame is free: so the first two get tracks from frame
-    4, and the third only when appear_cost (30) is below 31.13, not at 40."""
+    20, and the third only when appear_cost (30) is below 31.13, not at 40."""
     from dpom_warp.geometry import Camera, Grid, ObjectBox, build_geometry, pose_from_angles
 
     cam = Camera(160, 120, 114.0, 114.0, 79.5, 59.5, pose_from_angles(2.2, 20.0))
@@ -614,10 +650,10 @@ def test_entries_beside_unseen_cells_and_in_regions_by_hand(appear_cost, inner_t
     k_beside, k_region, k_inner = beside[0], at(1.1, 3.2), at(-0.5, 4.5)
     assert plain.entry[k_beside] and cells.entry[k_region] and not plain.entry[k_region]
     assert not cells.entry[k_inner] and seen.ravel()[k_inner]
-    maps = np.zeros((12, len(p)), np.float32)
-    maps[4:, [k_beside, k_region, k_inner]] = 0.98
+    maps = np.zeros((28, len(p)), np.float32)
+    maps[20:, [k_beside, k_region, k_inner]] = 0.98
     opt = TrackingOptions(max_speed=1.5, entry_cost=7.0, appear_cost=appear_cost)
     tracks, _ = run_tracker(maps, cells, grid.shape, opt, 10.0, 0.5, "ksp")
     got = sorted((tr.frames[0], tr.frames[-1], cells.nearest(tr.xyz[0])) for tr in tracks)
-    want = sorted([(4, 11, k_beside), (4, 11, k_region)] + ([(4, 11, k_inner)] if inner_track else []))
+    want = sorted([(20, 27, k_beside), (20, 27, k_region)] + ([(20, 27, k_inner)] if inner_track else []))
     assert got == want
