@@ -128,6 +128,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
         self.local_scratch = 0 if wp.get_device(device).is_cuda else K.SIZED_STACK
         self.one_pass_lists = not wp.get_device(device).is_cuda  # a big stack spills on a GPU
         self._graph, self._graph_lists = None, None
+        self._marks = None  # a GPU's timing events between the cameras' lists (_camera_marks)
         self._last_rho = None  # the last frame's rho, for params.warm_start
         # full-resolution frames are reduced on a GPU (kernels.frames), by NumPy on the CPU
         self.reduce_on_device = wp.get_device(device).is_cuda
@@ -242,16 +243,22 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
         t0 = time.perf_counter()
         self.tallies.zero_()  # (the entries counted now: the bound's pruning changes the counts)
         drift, camera_lists = [], []
-        for v, frames in zip(self.views, per_camera):
+        marks = self._camera_marks()  # a GPU's events between the cameras' lists (None: the CPU's clock)
+        for i, (v, frames) in enumerate(zip(self.views, per_camera)):
             tc = time.perf_counter()
+            if marks:
+                wp.record_event(marks[i])
             frames, estimates = v.correct_drift(frames)
             drift.append(estimates)
             v.build_lists(frames)
             v.launch(K.frame_tally, self.batch * v.n_pixels,
                      [v.lists.counts, v.n_pixels, K.TALLY_SUM, self.tallies, 0])
-            wp.synchronize_device(dev)  # (each camera's time: once a camera, outside the loop)
-            camera_lists.append(time.perf_counter() - tc)
+            camera_lists.append(time.perf_counter() - tc)  # (the CPU's launches return when done)
+        if marks:
+            wp.record_event(marks[-1])
         wp.synchronize_device(dev)
+        if marks:
+            camera_lists = [wp.get_event_elapsed_time(a, b, synchronize=False) / 1000.0 for a, b in zip(marks, marks[1:])]
         t1 = time.perf_counter()
         logit_prior, bound = self._start(n, start)
         before = [v.launch.seconds for v in self.views]
@@ -293,6 +300,14 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
                             kept_entries=None if kept[f] is None else int(kept[f]), pruned=int(pruned[f]),
                             joint=joint[f], drift=drift[0][f] if len(drift) == 1 else [d[f] for d in drift])
                 for f in range(n)]
+
+    def _camera_marks(self) -> list | None:
+        """Timing events, one a camera and one after the last, on a GPU (made once); None on the CPU."""
+        if wp.get_device(self.device).is_cpu:
+            return None
+        if self._marks is None:
+            self._marks = [wp.Event(self.device, enable_timing=True) for _ in range(len(self.views) + 1)]
+        return self._marks
 
     # -- the cameras' backgrounds and lists (engine.view), camera 0 unless told ------------
     def build_lists(self, depth_m: np.ndarray, camera: int = 0) -> int:
