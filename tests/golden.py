@@ -8,14 +8,24 @@ byte for byte (sha256), and each frame record's counts (iterations, converged, l
 entries, entries, kept entries, detections): the timings and the worker's name are left out,
 as are the pictures (matplotlib's bytes are not the engine's). Each run is the CLI's
 `dpom-warp run` with pictures off, so the recorded bytes are what a user's run writes.
+
+The maps' last bits depend on the CPU: Warp compiles its CPU kernels for the host
+(`-march=native`), and NumPy and the C library choose code paths by its features (an AMD EPYC
+and an Intel Xeon VM gave detections, tracks and their files byte for byte alike, and maps and
+list entries a few in 10^5 apart). So each run also records the machine it ran on (`machine()`)
+and each map's sum and count of cells at rho* >= 0.5: on that machine the maps and counts are
+compared byte for byte, elsewhere to those sums and counts (test_golden).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import platform
 import sys
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = Path(__file__).with_name("golden.json")
@@ -67,13 +77,36 @@ def run_scenario(name: str, out: Path) -> Path:
     return folder
 
 
+def machine() -> str:
+    """What the maps' last bits depend on: the processor's model and the instruction-set
+    features NumPy finds on it (Warp's CPU kernels are compiled for the host's)."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # NumPy 1
+        from numpy.core._multiarray_umath import __cpu_features__ as features
+    model = platform.processor()
+    try:
+        model = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                     if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    enabled = ",".join(sorted(k for k, on in features.items() if on))
+    return f"{platform.machine()} {model} [{hashlib.sha256(enabled.encode()).hexdigest()[:12]}]"
+
+
 def digest(folder: Path) -> dict:
-    """What must stay byte-identical in a run folder."""
-    out = {}
+    """What must stay byte-identical in a run folder (on the machine that ran it; `map_sums`,
+    each map's sum and count of cells at rho* >= 0.5, to compare with on another)."""
+    out = {"machine": machine()}
     for name in FILES:
         path = folder / name
         out[name] = hashlib.sha256(path.read_bytes()).hexdigest() if path.exists() else None
-    out["maps"] = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted((folder / "maps").glob("*.npy"))}
+    maps = sorted((folder / "maps").glob("*.npy"))
+    out["maps"] = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in maps}
+    out["map_sums"] = {}
+    for p in maps:
+        m = np.load(p)
+        out["map_sums"][p.name] = [float(np.sum(m, dtype=np.float64)), int(np.count_nonzero(m >= 0.5))]
     records = {}
     for p in sorted((folder / "frames").glob("*.json")):
         stats = json.loads(p.read_text()).get("stats", {})
