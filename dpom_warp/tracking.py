@@ -302,6 +302,8 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     supply = max(1, int(np.sum(cost < 0)) + (len(anchors) if anchors is not None else 0))
     costs += [enter, leave, [0.0]]
     paths, stats = _min_cost_paths(tails, heads, costs, supply, all_t, all_k, stats)
+    if not hid_in.any() and not hid_out.any():
+        return paths, stats
     node = {(int(t), int(k)): i for i, (t, k) in enumerate(zip(all_t, all_k))}
     for p in paths:  # a hidden start (end): the same cell at the window's first (last) frame, bridged
         if hid_in[node[p[0]]]:
