@@ -6,6 +6,7 @@ rig's evidence fusion (one mean field over every camera's pixels); and the time 
 against one camera's, measured in the same process on the same frames.
 
     python -m bench.rig [--frames 10] [--output runs/rig] [--scenes rig3 rig3_tight] [--repeats 5]
+                        [--tuning] [--object-width 0.5] [--device cpu|cuda:N]
 
 Scenes (the same cameras' layout in each: one at the near end looking along the area, one on
 each side looking across it; 256 x 212 pixels, Kinect v2's field of view):
@@ -45,14 +46,15 @@ SCENES = {
 }
 
 
-def rig_config(name: str, folder: Path, frames: int, tuning: bool = False, width: float = WIDTH) -> dict:
+def rig_config(name: str, folder: Path, frames: int, tuning: bool = False, width: float = WIDTH,
+               device: str = "cpu") -> dict:
     """The scene's rig config (its frames rendered into folder/scene); `tuning`: the tuning draw
     (seed + 1000), `width`: the object's."""
     s = SCENES[name]
     x0, x1, y0, y1 = s["area"]
     scene = folder / "scene"
     poses = layout(s["height"], s["pitch"], s["area"])
-    return {"device": "cpu",
+    return {"device": device,
             "cameras": [{"name": n, "input": {"frames": f"{scene}/{n}/frames/*.png",
                                               "background": f"{scene}/{n}/background/*.png", "fps": 5},
                          "camera": {**CAMERA, "extrinsics": p}} for n, p in poses.items()],
@@ -85,14 +87,15 @@ def fuse_detections(per_camera: list[dict], agree: int) -> dict:
     return out
 
 
-def run_scene(name: str, folder: Path, frames: int, repeats: int, tuning: bool = False, width: float = WIDTH) -> dict:
+def run_scene(name: str, folder: Path, frames: int, repeats: int, tuning: bool = False, width: float = WIDTH,
+              device: str = "cpu") -> dict:
     from dpom_warp import Detector
     from dpom_warp.evaluate import load_ground_truth, score_frames
     from dpom_warp.frames import run_frames, render_synthetic
     from dpom_warp.loading import config_from_mapping
     from dpom_warp.worker import read_rig_frame
 
-    raw = rig_config(name, folder, frames, tuning, width)
+    raw = rig_config(name, folder, frames, tuning, width, device)
     cfg = config_from_mapping(raw)
     render_synthetic(cfg, lambda *_: None)
     rig_frames = run_frames(cfg, log=lambda *_: None).frames
@@ -124,7 +127,7 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, tuning: bool =
     median = {k: statistics.median(v) for k, v in times.items()}
     hidden = sum(1 for f in rig_frames for o in truth[f.name]
                  if min(o["visible_in"].get(n, 0.0) for n in names) < 0.1)
-    return {"scene": name, "tuning": tuning, "object_width": width, "people": SCENES[name]["people"], "frames": len(rig_frames),
+    return {"scene": name, "tuning": tuning, "object_width": width, "device": device, "people": SCENES[name]["people"], "frames": len(rig_frames),
             "truth": sum(len(v) for v in frames_truth.values()), "hidden_from_one": hidden,
             "moda": scores, "rig_counts": {k: full["rig"][k] for k in ("tp", "fp", "fn")}, "detection_fusion": {"any": fused[1], "two": fused[2], "best": max(fused.values())},
             "median_s": median, "rig_over_camera": median["rig"] / statistics.mean(median[n] for n in names),
@@ -142,7 +145,9 @@ def markdown(results: list[dict], machine: str) -> str:
                     + f" | {r['detection_fusion']['any']:.3f} / {r['detection_fusion']['two']:.3f} | "
                       f"**{r['moda']['rig']:.3f}** | {r['rig_over_camera']:.2f}x ({1000 * r['median_s']['rig']:.0f} ms; "
                       f"{r['rig_over_sum']:.2f}x the three cameras' sum) |")
-    return "\n".join(rows) + f"\n\nMODA at 0.5 m, fast path; {machine}."
+    device = results[0].get("device", "cpu")
+    where = machine if device == "cpu" else f"{device} ({machine})"
+    return "\n".join(rows) + f"\n\nMODA at 0.5 m, fast path; {where}."
 
 
 def main():
@@ -154,6 +159,7 @@ def main():
     ap.add_argument("--tuning", action="store_true", help="the tuning draw (every scene's seed + 1000, cached apart), "
                                                           "on which the object's width was chosen")
     ap.add_argument("--object-width", type=float, default=WIDTH, help="object.width of the rig and of each camera alone")
+    ap.add_argument("--device", default="cpu", help="the rig's and each camera's inference device: cpu or cuda:N")
     args = ap.parse_args()
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -162,7 +168,7 @@ def main():
     results = []
     for name in args.scenes:
         folder = Path(".cache/bench") / f"{name}_{args.frames}{'_tuning' if args.tuning else ''}"
-        r = run_scene(name, folder, args.frames, args.repeats, args.tuning, args.object_width)
+        r = run_scene(name, folder, args.frames, args.repeats, args.tuning, args.object_width, args.device)
         print(json.dumps(r))
         results.append(r)
     (out / "rig.json").write_text(json.dumps(results, indent=1))

@@ -115,3 +115,22 @@ def test_errors_sorts_each_error_by_its_kind(tmp_path):
     v = cell_values(det, result, k)
     assert v["rho_star"] == float(result.rho_star.ravel()[k]) and v["rho"] == float(result.rho.ravel()[k])
     assert v["before"] >= v["rho_star"] - 1e-9  # the top band's factor is at most 1
+
+
+def test_detection_level_fusion_of_the_rig_bench_by_hand():
+    """bench.rig's detection fusion (the comparison the rig table makes): each camera's
+    detections merged greedily into the first group whose mean is within 0.4 m and holds none
+    of that camera's, kept where `agree` cameras found it, at the group's mean. Worked by hand:
+    camera A (0, 0) and (2, 2); B (0.3, 0) joins A's first (0.3 m), (5, 5) alone; C (0.1, 0.35)
+    is 0.354 m from that group's mean (0.15, 0) and joins it; A's second detection 0.2 m from
+    its first starts a group of its own (one camera, one vote)."""
+    from bench.rig import fuse_detections
+
+    a = {"f": np.array([[0.0, 0.0], [2.0, 2.0]]), "g": np.array([[0.0, 0.0], [0.2, 0.0]])}
+    b = {"f": np.array([[0.3, 0.0], [5.0, 5.0]]), "g": np.zeros((0, 2))}
+    c = {"f": np.array([[0.1, 0.35]]), "g": np.zeros((0, 2))}
+    one, two = fuse_detections([a, b, c], 1), fuse_detections([a, b, c], 2)
+    np.testing.assert_allclose(one["f"], [[0.4 / 3, 0.35 / 3], [2.0, 2.0], [5.0, 5.0]], atol=1e-12)
+    np.testing.assert_allclose(two["f"], [[0.4 / 3, 0.35 / 3]], atol=1e-12)
+    np.testing.assert_allclose(one["g"], [[0.0, 0.0], [0.2, 0.0]], atol=1e-12)
+    assert two["g"].shape == (0, 2)
