@@ -26,8 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from dpom_warp.config.rig import RIG_WIDTH
+
 CAMERA = {"width": 256, "height": 212, "intrinsics": {"fx": 182.5, "fy": 182.5, "cx": 127.5, "cy": 105.5}}
-WIDTH = 0.5  # object.width, metres: chosen on the tuning draw (--tuning; docs/rig.md)
+WIDTH = RIG_WIDTH  # object.width (a rig's default), metres: chosen on the tuning draw (--tuning; docs/rig.md)
 MERGE = 0.4  # metres: detection-level fusion merges detections closer than this
 
 

@@ -168,7 +168,9 @@ class ObjectBox(Node):  # the config's `object` section
     model_config = ConfigDict(**Node.model_config,
                               json_schema_extra={"description": __doc__.splitlines()[0]})
 
-    width: Num = Field(0.4, gt=0, description="metres, across the line of sight (the solid: its body's diameter)")
+    width: Num = Field(0.4, gt=0, description="metres, across the line of sight (the solid: its body's "
+                                               "diameter); left out in a rig of several cameras: 0.5, a "
+                                               "person seen from every side (docs/rig.md)")
     height: Num = Field(1.85, gt=0, description="metres")
     depth: Num | None = Field(None, gt=0, description="default: = width")
     shape: Literal["plane", "solid"] = Field(

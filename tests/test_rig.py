@@ -137,6 +137,25 @@ def test_a_rig_config_is_each_camera_with_the_shared_sections(tmp_path):
     assert again.resolved == cfg.resolved
 
 
+@pytest.mark.parametrize("obj, cameras, width", [(None, 2, 0.5), ({"height": 1.8}, 2, 0.5),
+                                                   ({"width": 0.45}, 2, 0.45), (None, 1, 0.4)])
+def test_a_rigs_object_is_wider_unless_given(tmp_path, obj, cameras, width):
+    """A rig of several cameras sees a person from every side: object.width left out is 0.5 m
+    there (docs/rig.md), what the config gives where it gives one, the single camera's 0.4 for
+    a rig of one; the other object keys as given; the resolved config says it."""
+    from dpom_warp.loading import config_from_mapping
+
+    rig = rig_mapping(tmp_path)
+    rig.pop("object")
+    rig["cameras"] = rig["cameras"][:cameras]
+    if obj is not None:
+        rig["object"] = obj
+    cfg = config_from_mapping(rig)
+    assert cfg.obj.width == width and cfg.resolved["object"]["width"] == width
+    if obj and "height" in obj:
+        assert cfg.obj.height == 1.8
+
+
 @pytest.mark.parametrize("change, message", [
     (lambda r: r["cameras"][1].update(name="front"),
      r"^cameras\[1\]\.name: expected a name unlike the other cameras', found 'front' again \(cameras\[0\]\)$"),

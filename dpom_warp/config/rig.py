@@ -17,6 +17,10 @@ from ..values import ConfigError, Node, Num, Str, _first_error, _fmt
 
 NAME = re.compile(r"^[A-Za-z0-9_-]+$")
 PER_CAMERA = ("input", "camera")  # the sections each camera has; the others are shared
+# object.width of a rig of several cameras where the config leaves it out: seen from every side
+# (arms and swinging legs included) a person needs a wider body than one camera's 0.4 m
+# (docs/rig.md: chosen on a tuning draw of the rig scenes)
+RIG_WIDTH = 0.5
 
 
 class RigSection(Node):
@@ -47,9 +51,9 @@ def rig_key(index: int, message: str) -> str:
 
 def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
     """(names, one single-camera mapping a camera: the shared sections with the camera's input and
-    camera) of a config mapping with `cameras:`. One-line errors for a list that is not one, an
-    item without a name or input, names that repeat, and `cameras:` beside a top-level input or
-    camera."""
+    camera) of a config mapping with `cameras:`; with several cameras, `object.width` left out is
+    RIG_WIDTH. One-line errors for a list that is not one, an item without a name or input, names
+    that repeat, and `cameras:` beside a top-level input or camera."""
     cams = raw["cameras"]
     if not isinstance(cams, list) or not cams:
         found = "an empty list" if isinstance(cams, list) else _fmt(cams)
@@ -59,6 +63,9 @@ def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
         raise ConfigError(f"cameras: expected either a cameras: list or a single {' and '.join(PER_CAMERA)}, found "
                           f"cameras: and a top-level {both[0]}: (move it into each camera)")
     shared = {k: v for k, v in raw.items() if k not in ("cameras", "rig")}
+    obj = shared.get("object")
+    if len(cams) > 1 and (obj is None or isinstance(obj, dict) and "width" not in obj):
+        shared["object"] = {**(obj or {}), "width": RIG_WIDTH}
     names, singles = [], []
     for i, item in enumerate(cams):
         if not isinstance(item, dict):
