@@ -159,11 +159,32 @@ def track_scores(tracks: dict[str, list], truth: dict[str, list[dict]], frames: 
     return out
 
 
+def link_naive(positions: list[np.ndarray], gate: float) -> list[list[int]]:
+    """The naive baseline: each frame's detections matched to the previous frame's by the
+    Hungarian method within `gate` metres; an unmatched detection starts a new identity.
+    Returns the identity of every detection, frame by frame."""
+    from .matching import match
+
+    out, prev, prev_ids, next_id = [], None, [], 0
+    for pos in positions:
+        pos = np.asarray(pos, float)
+        pos = pos.reshape(0, 2) if pos.size == 0 else pos
+        ids = [-1] * len(pos)
+        if prev is not None and len(prev) and len(pos):
+            for i, j in match(pos, prev, gate):
+                ids[i] = prev_ids[j]
+        for i in range(len(pos)):
+            if ids[i] < 0:
+                next_id += 1
+                ids[i] = next_id
+        out.append(ids)
+        prev, prev_ids = pos, ids
+    return out
+
+
 def naive_tracks(detections: dict[str, np.ndarray], frames: list[str], gate: float) -> dict[str, list]:
     """The naive baseline on a run's detections (name -> (n, dims) positions): linked frame
-    to frame by the Hungarian method within `gate` (tracking.link_naive)."""
-    from .tracking import link_naive
-
+    to frame by the Hungarian method within `gate` (link_naive)."""
     pos = [np.asarray(detections.get(f, np.zeros((0, 2))), float) for f in frames]
     ids = link_naive(pos, gate)
     return {f: [(i, *p) for i, p in zip(idf, pf)] for f, idf, pf in zip(frames, ids, pos)}

@@ -560,29 +560,6 @@ def track_online(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     return tracker.finish()
 
 
-def link_naive(positions: list[np.ndarray], gate: float) -> list[list[int]]:
-    """The naive baseline: each frame's detections matched to the previous frame's by the
-    Hungarian method within `gate` metres; an unmatched detection starts a new identity.
-    Returns the identity of every detection, frame by frame."""
-    from .matching import match
-
-    out, prev, prev_ids, next_id = [], None, [], 0
-    for pos in positions:
-        pos = np.asarray(pos, float)
-        pos = pos.reshape(0, 2) if pos.size == 0 else pos
-        ids = [-1] * len(pos)
-        if prev is not None and len(prev) and len(pos):
-            for i, j in match(pos, prev, gate):
-                ids[i] = prev_ids[j]
-        for i in range(len(pos)):
-            if ids[i] < 0:
-                next_id += 1
-                ids[i] = next_id
-        out.append(ids)
-        prev, prev_ids = pos, ids
-    return out
-
-
 def run_tracker(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOptions, fps: float,
                 threshold: float = 0.5, method: str | None = None, times: list | None = None
                 ) -> tuple[list[Track], dict]:

@@ -400,8 +400,9 @@ def test_readme_api_examples_run(monkeypatch, demo_run):
     exec(blocks[0], first)  # reads the demo's frames itself
     assert first["result"].detections and len(first["results"]) == 4
     assert first["tracks"] and first["online"].tracks is not None  # the four frames tracked both ways
-    named = re.search(r"result\.timings  # seconds: (.*)", blocks[0]).group(1)
-    assert set(re.findall(r"\w+_s\b", named)) == set(first["result"].timings)  # the comment names the keys
+    named = re.search(r"result\.timings  # seconds: (.*\n(?: +#.*\n)*)", blocks[0]).group(1)  # and its lines below
+    # the comment names the keys (seconds, and a list a camera: *_s_cameras)
+    assert set(re.findall(r"\w+_s(?:_cameras)?\b", named)) == set(first["result"].timings)
     second = {"depth_m": read_depth(frames[0], 0.001),
               "background_m": np.stack([read_depth(f, 0.001) for f in background])}
     exec(next(b for b in blocks if "Engine(" in b), second)

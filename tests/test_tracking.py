@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from dpom_warp.track_files import TABLE_HEADER, TRACKS_HEADER, read_tracks_csv, tracks_csv
-from dpom_warp.tracking import Cells, TrackingOptions, link_naive, run_tracker, track_offline, track_online
+from dpom_warp.track_eval import link_naive
+from dpom_warp.tracking import Cells, TrackingOptions, run_tracker, track_offline, track_online
 from paths import CONFIGS
 
 NX, NY, STEP = 40, 30, 0.1
