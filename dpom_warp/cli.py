@@ -127,6 +127,14 @@ def _report(summary: dict, out: str) -> None:
     print(f"{n} frame{'' if n == 1 else 's'}, {found} detection{'' if found == 1 else 's'}; median "
           f"{1000 * t['median_infer_s']:.0f} ms per frame ({t['median_iterations']:.0f} iterations) "
           f"on {summary['device']}; outputs in {out}")
+    if summary.get("cameras"):  # a rig: where each camera's time went
+        def ms(v):
+            return "-" if v is None else f"{1000 * v:.0f}"
+
+        print("cameras, median ms a frame (reading + lists + its pixels in the mean field): " + "; ".join(
+            f"{name} {ms(c['median_read_s'])} + {ms(c['median_lists_s'])} + {ms(c['median_iterations_s'])} "
+            f"({c['frames']} frames{', ' + str(len(c['missing'])) + ' missing' if c['missing'] else ''})"
+            for name, c in summary["cameras"].items()))
     tr = summary.get("tracking") or {}
     if tr.get("method", "off") != "off":
         print(f"{tr['tracks']} tracks ({tr['method']}, {tr['ms_per_frame']:.1f} ms per frame): "

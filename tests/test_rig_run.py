@@ -8,6 +8,7 @@ import copy
 import csv
 import json
 import math
+import re
 import shutil
 import statistics
 
@@ -142,6 +143,9 @@ def test_a_camera_whose_frames_run_out_early(runs, tmp_path, capsys):
     assert main(["run", write(tmp_path / "rig.yaml", rig), "--no-progress"]) == 0
     printed = capsys.readouterr().out
     assert "warning: cameras[1] (side): no frame for 2 of the rig's 6 frames (first 0004.png)" in printed
+    assert re.search(r"^cameras, median ms a frame \(reading \+ lists \+ its pixels in the mean field\): "
+                     r"front \d+ \+ \d+ \+ \d+ \(6 frames\); side \d+ \+ \d+ \+ \d+ \(4 frames, 2 missing\)$",
+                     printed, re.M)
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert {k: summary["cameras"]["side"][k] for k in ("frames", "missing")} == {"frames": 4,
                                                                                 "missing": ["0004.png", "0005.png"]}
