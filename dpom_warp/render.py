@@ -174,6 +174,19 @@ class MapPanel:
         canvas.paste(Image.fromarray(rgb).resize(size, Image.NEAREST), (int(round(a[0])), int(round(a[1]))))
         draw.rectangle((ox, oy, ox + self.w - 1, oy + self.h - 1), outline=INK)
 
+    def outline(self, draw, ox, oy, mask: np.ndarray, colour) -> None:
+        """The edge of `mask` (the map's shape, True inside) drawn along its cells' sides."""
+        x0, x1, y0, y1 = self.extent
+        ny, nx = mask.shape
+        dx, dy = (x1 - x0) / nx, (y1 - y0) / ny
+        padded = np.pad(np.asarray(mask, bool), 1)
+        for j, i in np.argwhere(padded[1:-1, 1:] != padded[1:-1, :-1]):  # a side between columns i - 1 and i
+            draw.line((*self.to_px(x0 + i * dx, y0 + j * dy, ox, oy), *self.to_px(x0 + i * dx, y0 + (j + 1) * dy, ox, oy)),
+                      fill=colour, width=2)
+        for j, i in np.argwhere(padded[1:, 1:-1] != padded[:-1, 1:-1]):  # a side between rows j - 1 and j
+            draw.line((*self.to_px(x0 + i * dx, y0 + j * dy, ox, oy), *self.to_px(x0 + (i + 1) * dx, y0 + j * dy, ox, oy)),
+                      fill=colour, width=2)
+
     def marks(self, draw, ox, oy, truth, dets):
         for x, y in truth:
             px, py = self.to_px(x, y, ox, oy)
@@ -247,7 +260,8 @@ def draw_tracks(draw, panel: MapPanel, ox, oy, tracks, trail: int, side: bool = 
 
 
 def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, title="",
-                  z_max=None, in_view=None, tracks=None, trail: int = 30, overlay: dict | None = None) -> bytes:
+                  z_max=None, in_view=None, tracks=None, trail: int = 30, overlay: dict | None = None,
+                  views: list | None = None) -> bytes:
     """A PNG file's bytes: left the depth frame with detection boxes (solid, with rho*) and
     ground-truth boxes (dashed); right the occupancy map rho* seen from above, with
     detections (circles), ground truth (crosses) and the camera position; for a voxel grid
@@ -259,7 +273,9 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
     trails on the maps. What is the same in every frame of a run (axes, titles, colour bars,
     legend) is drawn once per layout (picture_template) and copied. `overlay`: zones and lines
     on the top map ({"zones": [(polygon (n, 2), label)], "lines": [(from, to, label)]},
-    zone_tables.ZoneTables' of the frame: each zone's count, each line's crossings so far)."""
+    zone_tables.ZoneTables' of the frame: each zone's count, each line's crossings so far).
+    `views` (a rig's): (name, map-shaped bool) a camera, in camera_xy's order: each camera's
+    field of view outlined on the top map in its colour (VIEW_INKS), its name by its mark."""
     voxel = rho_map.ndim == 3
     has_truth, truth = truth is not None, truth or []
     depth = np.asarray(depth_m, dtype=np.float32)
@@ -326,9 +342,14 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
         draw_tracks(draw, top, ox, oy, tracks, trail)
     if overlay:
         draw_overlay(draw, top, ox, oy, overlay)
-    for cam in cams:
+    for k, (name, mask) in enumerate(views or []):
+        seen_map = np.asarray(mask, bool).reshape(rho_map.shape)
+        top.outline(draw, ox, oy, seen_map.any(axis=0) if voxel else seen_map, VIEW_INKS[k % len(VIEW_INKS)])
+    for k, cam in enumerate(cams):
         cx, cy = top.to_px(cam[0], cam[1], ox, oy)
         draw.polygon([(cx, cy - 8), (cx - 7, cy + 5), (cx + 7, cy + 5)], fill=(255, 255, 255), outline=INK)
+        if views and k < len(views):
+            draw.text((cx + 9, cy), views[k][0], fill=VIEW_INKS[k % len(VIEW_INKS)], font=font(11), anchor="lm")
     if voxel:
         side = panels[1]
         ox += top.w + PAD + 10
@@ -341,6 +362,7 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
 
 BAR_SPACE = BAR_W + 44  # a colour bar with its values
 ZONE_INK, LINE_INK = (80, 200, 255), (120, 255, 120)
+VIEW_INKS = ((255, 64, 160), (150, 220, 60), (90, 140, 255), (255, 110, 90), (60, 220, 200), (200, 120, 255))  # a rig's cameras (no other colour of the pictures)
 
 
 def draw_overlay(draw: ImageDraw.ImageDraw, panel: MapPanel, ox: int, oy: int, overlay: dict) -> None:

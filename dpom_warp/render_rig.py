@@ -1,5 +1,6 @@
 """A rig's frame picture (issue 61): the first camera's depth with the detections' boxes beside
-the one map (render.frame_picture, the map's grey where no camera sees), and below it every
+the one map (render.frame_picture, the map's grey where no camera sees, with several cameras
+each one's field of view outlined in its colour and named at its mark), and below it every
 other camera's depth with the same detections' boxes as that camera sees them, each named."""
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ def rig_picture(depths: list, rho_map: np.ndarray, cfg, rig, detections: list, t
     main = Image.open(io.BytesIO(frame_picture(
         depths[0] if depths[0] is not None else np.zeros(geometries[0].rays.shape[:2]), rho_map, cfg.grid, detections,
         np.array([g.centre[:2] for g in geometries]), truth, f"{title}  camera {names[0]}",
-        in_view=in_view, tracks=tracks, trail=cfg.tracking.trail, overlay=overlay)))
+        in_view=in_view, tracks=tracks, trail=cfg.tracking.trail, overlay=overlay,
+        views=[(n, g.rect_area > 0) for n, g in zip(names, geometries)] if len(geometries) > 1 else None)))
     panels = []
     for name, depth, g in zip(names[1:], depths[1:], geometries[1:]):
         boxes = [g.rect[d.k] for d in detections if g.rect_area[d.k] > 0]

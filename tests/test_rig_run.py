@@ -119,6 +119,11 @@ def test_a_rig_runs_outputs(runs):
     assert rgb.shape[0] > one.shape[0] + 400  # the side camera's panel (424 px high) below
     below = rgb[one.shape[0] + 40:one.shape[0] + 440, 40:600]
     assert len(np.unique(below.reshape(-1, 3), axis=0)) > 50  # a depth image there, not a blank
+    from dpom_warp.render import VIEW_INKS  # each camera's field of view outlined on the map in its colour
+
+    alone = np.asarray(Image.open(runs / "front" / "images" / "0002.png").convert("RGB"))
+    for ink in VIEW_INKS[:2]:  # (a rig of one draws none: its grey is its view)
+        assert (rgb[:one.shape[0]] == ink).all(axis=2).sum() > 100 and not (alone == ink).all(axis=2).any()
     assert main(["track", str(runs / "out"), "--set", "tracking.max_gap=2", "--set",
                  f"output.rerun={runs / 'rig.rrd'}"]) == 0  # tracks made again, and a Rerun log of the rig
     from rerun.chunk import RrdReader
