@@ -456,8 +456,23 @@ def live_block(out: Path) -> str:
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.live`")])
 
 
+def rig_picture(out: Path) -> None:
+    """docs/rig.png: the first frame of the rig3 scene (bench.rig's, rendered by it) as a rig run draws it."""
+    from bench.rig import rig_config
+    from dpom_warp.loading import config_from_mapping
+    from dpom_warp.pipeline import run
+
+    raw = rig_config("rig3", ROOT / ".cache" / "bench" / "rig3_10", 10)
+    raw.pop("synthetic")
+    raw["output"] = {"images": True}
+    run(config_from_mapping(raw), str(out / "rig_picture"), progress=False, log=lambda *_: None, overwrite=True,
+        max_frames=1)
+    shutil.copy(out / "rig_picture" / "images" / "0000.png", DOCS / "rig.png")
+
+
 def rig_block(out: Path) -> str:
     md = bench_markdown("bench.rig", out / "rig", "rig.md", "--frames", "10", "--repeats", "3")
+    rig_picture(out)
     return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.rig --frames 10 --repeats 3`; times: "
                                     "engine and detections a frame, median of 3 per frame over the frames, each frame "
                                     "by the rig and by each camera alone in turn, one process")])
