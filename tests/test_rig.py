@@ -60,6 +60,43 @@ def test_a_person_hidden_from_one_camera_is_found_by_the_rig():
     assert (away[fused > 0.5] < 0.3).all()
 
 
+def test_each_cameras_engine_time_on_the_cpu_and_from_a_gpus_events(monkeypatch):
+    """A rig's timings name each camera's: its lists (the CPU's clock) and its pixels' launches
+    in the loop (its Launcher's sum), within the engine's stages; where a GPU's timing events
+    stand between the cameras (_camera_marks: stood in for here, none is lent), each camera's
+    lists time is the events' elapsed time in seconds, recorded on the engine's device's stream
+    before each camera and after the last, and the loop's per camera is None (one graph)."""
+    grid, geoms = two_cameras()
+    params = ModelParams(prior=0.01, sigma_object=0.1, max_iterations=20)
+    rig = Engine(geoms, params, "cpu")
+    frames = []
+    for c, g in enumerate(geoms):
+        bg = ref.floor_background(g, params)
+        rig.set_background(bg, camera=c)
+        frames.append(bg.mu.astype(np.float32))
+    t = rig.infer(frames).timings
+    assert len(t["lists_s_cameras"]) == len(t["iterations_s_cameras"]) == 2
+    assert all(x > 0 for x in t["lists_s_cameras"] + t["iterations_s_cameras"])
+    assert sum(t["lists_s_cameras"]) <= t["lists_s"] and sum(t["iterations_s_cameras"]) <= t["iterations_s"]
+    recorded = []
+
+    class Stream:
+        def record_event(self, event):
+            recorded.append(event)
+
+    import warp as wp
+
+    monkeypatch.setattr(rig, "_camera_marks", lambda: ["a", "b", "c"])
+    monkeypatch.setattr(wp, "get_stream", lambda device: Stream())
+    elapsed = {("a", "b"): 12.0, ("b", "c"): 30.0}  # milliseconds, as Warp gives them
+    monkeypatch.setattr(wp, "get_event_elapsed_time", lambda a, b, synchronize=True: elapsed[(a, b)])
+    for v in rig.views:
+        v.launch.timed = False  # (a GPU's launches return at once)
+    t = rig.infer(frames).timings
+    assert recorded == ["a", "b", "c"] and t["lists_s_cameras"] == [0.012, 0.030]
+    assert t["iterations_s_cameras"] is None
+
+
 def test_a_rig_needs_one_grid_and_a_frame_per_camera():
     """The cameras of a rig see the same locations; frames come one a camera: one-line errors
     naming what was expected."""

@@ -246,8 +246,8 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
         marks = self._camera_marks()  # a GPU's events between the cameras' lists (None: the CPU's clock)
         for i, (v, frames) in enumerate(zip(self.views, per_camera)):
             tc = time.perf_counter()
-            if marks:
-                wp.record_event(marks[i])
+            if marks:  # (on the engine's device's stream, whichever device is current)
+                wp.get_stream(dev).record_event(marks[i])
             frames, estimates = v.correct_drift(frames)
             drift.append(estimates)
             v.build_lists(frames)
@@ -255,7 +255,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
                      [v.lists.counts, v.n_pixels, K.TALLY_SUM, self.tallies, 0])
             camera_lists.append(time.perf_counter() - tc)  # (the CPU's launches return when done)
         if marks:
-            wp.record_event(marks[-1])
+            wp.get_stream(dev).record_event(marks[-1])
         wp.synchronize_device(dev)
         if marks:
             camera_lists = [wp.get_event_elapsed_time(a, b, synchronize=False) / 1000.0 for a, b in zip(marks, marks[1:])]
