@@ -261,6 +261,37 @@ def test_calibrate_refuses_a_camera_that_shares_too_little(runs, tmp_path, capsy
     assert err.count("\n") == 1 and not out.exists()
 
 
+def test_cameras_of_other_sizes_make_one_rig_and_a_wrong_size_is_named(tmp_path, capsys):
+    """A rig's cameras need not share a resolution: the side camera at 128 x 96 beside the front
+    one's 160 x 120 runs (the run, and the API given one frame of each size, a camera missing in
+    a batch); the same frames given to a config that says the side camera is 160 x 120 are a
+    one-line error naming the camera, the file and the keys, and nothing is written."""
+    from dpom_warp import Detector
+
+    rig = rig_config(tmp_path)
+    rig["cameras"][1]["camera"].update({"width": 128, "height": 96,
+                                        "intrinsics": {"fx": 92.0, "fy": 92.0, "cx": 63.5, "cy": 47.5}})
+    assert main(["run", write(tmp_path / "rig.yaml", rig), "--no-progress"]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["scores"]["moda"] > 0.9 and summary["cameras"]["side"]["frames"] == 6
+    det = Detector.from_config({k: v for k, v in rig.items() if k != "synthetic"})
+    d0, d1 = (np.asarray(Image.open(tmp_path / "scene" / n / "frames" / "0000.png")) for n in ("front", "side"))
+    assert d0.shape == (120, 160) and d1.shape == (96, 128)
+    both, alone = det.detect_batch([[d0, d1], [d0, None]])
+    assert sorted((round(d.x, 4), round(d.y, 4)) for d in both.detections) == sorted(
+        (float(r["x"]), float(r["y"])) for r in csv.DictReader(open(tmp_path / "out" / "detections.csv"))
+        if r["frame"] == "0000.png")
+    assert alone.detections
+    wrong = rig_config(tmp_path, out="wrong")
+    wrong.pop("synthetic")
+    capsys.readouterr()
+    assert main(["run", write(tmp_path / "wrong.yaml", wrong), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"dpom-warp: error: cameras[1] (side): {tmp_path}/scene/side/frames/0000.png: expected 160x120 "
+                   f"pixels (camera.width x camera.height), found 128x96 (none of the 6 frames is usable)"]
+    assert not (tmp_path / "wrong").exists()
+
+
 def test_a_bad_frame_of_the_first_camera_skips_the_rig_frame(runs, tmp_path):
     """The front camera's frame 0002 unreadable: the rig frame it names is skipped with the
     file's reason (summary.json's skipped); the side camera's bad frame 0003 leaves the side
