@@ -289,12 +289,8 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     leave = np.where(last, 0.0, np.where(entry, opt.entry_cost, opt.appear_cost))
     if anchors is not None:  # a committed track pays its end as offline: dropping it is not free
         enter[first] = -leave[first]
-    # hidden since the run's start (until its end): a track first seen in the middle of the floor
-    # a few frames in was there, hidden, as one unseen for a few frames mid-run is bridged
-    hid_in = (is_peak & ~entry & (all_t >= 1) & (all_t <= opt.max_gap) & (all_t * gap < enter)
-              if run_start and anchors is None else np.zeros(n, bool))
-    hid_out = (is_peak & ~entry & (all_t <= T - 2) & (T - 1 - all_t <= opt.max_gap) & ((T - 1 - all_t) * gap < leave)
-               if run_end else np.zeros(n, bool))
+    hid_in, hid_out = _hidden_ends(all_t, T, is_peak & ~entry, enter, leave, gap, opt.max_gap,
+                                   run_start and anchors is None, run_end)
     enter = np.where(hid_in, all_t * gap, enter)
     leave = np.where(hid_out, (T - 1 - all_t) * gap, leave)
     tails += [np.full(n, src), np.arange(n) * 2 + 1, [src]]
@@ -302,15 +298,28 @@ def solve_window(maps: np.ndarray, cells: Cells, shape: tuple, opt: TrackingOpti
     supply = max(1, int(np.sum(cost < 0)) + (len(anchors) if anchors is not None else 0))
     costs += [enter, leave, [0.0]]
     paths, stats = _min_cost_paths(tails, heads, costs, supply, all_t, all_k, stats)
-    if not hid_in.any() and not hid_out.any():
-        return paths, stats
-    node = {(int(t), int(k)): i for i, (t, k) in enumerate(zip(all_t, all_k))}
-    for p in paths:  # a hidden start (end): the same cell at the window's first (last) frame, bridged
-        if hid_in[node[p[0]]]:
-            p.insert(0, (0, p[0][1]))
-        if hid_out[node[p[-1]]]:
-            p.append((T - 1, p[-1][1]))
+    if hid_in.any() or hid_out.any():
+        node = {(int(t), int(k)): i for i, (t, k) in enumerate(zip(all_t, all_k))}
+        for p in paths:  # a hidden start (end): the same cell at the window's first (last) frame, bridged
+            if hid_in[node[p[0]]]:
+                p.insert(0, (0, p[0][1]))
+            if hid_out[node[p[-1]]]:
+                p.append((T - 1, p[-1][1]))
     return paths, stats
+
+
+def _hidden_ends(all_t, T: int, inner_peak, enter, leave, gap: float, max_gap: int, run_start: bool,
+                 run_end: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Which nodes of a window may begin (end) a path hidden since the run's first frame (until
+    its last): a track first seen in the middle of the floor a few frames in was there, hidden,
+    as one unseen for a few frames mid-run is bridged. A peak away from the entry cells
+    (`inner_peak`), at most `max_gap` frames from that end, where the gap cost of those frames
+    is under its `enter` (`leave`) cost; none where the window's end is not the run's."""
+    none = np.zeros(len(all_t), bool)
+    hid_in = inner_peak & (all_t >= 1) & (all_t <= max_gap) & (all_t * gap < enter) if run_start else none
+    after = T - 1 - all_t
+    hid_out = inner_peak & (after >= 1) & (after <= max_gap) & (after * gap < leave) if run_end else none
+    return hid_in, hid_out
 
 
 def _min_cost_paths(tails: list, heads: list, costs: list, supply: int, all_t, all_k, stats: dict):
