@@ -342,14 +342,7 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
         draw_tracks(draw, top, ox, oy, tracks, trail)
     if overlay:
         draw_overlay(draw, top, ox, oy, overlay)
-    for k, (name, mask) in enumerate(views or []):
-        seen_map = np.asarray(mask, bool).reshape(rho_map.shape)
-        top.outline(draw, ox, oy, seen_map.any(axis=0) if voxel else seen_map, VIEW_INKS[k % len(VIEW_INKS)])
-    for k, cam in enumerate(cams):
-        cx, cy = top.to_px(cam[0], cam[1], ox, oy)
-        draw.polygon([(cx, cy - 8), (cx - 7, cy + 5), (cx + 7, cy + 5)], fill=(255, 255, 255), outline=INK)
-        if views and k < len(views):
-            draw.text((cx + 9, cy), views[k][0], fill=VIEW_INKS[k % len(VIEW_INKS)], font=font(11), anchor="lm")
+    draw_cameras(draw, top, ox, oy, cams, views, rho_map.shape)
     if voxel:
         side = panels[1]
         ox += top.w + PAD + 10
@@ -363,6 +356,21 @@ def frame_picture(depth_m, rho_map, grid, detections, camera_xy, truth=None, tit
 BAR_SPACE = BAR_W + 44  # a colour bar with its values
 ZONE_INK, LINE_INK = (80, 200, 255), (120, 255, 120)
 VIEW_INKS = ((255, 64, 160), (150, 220, 60), (90, 140, 255), (255, 110, 90), (60, 220, 200), (200, 120, 255))  # a rig's cameras (no other colour of the pictures)
+
+
+def draw_cameras(draw: ImageDraw.ImageDraw, top: MapPanel, ox: int, oy: int, cams: np.ndarray,
+                 views: list | None, map_shape: tuple) -> None:
+    """Each camera's mark on the top map; with `views` (frame_picture's), each camera's field of
+    view outlined in its colour first and its name beside its mark."""
+    for k, (name, mask) in enumerate(views or []):
+        seen_map = np.asarray(mask, bool).reshape(map_shape)
+        top.outline(draw, ox, oy, seen_map.any(axis=0) if len(map_shape) == 3 else seen_map,
+                    VIEW_INKS[k % len(VIEW_INKS)])
+    for k, cam in enumerate(cams):
+        cx, cy = top.to_px(cam[0], cam[1], ox, oy)
+        draw.polygon([(cx, cy - 8), (cx - 7, cy + 5), (cx + 7, cy + 5)], fill=(255, 255, 255), outline=INK)
+        if views and k < len(views):
+            draw.text((cx + 9, cy), views[k][0], fill=VIEW_INKS[k % len(VIEW_INKS)], font=font(11), anchor="lm")
 
 
 def draw_overlay(draw: ImageDraw.ImageDraw, panel: MapPanel, ox: int, oy: int, overlay: dict) -> None:
