@@ -235,9 +235,10 @@ def static_structure(cfg: RunConfig, view, camera, files: list[Path], log=print)
     taller = cfg.obj.height + 0.1 if cfg.grid.mode == "ground" else 0.0  # a plane no person is
     planes = find_planes(seen, camera, options, p.z_max, tuple(view.geometry.bounds[:4]), taller)
     g, shape = view.geometry, (view.height, view.width)
-    depth = plane_depths(planes, g.rays, g.centre, options.margin) if planes else np.full(shape, np.inf)
-    # where the frames read the plane, its reading there (a real wall bends by centimetres)
     seen = view.resolution.frames(seen[None].astype(np.float32))[0]
+    depth = (plane_depths(planes, g.rays, g.centre, options.margin, seen, 3 * options.distance) if planes
+             else np.full(shape, np.inf))
+    # where the frames read the plane, its reading there (a real wall bends by centimetres)
     on = np.isfinite(depth) & (seen > 0) & (np.abs(seen - depth) <= 3 * options.distance)
     depth = np.where(on, seen, depth)
     state = view.background_state()

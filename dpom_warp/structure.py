@@ -8,8 +8,13 @@ in the run's first frames (their per-pixel median, which leaves out most of what
 than the floor, that extend at least `min_extent` metres both ways along the plane, cover at
 least `min_fill` of their rectangle, stand over the grid and are no person (a plane that is not
 level reaches higher than the object; a level one, a desk or a table, lies below `flat_below`),
-become background: each pixel whose ray meets such a
-plane inside its rectangle (dilated by `margin`) before the floor expects the plane's depth
+become background, and so do flat, solid faces of furniture however high (a cabinet's front or
+side, a desk: level or upright, at least `solid_width` wide, upright ones `solid_height` tall
+from the floor up, filling `solid_fill` of their rectangle; a person's front fails one of the
+three). Planes tilted more than 10 degrees from level or upright are none of these (RANSAC
+finds such planes through a crowd). Each pixel whose ray meets such a plane inside its
+rectangle (dilated by `margin`) before the floor, and whose reading in the frames' median is
+not beyond it (a ray past a cabinet's edge, inside the margin), expects the plane's depth
 there (its reading in the frames' median where that lies on the plane: a real wall is not flat
 to the sensor's noise), as background frames would have said. A person standing against a wall, or half hidden
 in front of one, is at least a body's depth nearer than the plane, so their pixels are not the
@@ -19,7 +24,7 @@ plane's and stay evidence for them; what the plane explains is the wall seen bet
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from pydantic import Field
@@ -27,6 +32,9 @@ from pydantic import Field
 from ._open3d import o3d
 from .geometry import Camera
 from .values import Bool, Int, Node, Num
+
+
+COS_10, SIN_10 = float(np.cos(np.radians(10))), float(np.sin(np.radians(10)))
 
 
 class StructureOptions(Node):  # the config's `input.structure` section
@@ -38,9 +46,18 @@ class StructureOptions(Node):  # the config's `input.structure` section
     min_extent: Num = Field(1.0, gt=0, description="a plane is structure when its inliers span at least this "
                                                    "both ways along it, metres (a person is narrower)")
     min_fill: Num = Field(0.3, gt=0, le=1, description="and cover at least this share of their rectangle")
+    solid_width: Num = Field(0.5, gt=0, description="a flat, solid face (a cabinet's front or side, a desk) is "
+                                                    "structure, however high, when its patch is at least this "
+                                                    "wide, metres (on the real five-people frame, people's fronts "
+                                                    "made flat patches up to 0.48 m wide) ...")
+    solid_height: Num = Field(1.0, gt=0, description="... and, upright, at least this tall from the floor up "
+                                                     "(level: at least solid_width deep), metres ...")
+    solid_fill: Num = Field(0.85, gt=0, le=1, description="... and its inliers fill at least this share of its "
+                                                         "rectangle (there, those reaching the floor filled at most "
+                                                         "0.71; fuller ones began 0.25 m above it)")
     distance: Num = Field(0.03, gt=0, description="RANSAC inlier distance, metres")
     margin: Num = Field(0.1, ge=0, description="the plane's rectangle is dilated by this, metres")
-    max_planes: Int = Field(8, ge=1, description="planes peeled off the points, largest first")
+    max_planes: Int = Field(16, ge=1, description="planes peeled off the points, largest first")
     floor_gap: Num = Field(0.08, ge=0, description="points this close to the floor are the floor's, metres")
     flat_below: Num = Field(1.0, ge=0, description="a level plane (a desk, a table) counts only below this "
                                                    "height, metres (above it, from a ceiling camera, people's "
@@ -62,6 +79,42 @@ class StaticPlane:
     v: np.ndarray
     extent: tuple[float, float, float, float]
     inliers: int
+    fill: float = 1.0  # the share of the rectangle its inliers fill (0.1 m cells)
+    heights: tuple[float, float, float] = (0.0, 0.0, 0.0)  # its inliers' 1st, 50th, 98th percentile of z
+    columns: np.ndarray | None = None  # each 0.1 m column's share of the rectangle's rows filled ...
+    columns_from: float = 0.0  # ... the first's a
+
+    def solid_span(self, fill: float) -> tuple[float, float]:
+        """(a0, a1) of the widest run of columns each filling at least `fill` of the rectangle's
+        height (a cabinet's front; a person standing flush beside it fills a short band only),
+        within the extent; (a0, a0) where none does."""
+        a0, a1 = self.extent[:2]
+        full = np.append(self.columns >= fill, False) if self.columns is not None else np.array([False])
+        best, start = (a0, a0), None
+        for i, ok in enumerate(full):
+            if ok and start is None:
+                start = i
+            elif not ok and start is not None:
+                lo, hi = max(a0, self.columns_from + 0.1 * start), min(a1, self.columns_from + 0.1 * i)
+                best = (lo, hi) if hi - lo > best[1] - best[0] else best
+                start = None
+        return best
+
+    def narrowed(self, span: tuple[float, float]) -> "StaticPlane":
+        return replace(self, extent=(*span, *self.extent[2:]))
+
+    @property
+    def level(self) -> bool:
+        return abs(self.normal[2]) >= COS_10
+
+    def size(self) -> tuple[float, float]:
+        a0, a1, b0, b1 = self.extent
+        return a1 - a0, b1 - b0
+
+    def corners(self) -> np.ndarray:
+        """(4, 3) the rectangle's corners."""
+        a0, a1, b0, b1 = self.extent
+        return np.array([self.origin + a * self.u + b * self.v for a in (a0, a1) for b in (b0, b1)])
 
     def report(self) -> dict:
         a0, a1, b0, b1 = self.extent
@@ -92,41 +145,43 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
     points = points[points[:, 2] > options.floor_gap]  # the floor is the floor model's
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(voxel)
     o3d.utility.random.seed(0)
-    planes = []
+    planes, faces = [], []
     for _ in range(options.max_planes):
         if len(cloud.points) < min_points:
             break
         model, idx = cloud.segment_plane(options.distance, 3, 1000)
         if len(idx) < min_points:
             break
-        inl = np.asarray(cloud.points)[idx]
+        patch = _patch(np.asarray(model, np.float64), np.asarray(cloud.points)[idx], grid_xy, options.in_grid)
+        kind = _kind(patch, options, taller) if patch is not None else None
+        if kind in ("solid", "face"):  # its solid columns only
+            patch = patch.narrowed(patch.solid_span(options.solid_fill))
+        (planes if kind in ("large", "solid") else faces if kind == "face" else []).append(patch)
         cloud = cloud.select_by_index(idx, invert=True)
-        plane = _rectangle(np.asarray(model, np.float64), inl, options, grid_xy, taller)
-        if plane is not None:
-            planes.append(plane)
-    return planes
+    solids = [p for p in planes if _kind(p, options, taller) == "solid"]
+    return planes + [f for f in faces if any(_meet(f, s, 2 * options.margin) for s in solids)]
 
 
-def _rectangle(model: np.ndarray, inliers: np.ndarray, options: StructureOptions, grid_xy, taller: float,
-               cell: float = 0.1) -> StaticPlane | None:
+def _patch(model: np.ndarray, inliers: np.ndarray, grid_xy, in_grid: float, cell: float = 0.1) -> StaticPlane | None:
     """The plane of `model` (a, b, c, d) with the rectangle of its largest connected patch of
     inliers (on a `cell` grid along two in-plane axes: horizontal, and up the plane where it is
-    not level), or None where that patch is no structure: narrower than min_extent either way
-    (people side by side make planes of several person-wide patches), filling less than
-    min_fill of its rectangle, level above flat_below, not level and no taller than `taller`, or
-    mostly beside the grid."""
+    not level), its fill and heights; None where the patch lies mostly beside the grid
+    (`grid_xy`: less than `in_grid` of it over) or the plane is tilted more than 10 degrees
+    from level or upright (walls and furniture are either; RANSAC finds tilted planes through a
+    crowd)."""
     from scipy import ndimage
 
     n = model[:3] / np.linalg.norm(model[:3])
     d = model[3] / np.linalg.norm(model[:3])
+    if not (abs(n[2]) >= COS_10 or abs(n[2]) <= SIN_10):
+        return None
     up = np.array([0.0, 0.0, 1.0])
-    u = np.cross(up, n) if abs(n[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(up, n) if abs(n[2]) < 0.9 else np.array([1.0, 0.0, 0.0]) - n[0] * n  # (in the plane)
     u /= np.linalg.norm(u)
     v = np.cross(n, u)
     origin = -d * n
     ab = np.stack([(inliers - origin) @ u, (inliers - origin) @ v], 1)
-    lo = ab.min(0)
-    ij = np.floor((ab - lo) / cell).astype(np.int64)
+    ij = np.floor((ab - ab.min(0)) / cell).astype(np.int64)
     grid = np.zeros(ij.max(0) + 1, bool)
     grid[ij[:, 0], ij[:, 1]] = True
     labels, count = ndimage.label(ndimage.binary_closing(grid, iterations=1, border_value=0) | grid)
@@ -135,26 +190,59 @@ def _rectangle(model: np.ndarray, inliers: np.ndarray, options: StructureOptions
     sizes = np.bincount(labels[ij[:, 0], ij[:, 1]], minlength=count + 1)
     sizes[0] = 0
     keep = labels[ij[:, 0], ij[:, 1]] == np.argmax(sizes)
-    patch = ab[keep]
-    points = inliers[keep]
+    patch, points = ab[keep], inliers[keep]
     x0, x1, y0, y1 = grid_xy
-    over = (points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1)
-    level = abs(n[2]) > 0.7
-    if (over.mean() < options.in_grid or (level and np.median(points[:, 2]) > options.flat_below)
-            or (not level and np.percentile(points[:, 2], 98) <= taller)):
+    if np.mean((points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1)) < in_grid:
         return None
     a0, a1 = np.percentile(patch[:, 0], [1, 99])
     b0, b1 = np.percentile(patch[:, 1], [1, 99])
-    filled = len(np.unique(ij[keep], axis=0)) * cell ** 2
-    if min(a1 - a0, b1 - b0) < options.min_extent or filled < options.min_fill * (a1 - a0) * (b1 - b0):
+    cells = np.unique(ij[keep], axis=0)
+    fill = len(cells) * cell ** 2 / max((a1 - a0) * (b1 - b0), cell ** 2)
+    heights = tuple(float(z) for z in np.percentile(points[:, 2], [1, 50, 98]))
+    lo = ab.min(0)  # each column's filled rows within b0..b1
+    rows = np.arange(np.floor((b0 - lo[1]) / cell), np.floor((b1 - lo[1]) / cell) + 1).astype(np.int64)
+    inside = cells[np.isin(cells[:, 1], rows)]
+    columns = np.bincount(inside[:, 0], minlength=grid.shape[0]) / len(rows)
+    return StaticPlane(n, float(d), origin, u, v, (float(a0), float(a1), float(b0), float(b1)), int(keep.sum()),
+                       float(fill), heights, columns, float(lo[0]))
+
+
+def _kind(p: StaticPlane, options: StructureOptions, taller: float) -> str | None:
+    """What the patch `p` is (module doc): "large" (a wall, a floor-wide desk), "solid" (a flat
+    face of furniture), "face" (a flat face too narrow alone, structure where it meets a solid
+    face at its edge: a shelf's end, a cabinet's top), or None (people side by side make planes
+    of several person-wide patches, a person's front a narrow or gappy one)."""
+    (w, h), (z_low, z_mid, z_top) = p.size(), p.heights
+    if p.level:  # a desk, a table: low; (above, from a ceiling camera, heads and shoulders)
+        placed, tall_enough, standing = z_mid <= options.flat_below, h >= options.solid_width, True
+    else:  # a wall reaches above any person; a cabinet's face stands on the floor
+        placed, tall_enough = z_top > taller, h >= options.solid_height
+        standing = z_low <= options.floor_gap + 0.1
+    if min(w, h) >= options.min_extent and p.fill >= options.min_fill and placed:
+        return "large"
+    if not standing or (not p.level and not tall_enough):
         return None
-    return StaticPlane(n, float(d), origin, u, v, (float(a0), float(a1), float(b0), float(b1)), int(keep.sum()))
+    span = p.solid_span(options.solid_fill)
+    if span[1] - span[0] >= options.solid_width and tall_enough and (placed or not p.level):
+        return "solid"
+    return "face" if min(span[1] - span[0], h) >= options.solid_width / 2 else None
 
 
-def plane_depths(planes: list[StaticPlane], rays: np.ndarray, centre: np.ndarray, margin: float) -> np.ndarray:
+def _meet(face: StaticPlane, solid: StaticPlane, within: float) -> bool:
+    """Whether `face` meets `solid` at an edge: two of its corners each within `within` of one
+    of the solid's, the two planes at least 60 degrees apart (a box's faces)."""
+    if abs(face.normal @ solid.normal) > 0.5:
+        return False
+    gaps = np.linalg.norm(face.corners()[:, None] - solid.corners()[None], axis=2).min(1)
+    return int(np.sum(gaps <= within)) >= 2
+
+
+def plane_depths(planes: list[StaticPlane], rays: np.ndarray, centre: np.ndarray, margin: float,
+                 seen: np.ndarray | None = None, tolerance: float = 0.0) -> np.ndarray:
     """(H, W) the z-depth at which each pixel's ray (rays: world directions whose parameter is
-    z-depth) meets the nearest plane inside its dilated rectangle, before the floor; inf where
-    it meets none."""
+    z-depth) meets the nearest plane inside its dilated rectangle, before the floor and, where
+    `seen` (H, W) reads the pixel, no nearer than its reading - `tolerance` (a ray that saw
+    beyond a plane passed it: past a cabinet's edge, inside the margin); inf where it meets none."""
     out = np.full(rays.shape[:2], np.inf)
     floor = np.where(rays[..., 2] < -1e-12, -centre[2] / np.minimum(rays[..., 2], -1e-12), np.inf)
     for p in planes:
@@ -166,5 +254,7 @@ def plane_depths(planes: list[StaticPlane], rays: np.ndarray, centre: np.ndarray
         a0, a1, b0, b1 = p.extent
         inside = ((t > 0) & np.isfinite(t) & (a >= a0 - margin) & (a <= a1 + margin) & (b >= b0 - margin)
                   & (b <= b1 + margin) & (t < floor))
+        if seen is not None:
+            inside &= ~((seen > 0) & (seen > t + tolerance))
         out = np.where(inside & (t < out), t, out)
     return out
