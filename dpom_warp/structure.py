@@ -5,7 +5,8 @@ it could not estimate: every wall, cupboard or desk inside the grid is then evid
 objects (the end wall of the five-people corridor was three "people"; an office wall faced
 level, four a frame). Large planes are no people: the planes Open3D's plane segmentation finds
 in the run's first frames (their per-pixel median, which leaves out most of what moves), other
-than the floor, that extend at least `min_extent` metres both ways along the plane, cover at
+than the floor (each connected patch of a plane's inliers judged alone), that extend at least
+`min_extent` metres both ways along the plane, cover at
 least `min_fill` of their rectangle, stand over the grid and are no person (a plane that is not
 level reaches higher than the object; a level one, a desk or a table, lies below `flat_below`),
 become background, and so do flat, solid faces of furniture however high (a cabinet's front or
@@ -35,6 +36,7 @@ from .values import Bool, Int, Node, Num
 
 
 COS_10, SIN_10 = float(np.cos(np.radians(10))), float(np.sin(np.radians(10)))
+LOWEST = 0.25  # metres: a level plane lower than this is the floor (no desk is as low)
 
 
 class StructureOptions(Node):  # the config's `input.structure` section
@@ -145,66 +147,72 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
     points = points[points[:, 2] > options.floor_gap]  # the floor is the floor model's
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(voxel)
     o3d.utility.random.seed(0)
-    planes, faces = [], []
+    planes, solids, faces = [], [], []
     for _ in range(options.max_planes):
         if len(cloud.points) < min_points:
             break
         model, idx = cloud.segment_plane(options.distance, 3, 1000)
         if len(idx) < min_points:
             break
-        patch = _patch(np.asarray(model, np.float64), np.asarray(cloud.points)[idx], grid_xy, options.in_grid)
-        kind = _kind(patch, options, taller) if patch is not None else None
-        if kind in ("solid", "face"):  # its solid columns only
-            patch = patch.narrowed(patch.solid_span(options.solid_fill))
-        (planes if kind in ("large", "solid") else faces if kind == "face" else []).append(patch)
+        for patch in _patches(np.asarray(model, np.float64), np.asarray(cloud.points)[idx], grid_xy,
+                              options.in_grid, min_points // 4):
+            kind = _kind(patch, options, taller)
+            if kind in ("solid", "face"):  # its solid columns only
+                patch = patch.narrowed(patch.solid_span(options.solid_fill))
+            (planes if kind in ("large", "solid") else faces if kind == "face" else []).append(patch)
+            solids += [patch] if kind == "solid" else []
         cloud = cloud.select_by_index(idx, invert=True)
-    solids = [p for p in planes if _kind(p, options, taller) == "solid"]
     return planes + [f for f in faces if any(_meet(f, s, 2 * options.margin) for s in solids)]
 
 
-def _patch(model: np.ndarray, inliers: np.ndarray, grid_xy, in_grid: float, cell: float = 0.1) -> StaticPlane | None:
-    """The plane of `model` (a, b, c, d) with the rectangle of its largest connected patch of
-    inliers (on a `cell` grid along two in-plane axes: horizontal, and up the plane where it is
-    not level), its fill and heights; None where the patch lies mostly beside the grid
-    (`grid_xy`: less than `in_grid` of it over) or the plane is tilted more than 10 degrees
-    from level or upright (walls and furniture are either; RANSAC finds tilted planes through a
-    crowd)."""
+def _patches(model: np.ndarray, inliers: np.ndarray, grid_xy, in_grid: float, min_points: int,
+             cell: float = 0.1) -> list[StaticPlane]:
+    """The plane of `model` (a, b, c, d) with the rectangle of each connected patch of its
+    inliers of at least `min_points` (on a `cell` grid along two in-plane axes: horizontal, and
+    up the plane where it is not level; two cabinets' fronts in one plane are two patches), its
+    fill and heights, largest first; none where a patch lies mostly beside the grid (`grid_xy`:
+    less than `in_grid` of it over) or the plane is tilted more than 10 degrees from level or
+    upright (walls and furniture are either; RANSAC finds tilted planes through a crowd)."""
     from scipy import ndimage
 
     n = model[:3] / np.linalg.norm(model[:3])
     d = model[3] / np.linalg.norm(model[:3])
     if not (abs(n[2]) >= COS_10 or abs(n[2]) <= SIN_10):
-        return None
+        return []
     up = np.array([0.0, 0.0, 1.0])
     u = np.cross(up, n) if abs(n[2]) < 0.9 else np.array([1.0, 0.0, 0.0]) - n[0] * n  # (in the plane)
     u /= np.linalg.norm(u)
     v = np.cross(n, u)
     origin = -d * n
     ab = np.stack([(inliers - origin) @ u, (inliers - origin) @ v], 1)
-    ij = np.floor((ab - ab.min(0)) / cell).astype(np.int64)
+    lo = ab.min(0)
+    ij = np.floor((ab - lo) / cell).astype(np.int64)
     grid = np.zeros(ij.max(0) + 1, bool)
     grid[ij[:, 0], ij[:, 1]] = True
     labels, count = ndimage.label(ndimage.binary_closing(grid, iterations=1, border_value=0) | grid)
-    if count == 0:
-        return None
-    sizes = np.bincount(labels[ij[:, 0], ij[:, 1]], minlength=count + 1)
+    label = labels[ij[:, 0], ij[:, 1]]
+    sizes = np.bincount(label, minlength=count + 1)
     sizes[0] = 0
-    keep = labels[ij[:, 0], ij[:, 1]] == np.argmax(sizes)
-    patch, points = ab[keep], inliers[keep]
     x0, x1, y0, y1 = grid_xy
-    if np.mean((points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1)) < in_grid:
-        return None
-    a0, a1 = np.percentile(patch[:, 0], [1, 99])
-    b0, b1 = np.percentile(patch[:, 1], [1, 99])
-    cells = np.unique(ij[keep], axis=0)
-    fill = len(cells) * cell ** 2 / max((a1 - a0) * (b1 - b0), cell ** 2)
-    heights = tuple(float(z) for z in np.percentile(points[:, 2], [1, 50, 98]))
-    lo = ab.min(0)  # each column's filled rows within b0..b1
-    rows = np.arange(np.floor((b0 - lo[1]) / cell), np.floor((b1 - lo[1]) / cell) + 1).astype(np.int64)
-    inside = cells[np.isin(cells[:, 1], rows)]
-    columns = np.bincount(inside[:, 0], minlength=grid.shape[0]) / len(rows)
-    return StaticPlane(n, float(d), origin, u, v, (float(a0), float(a1), float(b0), float(b1)), int(keep.sum()),
-                       float(fill), heights, columns, float(lo[0]))
+    out = []
+    for k in np.argsort(-sizes, kind="stable"):
+        if sizes[k] < min_points:
+            break
+        keep = label == k
+        patch, points = ab[keep], inliers[keep]
+        if np.mean((points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1)) < in_grid:
+            continue
+        a0, a1 = np.percentile(patch[:, 0], [1, 99])
+        b0, b1 = np.percentile(patch[:, 1], [1, 99])
+        cells = np.unique(ij[keep], axis=0)
+        fill = len(cells) * cell ** 2 / max((a1 - a0) * (b1 - b0), cell ** 2)
+        heights = tuple(float(z) for z in np.percentile(points[:, 2], [1, 50, 98]))
+        rows = np.arange(np.floor((b0 - lo[1]) / cell), np.floor((b1 - lo[1]) / cell) + 1).astype(np.int64)
+        inside = cells[np.isin(cells[:, 1], rows)]  # each column's filled rows within b0..b1
+        columns = np.bincount(inside[:, 0], minlength=grid.shape[0]) / len(rows)
+        out.append(StaticPlane(n, float(d), origin, u, v, (float(a0), float(a1), float(b0), float(b1)),
+                               int(keep.sum()), float(fill), heights, columns, float(lo[0])))
+    return out
 
 
 def _kind(p: StaticPlane, options: StructureOptions, taller: float) -> str | None:
@@ -213,13 +221,15 @@ def _kind(p: StaticPlane, options: StructureOptions, taller: float) -> str | Non
     face at its edge: a shelf's end, a cabinet's top), or None (people side by side make planes
     of several person-wide patches, a person's front a narrow or gappy one)."""
     (w, h), (z_low, z_mid, z_top) = p.size(), p.heights
+    if p.level and z_mid < LOWEST:  # the floor, misread (a frame that drifts 3 % from 3 m reads it 9 cm off)
+        return None
     if p.level:  # a desk, a table: low; (above, from a ceiling camera, heads and shoulders)
         placed, tall_enough, standing = z_mid <= options.flat_below, h >= options.solid_width, True
     else:  # a wall reaches above any person; a cabinet's face stands on the floor
         placed, tall_enough = z_top > taller, h >= options.solid_height
         standing = z_low <= options.floor_gap + 0.1
-    if min(w, h) >= options.min_extent and p.fill >= options.min_fill and placed:
-        return "large"
+    if min(w, h) >= options.min_extent and p.fill >= options.min_fill and placed and not p.level:
+        return "large"  # (a level plane a third filled is as likely people's slices: desks must be solid)
     if not standing or (not p.level and not tall_enough):
         return None
     span = p.solid_span(options.solid_fill)
