@@ -245,3 +245,16 @@ def test_a_cabinet_in_the_grid_is_background_and_the_person_beside_it_is_found(t
     assert near(dets, person, 0.3) and len(dets) == len(frames), dets
     plain, _ = run(tmp_path, "cabinet_plain", frames, camera=camera, structure={"solid_width": 100.0})
     assert any(np.hypot(*(d - np.array(cabinet))) < 0.5 for d in plain), plain
+
+
+def test_two_cabinets_in_one_plane_are_two_patches():
+    """Two cabinet fronts 0.7 x 1.6 m in the plane y = 3, 1 m apart, are one RANSAC plane: each
+    is its own patch, each "solid", its rectangle its own (0.7 m wide, not 2.4 m)."""
+    from dpom_warp.structure import StructureOptions, _kind, _patches
+
+    pts = np.concatenate([flat_points(0.7, 1.6), flat_points(0.7, 1.6) + [1.7, 0, 0]])
+    patches = _patches(np.array([0.0, 1.0, 0.0, -3.0]), pts, (-5, 5, 0, 8), 0.2, 50)
+    assert len(patches) == 2
+    for p in patches:
+        assert _kind(p, StructureOptions(), 1.95) == "solid"
+        assert abs(p.size()[0] - 0.7) < 0.05
