@@ -3,23 +3,24 @@
 The floor-only model explains the floor and nothing else, and `auto` leaves to it the pixels
 it could not estimate: every wall, cupboard or desk inside the grid is then evidence for
 objects (the end wall of the five-people corridor was three "people"; an office wall faced
-level, four a frame). Large planes are no people: the planes Open3D's plane segmentation finds
-in the run's first frames (their per-pixel median, which leaves out most of what moves), other
-than the floor (each connected patch of a plane's inliers judged alone), that extend at least
-`min_extent` metres both ways along the plane, cover at
-least `min_fill` of their rectangle, stand over the grid and are no person (a plane that is not
-level reaches higher than the object; a level one, a desk or a table, lies below `flat_below`),
-become background, and so do flat, solid faces of furniture however high (a cabinet's front or
-side, a desk: level or upright, at least `solid_width` wide, upright ones `solid_height` tall
-from the floor up, filling `solid_fill` of their rectangle; a person's front fails one of the
-three). Planes tilted more than 10 degrees from level or upright are none of these (RANSAC
-finds such planes through a crowd). Each pixel whose ray meets such a plane inside its
-rectangle (dilated by `margin`) before the floor, and whose reading in the frames' median is
-not beyond it (a ray past a cabinet's edge, inside the margin), expects the plane's depth
-there (its reading in the frames' median where that lies on the plane: a real wall is not flat
-to the sensor's noise), as background frames would have said. A person standing against a wall, or half hidden
-in front of one, is at least a body's depth nearer than the plane, so their pixels are not the
-plane's and stay evidence for them; what the plane explains is the wall seen between people.
+level, four a frame). Walls are no people: of the planes Open3D's plane segmentation finds in
+the run's first frames (their per-pixel median, which leaves out most of what moves), other
+than the floor, each connected patch of inliers is judged alone; an upright one that extends at
+least `min_extent` metres both ways, covers at least `min_fill` of its rectangle, stands over
+the grid and reaches higher than the object becomes background, and so do flat, solid faces of
+furniture however high (a cabinet's front or end, a desk: upright ones `solid_width` wide and
+`solid_height` tall from the floor up, level ones `solid_width` both ways below `flat_below`,
+each column filled over `solid_fill` of their height; a person's front fails one of these), and
+narrower faces meeting such a face at its edge (a shelf's end, a cabinet's top). Planes
+tilted more than 10 degrees from level or upright are none of these (RANSAC finds such planes
+through a crowd), nor are level ones under 0.25 m (the floor, misread by a drifting frame). Each
+pixel whose ray meets such a plane inside its rectangle (dilated by `margin`) before the floor,
+and whose reading in the frames' median is not beyond it (a ray past a cabinet's edge, inside
+the margin), expects the plane's depth there (its reading in the frames' median where that lies
+on the plane: a real wall is not flat to the sensor's noise), as background frames would have
+said. A person standing against a wall, or half hidden in front of one, is at least a body's
+depth nearer than the plane, so their pixels are not the plane's and stay evidence for them;
+what the plane explains is the wall seen between people.
 """
 
 from __future__ import annotations
@@ -45,18 +46,21 @@ class StructureOptions(Node):  # the config's `input.structure` section
     planes: Bool = Field(True, description="find large planes other than the floor in the first frames and "
                                            "make them background (floor-only, and auto's floor-only pixels)")
     frames: Int = Field(5, ge=1, description="first frames whose per-pixel median the planes are found in")
-    min_extent: Num = Field(1.0, gt=0, description="a plane is structure when its inliers span at least this "
-                                                   "both ways along it, metres (a person is narrower)")
-    min_fill: Num = Field(0.3, gt=0, le=1, description="and cover at least this share of their rectangle")
+    min_extent: Num = Field(1.0, gt=0, description="an upright plane (a wall) is structure when its inliers "
+                                                   "span at least this both ways along it, metres (a person is "
+                                                   "narrower) ...")
+    min_fill: Num = Field(0.3, gt=0, le=1, description="... cover at least this share of their rectangle and reach "
+                                                       "above object.height + 0.1 m")
     solid_width: Num = Field(0.5, gt=0, description="a flat, solid face (a cabinet's front or side, a desk) is "
                                                     "structure, however high, when its patch is at least this "
                                                     "wide, metres (on the real five-people frame, people's fronts "
                                                     "made flat patches up to 0.48 m wide) ...")
     solid_height: Num = Field(1.0, gt=0, description="... and, upright, at least this tall from the floor up "
                                                      "(level: at least solid_width deep), metres ...")
-    solid_fill: Num = Field(0.85, gt=0, le=1, description="... and its inliers fill at least this share of its "
-                                                         "rectangle (there, those reaching the floor filled at most "
-                                                         "0.71; fuller ones began 0.25 m above it)")
+    solid_fill: Num = Field(0.85, gt=0, le=1, description="... counting only the columns (0.1 m) its inliers "
+                                                         "fill over at least this share of its height (there, "
+                                                         "fronts reaching the floor filled at most 0.71 of their "
+                                                         "rectangle; fuller ones began 0.25 m above it)")
     distance: Num = Field(0.03, gt=0, description="RANSAC inlier distance, metres")
     margin: Num = Field(0.1, ge=0, description="the plane's rectangle is dilated by this, metres")
     max_planes: Int = Field(16, ge=1, description="planes peeled off the points, largest first")
@@ -216,7 +220,7 @@ def _patches(model: np.ndarray, inliers: np.ndarray, grid_xy, in_grid: float, mi
 
 
 def _kind(p: StaticPlane, options: StructureOptions, taller: float) -> str | None:
-    """What the patch `p` is (module doc): "large" (a wall, a floor-wide desk), "solid" (a flat
+    """What the patch `p` is (module doc): "large" (a wall), "solid" (a flat
     face of furniture), "face" (a flat face too narrow alone, structure where it meets a solid
     face at its edge: a shelf's end, a cabinet's top), or None (people side by side make planes
     of several person-wide patches, a person's front a narrow or gappy one)."""
