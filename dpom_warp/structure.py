@@ -163,8 +163,12 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
             kind = _kind(patch, options, taller)
             if kind in ("solid", "face"):  # its solid columns only
                 patch = patch.narrowed(patch.solid_span(options.solid_fill))
-            (planes if kind in ("large", "solid") else faces if kind == "face" else []).append(patch)
-            solids += [patch] if kind == "solid" else []
+            if kind in ("large", "solid"):
+                planes.append(patch)
+            if kind == "solid":
+                solids.append(patch)
+            elif kind == "face":
+                faces.append(patch)
         cloud = cloud.select_by_index(idx, invert=True)
     return planes + [f for f in faces if any(_meet(f, s, 2 * options.margin) for s in solids)]
 
