@@ -233,7 +233,8 @@ def static_structure(cfg: RunConfig, view, camera, files: list[Path], log=print)
     options, p = cfg.inputs.structure, cfg.model
     seen = median_frame([read_frame(cfg, f) for f in files])
     taller = cfg.obj.height + 0.1 if cfg.grid.mode == "ground" else 0.0  # a plane no person is
-    planes = find_planes(seen, camera, options, p.z_max, tuple(view.geometry.bounds[:4]), taller)
+    planes = find_planes(seen, camera, options, p.z_max, tuple(view.geometry.bounds[:4]), taller,
+                         noise=p.sensor_noise)
     g, shape = view.geometry, (view.height, view.width)
     seen = view.resolution.frames(seen[None].astype(np.float32))[0]
     depth = (plane_depths(planes, g.rays, g.centre, options.margin, seen, 3 * options.distance) if planes

@@ -3,11 +3,11 @@
 The floor-only model explains the floor and nothing else, and `auto` leaves to it the pixels
 it could not estimate: every wall, cupboard or desk inside the grid is then evidence for
 objects (the end wall of the five-people corridor was three "people"; an office wall faced
-level, four a frame). Walls are no people: of the planes Open3D's plane segmentation finds in
-the run's first frames (their per-pixel median, which leaves out most of what moves), other
-than the floor, each connected patch of inliers is judged alone; an upright one that extends at
-least `min_extent` metres both ways, covers at least `min_fill` of its rectangle, stands over
-the grid and reaches higher than the object becomes background, and so do flat, solid faces of
+level, four a frame). Walls are no people: of the planes RANSAC (planes.py: the same planes on
+every run) finds in the run's first frames (their per-pixel median, which leaves out most of
+what moves, downsampled by Open3D), other than the floor, each connected patch of inliers is
+judged alone; an upright one that extends at least `min_extent` metres both ways, covers at
+least `min_fill` of its rectangle, stands over the grid and reaches higher than the object becomes background, and so do flat, solid faces of
 furniture however high (a cabinet's front or end, a desk: upright ones `solid_width` wide and
 `solid_height` tall from the floor up, level ones `solid_width` both ways below `flat_below`,
 each column filled over `solid_fill` of their height; a person's front fails one of these), and
@@ -33,6 +33,7 @@ from pydantic import Field
 
 from ._open3d import o3d
 from .geometry import Camera
+from .planes import segment_plane
 from .values import Bool, Int, Node, Num
 
 
@@ -139,27 +140,30 @@ def median_frame(frames_m: list[np.ndarray]) -> np.ndarray:
 
 def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, z_max: float,
                 grid_xy: tuple[float, float, float, float], taller: float = 0.0, voxel: float = 0.04,
-                min_points: int = 200) -> list[StaticPlane]:
+                min_points: int = 200, noise: tuple[float, float] = (0.0, 0.0)) -> list[StaticPlane]:
     """The large planes other than the floor among the readings of `depth_m` (module doc), for
     the posed `camera` (the floor is z = 0), that stand over the grid (`grid_xy`: x_min, x_max,
     y_min, y_max of its object boxes) and, where not level, reach higher than `taller` metres
-    (no person is that tall: people standing side by side make planes up to their height)."""
+    (no person is that tall: people standing side by side make planes up to their height). A
+    point is a plane's within `options.distance` or the sensor's noise at its range, `noise`
+    (a, b) of sigma(r) = a + b r^2, whichever is larger (a Kinect's 6 m wall, bent by a few
+    centimetres, is otherwise cut into bands)."""
     ok = (depth_m > 0) & (depth_m <= z_max)
     if not ok.any():
         return []
     points = camera.centre + depth_m[ok][:, None] * camera.rays()[ok]
     points = points[points[:, 2] > options.floor_gap]  # the floor is the floor model's
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(voxel)
-    o3d.utility.random.seed(0)
+    cloud = np.asarray(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(voxel).points)
+    r = np.linalg.norm(cloud - camera.centre, axis=1)
+    tol = np.maximum(options.distance, noise[0] + noise[1] * r ** 2)
     planes, solids, faces = [], [], []
     for _ in range(options.max_planes):
-        if len(cloud.points) < min_points:
+        if len(cloud) < min_points:
             break
-        model, idx = cloud.segment_plane(options.distance, 3, 1000)
+        model, idx = segment_plane(cloud, tol)
         if len(idx) < min_points:
             break
-        for patch in _patches(np.asarray(model, np.float64), np.asarray(cloud.points)[idx], grid_xy,
-                              options.in_grid, min_points // 4):
+        for patch in _patches(model, cloud[idx], grid_xy, options.in_grid, min_points // 4):
             kind = _kind(patch, options, taller)
             if kind in ("solid", "face"):  # its solid columns only
                 patch = patch.narrowed(patch.solid_span(options.solid_fill))
@@ -169,7 +173,7 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
                 solids.append(patch)
             elif kind == "face":
                 faces.append(patch)
-        cloud = cloud.select_by_index(idx, invert=True)
+        cloud, tol = np.delete(cloud, idx, axis=0), np.delete(tol, idx)
     return planes + [f for f in faces if any(_meet(f, s, 2 * options.margin) for s in solids)]
 
 
