@@ -1,26 +1,27 @@
 """Static structure as background where no background frames say otherwise (issue 60).
 
-The floor-only model explains the floor and nothing else, and `auto` leaves to it the pixels
-it could not estimate: every wall, cupboard or desk inside the grid is then evidence for
-objects (the end wall of the five-people corridor was three "people"; an office wall faced
-level, four a frame). Walls are no people: of the planes RANSAC (planes.py: the same planes on
-every run) finds in the run's first frames (their per-pixel median, which leaves out most of
-what moves, downsampled by Open3D), other than the floor, each connected patch of inliers is
-judged alone; an upright one that extends at least `min_extent` metres both ways, covers at
-least `min_fill` of its rectangle, stands over the grid and reaches higher than the object becomes background, and so do flat, solid faces of
-furniture however high (a cabinet's front or end, a desk: upright ones `solid_width` wide and
-`solid_height` tall from the floor up, level ones `solid_width` both ways below `flat_below`,
-each column filled over `solid_fill` of their height; a person's front fails one of these), and
-narrower faces meeting such a face at its edge (a shelf's end, a cabinet's top). Planes
-tilted more than 10 degrees from level or upright are none of these (RANSAC finds such planes
-through a crowd), nor are level ones under 0.25 m (the floor, misread by a drifting frame). Each
-pixel whose ray meets such a plane inside its rectangle (dilated by `margin`) before the floor,
-and whose reading in the frames' median is not beyond it (a ray past a cabinet's edge, inside
-the margin), expects the plane's depth there (its reading in the frames' median where that lies
-on the plane: a real wall is not flat to the sensor's noise), as background frames would have
-said. A person standing against a wall, or half hidden in front of one, is at least a body's
-depth nearer than the plane, so their pixels are not the plane's and stay evidence for them;
-what the plane explains is the wall seen between people.
+The floor-only model explains the floor and nothing else, and `auto` leaves to it the pixels it
+could not estimate: every wall, cupboard or desk inside the grid is then evidence for objects
+(the end wall of the five-people corridor was three "people"; an office wall faced level, four
+a frame). Walls are no people: of the planes RANSAC (planes.py: the same planes on every run)
+finds in the run's first frames (their per-pixel median, which leaves out most of what moves,
+downsampled by Open3D), other than the floor, each connected patch of inliers is judged alone;
+an upright one that extends at least `min_extent` metres both ways, covers at least `min_fill`
+of its rectangle, stands over the grid and reaches higher than the object becomes background,
+and so do flat, solid faces of furniture however high (a cabinet's front or end, a desk:
+upright ones `solid_width` wide and `solid_height` tall from the floor up, level ones
+`solid_width` both ways below `flat_below`, each column filled over `solid_fill` of their
+height; a person's front fails one of these), and narrower faces meeting such a face at its
+edge (a shelf's end, a cabinet's top). Planes tilted more than 10 degrees from level or upright
+are none of these (RANSAC finds such planes through a crowd), nor are level ones under 0.25 m
+(the floor, misread by a drifting frame). Each pixel whose ray meets such a plane inside its
+rectangle (dilated by `margin`) before the floor, and whose reading in the frames' median is
+not beyond it (a ray past a cabinet's edge, inside the margin), expects the plane's depth there
+(its reading in the frames' median where that lies on the plane: a real wall is not flat to the
+sensor's noise), as background frames would have said. A person standing against a wall, or
+half hidden in front of one, is at least a body's depth nearer than the plane, so their pixels
+are not the plane's and stay evidence for them; what the plane explains is the wall seen
+between people.
 """
 
 from __future__ import annotations
@@ -62,7 +63,10 @@ class StructureOptions(Node):  # the config's `input.structure` section
                                                          "fill over at least this share of its height (there, "
                                                          "fronts reaching the floor filled at most 0.71 of their "
                                                          "rectangle; fuller ones began 0.25 m above it)")
-    distance: Num = Field(0.03, gt=0, description="RANSAC inlier distance, metres")
+    distance: Num = Field(0.03, gt=0, description="RANSAC inlier distance, metres (or, where larger, the noise "
+                                                  "at the point's range of the frames' median: "
+                                                  "model.sensor_noise's sigma times sqrt(pi / 2 frames), at "
+                                                  "most sigma)")
     margin: Num = Field(0.1, ge=0, description="the plane's rectangle is dilated by this, metres")
     max_planes: Int = Field(16, ge=1, description="planes peeled off the points, largest first")
     floor_gap: Num = Field(0.08, ge=0, description="points this close to the floor are the floor's, metres")
@@ -145,9 +149,9 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
     the posed `camera` (the floor is z = 0), that stand over the grid (`grid_xy`: x_min, x_max,
     y_min, y_max of its object boxes) and, where not level, reach higher than `taller` metres
     (no person is that tall: people standing side by side make planes up to their height). A
-    point is a plane's within `options.distance` or the sensor's noise at its range, `noise`
-    (a, b) of sigma(r) = a + b r^2, whichever is larger (a Kinect's 6 m wall, bent by a few
-    centimetres, is otherwise cut into bands)."""
+    point is a plane's within `options.distance` or the noise at its range, `noise` (a, b) of
+    sigma(r) = a + b r^2 (the median's: camera_setup.static_structure), whichever is larger (a
+    Kinect's 6 m wall, bent by a few centimetres, is otherwise cut into bands)."""
     ok = (depth_m > 0) & (depth_m <= z_max)
     if not ok.any():
         return []
