@@ -265,8 +265,8 @@ def test_two_cabinets_in_one_plane_are_two_patches():
 
 def test_ransac_finds_the_plane_with_most_points_the_same_on_every_call():
     """planes.segment_plane on a 2 x 1.5 m wall (y = 3, points every 5 cm, +-1 cm of noise) with
-    a person-sized cloud in front of it and scattered points: the wall's plane (normal +-y, d
-    -+3 to 5 mm) and exactly the wall's points within 3 cm; the same plane and indices on a
+    a person-sized cloud in front of it and scattered points: the wall's plane (normal +-y, at
+    y = 3 within 5 mm) and exactly the wall's points within 3 cm; the same plane and indices on a
     second call (Open3D's segment_plane changed from call to call); a wall whose right half sits
     8 cm behind its left is not one plane within 3 cm, and is within 3 cm on the left and 10 cm
     on the right (each point's own distance: a sensor's noise grows with range)."""
