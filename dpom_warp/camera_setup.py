@@ -227,16 +227,14 @@ def static_structure(cfg: RunConfig, view, camera, files: list[Path], log=print)
     where a camera's background (its engine.view.CameraView) is the floor model (floor-only, or
     the pixels auto left to it); returns the report for summary.json's inference.structure."""
     from .model import Background
-    from .structure import find_planes, median_frame, plane_depths
+    from .structure import find_planes, median_frame, median_noise, plane_depths
 
     t = time.perf_counter()
     options, p = cfg.inputs.structure, cfg.model
     seen = median_frame([read_frame(cfg, f) for f in files])
     taller = cfg.obj.height + 0.1 if cfg.grid.mode == "ground" else 0.0  # a plane no person is
-    # the median of n readings: its noise about sigma sqrt(pi / 2n) (one reading: sigma)
-    spread = min(1.0, float(np.sqrt(np.pi / (2 * len(files)))))
     planes = find_planes(seen, camera, options, p.z_max, tuple(view.geometry.bounds[:4]), taller,
-                         noise=tuple(spread * x for x in p.sensor_noise))
+                         noise=median_noise(p.sensor_noise, len(files)))
     g, shape = view.geometry, (view.height, view.width)
     seen = view.resolution.frames(seen[None].astype(np.float32))[0]
     depth = (plane_depths(planes, g.rays, g.centre, options.margin, seen, 3 * options.distance) if planes

@@ -244,7 +244,7 @@ def test_a_cabinet_in_the_grid_is_background_and_the_person_beside_it_is_found(t
     (nx, ny, _), d = fronts[0]["normal"], fronts[0]["d"]
     for x in (cabinet[0] - 0.4, cabinet[0] + 0.4):  # its front, y = 3.25, within 5 cm from end to end
         assert abs(-(d + nx * x) / ny - 3.25) < 0.05, fronts
-    assert abs(fronts[0]["size_m"][0] - 0.8) <= 0.1  # not the person's front beside it
+    assert abs(fronts[0]["size_m"][0] - 0.8) <= 0.1, fronts  # not the person's front beside it
     assert near(dets, person, 0.3) and len(dets) == len(frames), dets
     plain, _ = run(tmp_path, "cabinet_plain", frames, camera=camera, structure={"solid_width": 100.0})
     assert any(np.hypot(*(d - np.array(cabinet))) < 0.5 for d in plain), plain
@@ -291,3 +291,18 @@ def test_ransac_finds_the_plane_with_most_points_the_same_on_every_call():
     assert np.array_equal(segment_plane(bent, np.where(far, 0.1, 0.03))[1], np.arange(len(wall)))
     with pytest.raises(ValueError, match="at least 3 points"):
         segment_plane(points[:2], 0.03)
+
+
+@pytest.mark.parametrize("frames", [1, 3, 5, 9, 25])
+def test_the_medians_noise_is_that_of_a_median_of_normal_readings_never_under_it(frames):
+    """The plane finder's tolerance for the frames' median (median_noise): against the spread
+    of the median of `frames` normal readings drawn here, it is never under it (a tolerance
+    tighter than the noise cuts a wall into bands) and within 10 % of it; one reading is sigma."""
+    from dpom_warp.structure import median_noise
+
+    sigma = 0.05
+    rng = np.random.default_rng(frames)
+    drawn = np.median(rng.normal(3.0, sigma, (200_000, frames)), axis=1).std()
+    a, b = median_noise((sigma, 0.0), frames)
+    assert b == 0.0 and drawn <= a * 1.01 and a <= drawn * 1.1
+    assert median_noise((0.002, 0.0015), 1) == (0.002, 0.0015)
