@@ -404,7 +404,7 @@ WHOLE_RUN_SCENES = ("kinect_v2", "kinect_v2_far")  # --whole-run: the people sce
 REFERENCE_SCENES = ("kinect_v2", "kinect_v2_far")
 
 
-def main():
+def arguments():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--repeats", type=int, default=5)
@@ -424,97 +424,95 @@ def main():
     ap.add_argument("--kernels-batch", type=int, default=1, metavar="N",
                     help="with --kernels: N frames of the scene's sequence in one engine call (times per frame)")
     ap.add_argument("--output", default="runs/bench")
-    a = ap.parse_args()
+    return ap.parse_args()
 
+
+def kernels_table(a, device: str, out: Path) -> None:
+    """--kernels: each kernel's ms a frame and launches in each scene, to OUTPUT/kernels_DEVICE.md."""
     import warp as wp
 
+    times = {}
+    for name in a.scenes:
+        cfg, depth, bg = load_scene(name)
+        if a.kernels_batch > 1:
+            depth, bg = scene_frames(name, a.kernels_batch)
+            depth = depth[:a.kernels_batch]
+        times[name] = kernel_times(cfg, depth, bg, device, a.repeats, a.kernels_batch)
+    first = times[a.scenes[0]]
+    kernels = list(first) + sorted({k for t in times.values() for k in t} - set(first))
+    lines = [f"Machine: {platform.machine()}, {platform.node()}; device {device} ({wp.get_device(device).name}); "
+             f"Warp {wp.__version__}; {a.kernels_batch} frame(s) an engine call, launches counted a call", "",
+             "| kernel | " + " | ".join(f"{name}: ms a frame | launches" for name in a.scenes) + " |",
+             "|---|" + "---|---|" * len(a.scenes)]
+    for k in kernels:
+        lines.append(f"| `{k}` | " + " | ".join(f"{t[k][0]:.2f} | {t[k][1]:g}" if k in t else "- | -"
+                                               for t in times.values()) + " |")
+    lines.append("| all | " + " | ".join(f"**{sum(ms for ms, _ in t.values()):.1f}** | "
+                                         f"{sum(n for _, n in t.values()):g}" for t in times.values()) + " |")
+    print("\n".join(lines))
+    (out / f"kernels_{device.replace(':', '')}.md").write_text("\n".join(lines) + "\n")
+
+
+def scene_rows(a, name: str, device: str) -> dict:
+    """One scene's figures, {path: results} for the fast and exact paths (with --reference, the
+    NumPy reference's time beside the exact path; with --batch-sweep, the fast path's sweep)."""
     from dpom_warp import reference as ref
-    from dpom_warp.engine import resolve_device
     from dpom_warp.geometry import build_geometry
 
-    device = resolve_device(a.device)
-    out = Path(a.output)
-    out.mkdir(parents=True, exist_ok=True)
-    if a.kernels:
-        times = {}
-        for name in a.scenes:
-            cfg, depth, bg = load_scene(name)
-            if a.kernels_batch > 1:
-                depth, bg = scene_frames(name, a.kernels_batch)
-                depth = depth[:a.kernels_batch]
-            times[name] = kernel_times(cfg, depth, bg, device, a.repeats, a.kernels_batch)
-        first = times[a.scenes[0]]
-        kernels = list(first) + sorted({k for t in times.values() for k in t} - set(first))
-        lines = [f"Machine: {platform.machine()}, {platform.node()}; device {device} ({wp.get_device(device).name}); "
-                 f"Warp {wp.__version__}; {a.kernels_batch} frame(s) an engine call, launches counted a call", "",
-                 "| kernel | " + " | ".join(f"{name}: ms a frame | launches" for name in a.scenes) + " |",
-                 "|---|" + "---|---|" * len(a.scenes)]
-        for k in kernels:
-            lines.append(f"| `{k}` | " + " | ".join(f"{t[k][0]:.2f} | {t[k][1]:g}" if k in t else "- | -"
-                                                   for t in times.values()) + " |")
-        lines.append("| all | " + " | ".join(f"**{sum(ms for ms, _ in t.values()):.1f}** | "
-                                             f"{sum(n for _, n in t.values()):g}" for t in times.values()) + " |")
-        print("\n".join(lines))
-        (out / f"kernels_{device.replace(':', '')}.md").write_text("\n".join(lines) + "\n")
-        return
-    result = {"machine": f"{platform.machine()}, {platform.node()}", "device": device,
-              "device_name": wp.get_device(device).name, "python": platform.python_version(),
-              "warp": wp.__version__, "repeats": a.repeats, "scenes": {}}
-    lines = [f"Machine: {result['machine']}; device {device} ({result['device_name']}); Warp "
-             f"{wp.__version__}; median of {a.repeats} runs after a warm-up", "",
-             "| scene | path | image | mask entries | after the bound | iterations | live at end | masks+lists | "
-             "one full iteration | whole frame | with graph | batched, per frame | MODA | mean error |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name in a.scenes:
-        seq = scene_frames(name, max(a.batch, a.moda_frames, 1), with_truth=True)
-        sequence = (seq[0][:a.batch], seq[1]) if a.batch > 1 else None
-        rows = {}
-        for path, extra in PATHS.items():
-            cfg, depth, bg = load_scene(name, extra)
-            r, warm = time_scene(cfg, depth, bg, device, a.repeats, a.batch, sequence)
-            r["rho_star"] = warm.rho_star
-            if a.moda_frames:
-                r["scores"], r["maps"] = score_scene(cfg, device, seq, a.moda_frames)
-            rows[path] = r
-            if a.reference and name in REFERENCE_SCENES and path == "exact":
-                params = dataclasses.replace(cfg.model)
-                geom = build_geometry(cfg.camera, cfg.grid, cfg.obj)
-                t = time.perf_counter()
-                want = ref.mean_field(depth, geom, ref.background_from_frames(bg, params), params)
-                r["reference_whole_frame_s"] = time.perf_counter() - t
-                r["reference_max_rho_difference"] = float(np.abs(want["rho"] - warm.rho).max())
-        if a.batch_sweep:
-            sweep_s, parts = batch_sweep(load_scene(name)[0], seq, device, a.repeats, a.batch_sweep)
-            rows["fast"]["batch_sweep_per_frame_s"] = {str(b): t for b, t in sweep_s.items()}
-            rows["fast"]["batch_sweep_parts_per_frame_s"] = {str(b): p for b, p in parts.items()}
-        fast, exact = rows["fast"], rows["exact"]
-        # what the sparse iterations and the pruning bound contribute, at the fast path's stride:
-        # every pass full, then sparse iterations without the bound
-        ingredients = ingredient_times(name, fast["stride"], device, max(5, a.repeats),
-                                       table=fast["mask_index"] == "table")
-        for key, (seconds, rho_star, lists) in ingredients.items():
-            fast[f"{key}_same_stride_whole_frame_s"] = seconds
-            fast[f"{key}_same_stride_lists_s"] = lists
-            if key != "fast":
-                fast[f"{key}_vs_fast_max_rho_star_difference"] = float(np.abs(ingredients["fast"][1] - rho_star).max())
-        fast["fast_vs_exact_max_rho_star_difference"] = float(np.abs(fast["rho_star"] - exact["rho_star"]).max())
+    seq = scene_frames(name, max(a.batch, a.moda_frames, 1), with_truth=True)
+    sequence = (seq[0][:a.batch], seq[1]) if a.batch > 1 else None
+    rows = {}
+    for path, extra in PATHS.items():
+        cfg, depth, bg = load_scene(name, extra)
+        r, warm = time_scene(cfg, depth, bg, device, a.repeats, a.batch, sequence)
+        r["rho_star"] = warm.rho_star
         if a.moda_frames:
-            fast["fast_vs_exact_max_rho_star_difference_sequence"] = float(max(
-                np.abs(x - y).max() for x, y in zip(fast.pop("maps"), exact.pop("maps"))))
-        for path, r in rows.items():
-            r.pop("rho_star")
-            m = r["median_s"]
-            sc = r.get("scores")
-            lines.append(
-                f"| {name} | {path} | {r['image'][0]}x{r['image'][1]} | {r['mask_entries']} | "
-                f"{r['entries_after_bound'] if r['entries_after_bound'] is not None else '-'} | {r['iterations']} | "
-                f"{r['live_locations_at_end']} | {1000 * m['masks, Delta, lists, sort']:.1f} ms | "
-                f"{1000 * m['one iteration']:.2f} ms | **{1000 * m['whole frame']:.1f} ms** | "
-                f"{1000 * m['whole frame, graph']:.1f} ms | "
-                + (f"{1000 * m['per frame, batched']:.1f} ms (x{a.batch}) | " if a.batch > 1 else "- | ")
-                + (f"{sc['moda']:.3f} | {sc['mean_error_m']:.3f} m |" if sc else "- | - |"))
-            print(lines[-1], flush=True)
-        result["scenes"][name] = rows
+            r["scores"], r["maps"] = score_scene(cfg, device, seq, a.moda_frames)
+        rows[path] = r
+        if a.reference and name in REFERENCE_SCENES and path == "exact":
+            params = dataclasses.replace(cfg.model)
+            geom = build_geometry(cfg.camera, cfg.grid, cfg.obj)
+            t = time.perf_counter()
+            want = ref.mean_field(depth, geom, ref.background_from_frames(bg, params), params)
+            r["reference_whole_frame_s"] = time.perf_counter() - t
+            r["reference_max_rho_difference"] = float(np.abs(want["rho"] - warm.rho).max())
+    if a.batch_sweep:
+        sweep_s, parts = batch_sweep(load_scene(name)[0], seq, device, a.repeats, a.batch_sweep)
+        rows["fast"]["batch_sweep_per_frame_s"] = {str(b): t for b, t in sweep_s.items()}
+        rows["fast"]["batch_sweep_parts_per_frame_s"] = {str(b): p for b, p in parts.items()}
+    fast, exact = rows["fast"], rows["exact"]
+    # what the sparse iterations and the pruning bound contribute, at the fast path's stride:
+    # every pass full, then sparse iterations without the bound
+    ingredients = ingredient_times(name, fast["stride"], device, max(5, a.repeats),
+                                   table=fast["mask_index"] == "table")
+    for key, (seconds, rho_star, lists) in ingredients.items():
+        fast[f"{key}_same_stride_whole_frame_s"] = seconds
+        fast[f"{key}_same_stride_lists_s"] = lists
+        if key != "fast":
+            fast[f"{key}_vs_fast_max_rho_star_difference"] = float(np.abs(ingredients["fast"][1] - rho_star).max())
+    fast["fast_vs_exact_max_rho_star_difference"] = float(np.abs(fast["rho_star"] - exact["rho_star"]).max())
+    if a.moda_frames:
+        fast["fast_vs_exact_max_rho_star_difference_sequence"] = float(max(
+            np.abs(x - y).max() for x, y in zip(fast.pop("maps"), exact.pop("maps"))))
+    for r in rows.values():
+        r.pop("rho_star")
+    return rows
+
+
+def table_row(name: str, path: str, r: dict, batch: int) -> str:
+    m, sc = r["median_s"], r.get("scores")
+    return (f"| {name} | {path} | {r['image'][0]}x{r['image'][1]} | {r['mask_entries']} | "
+            f"{r['entries_after_bound'] if r['entries_after_bound'] is not None else '-'} | {r['iterations']} | "
+            f"{r['live_locations_at_end']} | {1000 * m['masks, Delta, lists, sort']:.1f} ms | "
+            f"{1000 * m['one iteration']:.2f} ms | **{1000 * m['whole frame']:.1f} ms** | "
+            f"{1000 * m['whole frame, graph']:.1f} ms | "
+            + (f"{1000 * m['per frame, batched']:.1f} ms (x{batch}) | " if batch > 1 else "- | ")
+            + (f"{sc['moda']:.3f} | {sc['mean_error_m']:.3f} m |" if sc else "- | - |"))
+
+
+def scene_notes(result: dict, repeats: int) -> list[str]:
+    """The lines under the table: each scene's paths and ingredients, its batch sweep, the
+    NumPy reference's time (and each path's speed-up over it, added to `result`)."""
     notes = []
     for name, rows in result["scenes"].items():
         f, e = rows["fast"], rows["exact"]
@@ -523,7 +521,7 @@ def main():
                      f"at stride {f['stride']}, every pass full {1000 * f['full_passes_same_stride_whole_frame_s']:.1f} ms, "
                      f"sparse iterations {1000 * f['no_bound_same_stride_whole_frame_s']:.1f} ms, with the pruning bound "
                      f"{1000 * f['fast_same_stride_whole_frame_s']:.1f} ms (timed in turn, median of "
-                     f"{max(5, a.repeats)}; {f['pruned_locations']} of {f['locations']} locations "
+                     f"{max(5, repeats)}; {f['pruned_locations']} of {f['locations']} locations "
                      f"pruned, {f['entries_after_bound']} of {f['mask_entries']} entries left); max |rho* difference| "
                      f"against every pass full {f['full_passes_vs_fast_max_rho_star_difference']:.1e}, against no bound "
                      f"{f['no_bound_vs_fast_max_rho_star_difference']:.1e} (epsilon {f['sparse_epsilon']:g}); "
@@ -557,6 +555,35 @@ def main():
                      f"**{rows['fast']['speedup_vs_reference']:.0f}x**, exact path "
                      f"{rows['exact']['speedup_vs_reference']:.1f}x (exact rho vs reference: max difference "
                      f"{rows['exact']['reference_max_rho_difference']:.1e})")
+    return notes
+
+
+def main():
+    a = arguments()
+    import warp as wp
+
+    from dpom_warp.engine import resolve_device
+
+    device = resolve_device(a.device)
+    out = Path(a.output)
+    out.mkdir(parents=True, exist_ok=True)
+    if a.kernels:
+        kernels_table(a, device, out)
+        return
+    result = {"machine": f"{platform.machine()}, {platform.node()}", "device": device,
+              "device_name": wp.get_device(device).name, "python": platform.python_version(),
+              "warp": wp.__version__, "repeats": a.repeats, "scenes": {}}
+    lines = [f"Machine: {result['machine']}; device {device} ({result['device_name']}); Warp "
+             f"{wp.__version__}; median of {a.repeats} runs after a warm-up", "",
+             "| scene | path | image | mask entries | after the bound | iterations | live at end | masks+lists | "
+             "one full iteration | whole frame | with graph | batched, per frame | MODA | mean error |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name in a.scenes:
+        result["scenes"][name] = rows = scene_rows(a, name, device)
+        for path, r in rows.items():
+            lines.append(table_row(name, path, r, a.batch))
+            print(lines[-1], flush=True)
+    notes = scene_notes(result, a.repeats)
     if a.whole_run:
         result["whole_run"] = {}
         for name in [n for n in a.scenes if n in WHOLE_RUN_SCENES]:
