@@ -6,7 +6,7 @@ rig's evidence fusion (one mean field over every camera's pixels); and the time 
 against one camera's, measured in the same process on the same frames.
 
     python -m bench.rig [--frames 10] [--output runs/rig] [--scenes rig3 rig3_tight] [--repeats 5]
-                        [--tuning] [--object-width 0.5] [--device cpu|cuda:N]
+                        [--tuning | --draw N] [--object-width 0.5] [--device cpu|cuda:N]
 
 Scenes (the same cameras' layout in each: one at the near end looking along the area, one on
 each side looking across it; 256 x 212 pixels, Kinect v2's field of view):
@@ -48,10 +48,10 @@ SCENES = {
 }
 
 
-def rig_config(name: str, folder: Path, frames: int, tuning: bool = False, width: float = WIDTH,
+def rig_config(name: str, folder: Path, frames: int, draw: int = 0, width: float = WIDTH,
                device: str = "cpu") -> dict:
-    """The scene's rig config (its frames rendered into folder/scene); `tuning`: the tuning draw
-    (seed + 1000), `width`: the object's."""
+    """The scene's rig config (its frames rendered into folder/scene); `draw`: added to the
+    scene's seed (0: the reported draw, 1000: the tuning draw), `width`: the object's."""
     s = SCENES[name]
     x0, x1, y0, y1 = s["area"]
     scene = folder / "scene"
@@ -65,7 +65,7 @@ def rig_config(name: str, folder: Path, frames: int, tuning: bool = False, width
             "evaluation": {"ground_truth": f"{scene}/ground_truth.json"},
             "output": {"dir": str(folder / "out"), "images": False},
             "tracking": {"method": "off"},
-            "synthetic": {"cache": str(scene), "seed": s["seed"] + (1000 if tuning else 0), "frames": frames, "background_frames": 5,
+            "synthetic": {"cache": str(scene), "seed": s["seed"] + draw, "frames": frames, "background_frames": 5,
                           "people": s["people"], "min_gap": s["min_gap"], "area": list(s["area"]), "furniture": 0,
                           "room": [x0 - 2.0, x1 + 2.0, y0 - 2.0, y1 + 2.0, 3.0]}}
 
@@ -89,7 +89,7 @@ def fuse_detections(per_camera: list[dict], agree: int) -> dict:
     return out
 
 
-def run_scene(name: str, folder: Path, frames: int, repeats: int, tuning: bool = False, width: float = WIDTH,
+def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0, width: float = WIDTH,
               device: str = "cpu") -> dict:
     from dpom_warp import Detector
     from dpom_warp.evaluate import load_ground_truth, score_frames
@@ -97,7 +97,7 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, tuning: bool =
     from dpom_warp.loading import config_from_mapping
     from dpom_warp.worker import read_rig_frame
 
-    raw = rig_config(name, folder, frames, tuning, width, device)
+    raw = rig_config(name, folder, frames, draw, width, device)
     cfg = config_from_mapping(raw)
     render_synthetic(cfg, lambda *_: None)
     rig_frames = run_frames(cfg, log=lambda *_: None).frames
@@ -129,7 +129,7 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, tuning: bool =
     median = {k: statistics.median(v) for k, v in times.items()}
     hidden = sum(1 for f in rig_frames for o in truth[f.name]
                  if min(o["visible_in"].get(n, 0.0) for n in names) < 0.1)
-    return {"scene": name, "tuning": tuning, "object_width": width, "device": device, "people": SCENES[name]["people"], "frames": len(rig_frames),
+    return {"scene": name, "tuning": draw == 1000, "draw": draw, "object_width": width, "device": device, "people": SCENES[name]["people"], "frames": len(rig_frames),
             "truth": sum(len(v) for v in frames_truth.values()), "hidden_from_one": hidden,
             "moda": scores, "rig_counts": {k: full["rig"][k] for k in ("tp", "fp", "fn")}, "detection_fusion": {"any": fused[1], "two": fused[2], "best": max(fused.values())},
             "median_s": median, "rig_over_camera": median["rig"] / statistics.mean(median[n] for n in names),
@@ -160,6 +160,8 @@ def main():
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     ap.add_argument("--tuning", action="store_true", help="the tuning draw (every scene's seed + 1000, cached apart), "
                                                           "on which the object's width was chosen")
+    ap.add_argument("--draw", type=int, default=0, metavar="N",
+                    help="another draw: every scene's seed + N, cached apart (1000: the tuning draw)")
     ap.add_argument("--object-width", type=float, default=WIDTH, help="object.width of the rig and of each camera alone")
     ap.add_argument("--device", default="cpu", help="the rig's and each camera's inference device: cpu or cuda:N")
     args = ap.parse_args()
@@ -169,8 +171,9 @@ def main():
 
     results = []
     for name in args.scenes:
-        folder = Path(".cache/bench") / f"{name}_{args.frames}{'_tuning' if args.tuning else ''}"
-        r = run_scene(name, folder, args.frames, args.repeats, args.tuning, args.object_width, args.device)
+        draw = 1000 if args.tuning else args.draw
+        folder = Path(".cache/bench") / f"{name}_{args.frames}{'_tuning' if draw == 1000 else f'_draw{draw}' if draw else ''}"
+        r = run_scene(name, folder, args.frames, args.repeats, draw, args.object_width, args.device)
         print(json.dumps(r))
         results.append(r)
     (out / "rig.json").write_text(json.dumps(results, indent=1))
