@@ -32,6 +32,59 @@ class Detected:
     log_odds: float | None = None
 
 
+@dataclass(frozen=True)
+class CameraViews:
+    """What the edge rule reads of each camera (one, or a rig's): each location's share in view
+    (C, K), and, where known, its silhouette rectangle (C, K, 4) with its area in the image
+    (C, K) and the camera's centre (C, 3)."""
+
+    view_part: np.ndarray
+    rect: np.ndarray | None = None
+    rect_area: np.ndarray | None = None
+    centre: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, geometry) -> "CameraViews | None":
+        """From a Geometry or a geometry.RigGeometry (its `parts`); None without view parts."""
+        parts = getattr(geometry, "parts", None) or [geometry]
+        if any(g.view_part is None for g in parts):
+            return None
+        return cls(np.stack([g.view_part for g in parts]), np.stack([g.rect for g in parts]),
+                   np.stack([g.rect_area for g in parts]), np.stack([g.centre for g in parts]))
+
+    @classmethod
+    def single(cls, view_part: np.ndarray) -> "CameraViews":
+        return cls(np.asarray(view_part)[None])
+
+    @property
+    def best(self) -> np.ndarray:
+        """(K,) the largest share in view over the cameras."""
+        return self.view_part.max(axis=0)
+
+    def at_edge(self, k: int, edge_view: float) -> bool:
+        """Whether location k is mostly outside every image, or cut by some image's edge."""
+        vp = self.view_part[:, k]
+        return bool(vp.max() < edge_view or np.any((vp > 0) & (vp < edge_view)))
+
+    def hidden(self, k: int, j: int, c: int, edge_view: float, locations: np.ndarray) -> bool:
+        """Whether, in camera c, location k lies behind j, j's rectangle covering at least
+        `edge_view` of k's (unknown rectangles: never)."""
+        if self.rect is None or self.rect_area[c, k] <= 0:
+            return False
+        centre = self.centre[c]
+        if np.linalg.norm(locations[k] - centre) <= np.linalg.norm(locations[j] - centre):
+            return False
+        a, b = self.rect[c, k], self.rect[c, j]
+        w, h = min(a[2], b[2]) - max(a[0], b[0]) + 1, min(a[3], b[3]) - max(a[1], b[1]) + 1
+        return max(w, 0) * max(h, 0) >= edge_view * self.rect_area[c, k]
+
+    def beside(self, k: int, j: int, edge_view: float, locations: np.ndarray) -> float:
+        """k's largest share in view over the cameras in which it is not hidden behind j (0
+        where it is hidden in every one)."""
+        return max((float(self.view_part[c, k]) for c in range(len(self.view_part))
+                    if not self.hidden(k, j, c, edge_view, locations)), default=0.0)
+
+
 def local_maxima(rho_map: np.ndarray) -> np.ndarray:
     """Boolean map of cells not smaller than any of their neighbours (8- or 26-connected)."""
     padded = np.pad(rho_map, 1, mode="constant", constant_values=-np.inf)
@@ -45,7 +98,7 @@ def local_maxima(rho_map: np.ndarray) -> np.ndarray:
 
 
 def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, threshold: float,
-           nms_radius: float, view_part: np.ndarray | None = None, edge_radius: float = 0.0,
+           nms_radius: float, view_part: np.ndarray | CameraViews | None = None, edge_radius: float = 0.0,
            edge_view: float = 0.5) -> list[Detected]:
     """Detections of one frame, strongest first.
 
@@ -59,7 +112,8 @@ def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, thresh
         threshold: minimum rho*.
         nms_radius: a detection suppresses weaker ones closer than this, metres.
         view_part: (K,) the share of each location's silhouette rectangle inside the image
-            (Geometry.view_part); None: every location in view.
+            (Geometry.view_part), or each camera's (CameraViews: a rig's); None: every
+            location in view.
         edge_radius, edge_view: after the suppression, edge_drop.
     """
     from scipy.ndimage import uniform_filter
@@ -80,18 +134,28 @@ def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, thresh
                      tuple(int(b) for b in rect[k])) for k in kept]
 
 
-def edge_drop(kept: list[int], flat: np.ndarray, locations: np.ndarray, view_part: np.ndarray | None,
-              edge_radius: float, edge_view: float) -> list[int]:
+def edge_drop(kept: list[int], flat: np.ndarray, locations: np.ndarray,
+              view_part: np.ndarray | CameraViews | None, edge_radius: float, edge_view: float) -> list[int]:
     """`kept` (cells of one map) less those with view_part < edge_view (their silhouette
     rectangle mostly outside the image: the axis out of view) that lie closer than
-    `edge_radius` (metres; 0: off) to a kept cell with view_part >= edge_view and at least
-    their value in `flat`: what is in view of such a cell is the edge of the person found
-    beside it, its core (where a second cell meets the readings behind it) outside the image."""
+    `edge_radius` (metres; 0: off) to another kept cell with view_part >= edge_view and at
+    least their value in `flat`: what is in view of such a cell is the edge of the person found
+    beside it, its core (where a second cell meets the readings behind it) outside the image.
+    A rig's cell (CameraViews of several cameras) is such an edge when some image cuts it (or
+    every image leaves it mostly out) and every camera that has it mostly in view sees it
+    behind that neighbour, which hides it there: no camera sees more of it than an edge
+    (docs/rig.md). With one camera the two rules are the same."""
     if view_part is None or edge_radius <= 0:
         return kept
-    seen = [j for j in kept if view_part[j] >= edge_view]
-    return [k for k in kept if view_part[k] >= edge_view or all(
-        flat[j] < flat[k] or not closer(np.linalg.norm(locations[k] - locations[j]), edge_radius) for j in seen)]
+    views = view_part if isinstance(view_part, CameraViews) else CameraViews.single(view_part)
+    best = views.best
+    seen = [j for j in kept if best[j] >= edge_view]
+
+    def edge_of(k: int, j: int) -> bool:
+        return (j != k and flat[j] >= flat[k] and closer(np.linalg.norm(locations[k] - locations[j]), edge_radius)
+                and views.beside(k, j, edge_view, locations) < edge_view)
+
+    return [k for k in kept if not views.at_edge(k, edge_view) or not any(edge_of(k, j) for j in seen)]
 
 
 def detect_map(rho_star: np.ndarray, geometry, detection, threshold: float | None = None) -> list[Detected]:
@@ -99,7 +163,7 @@ def detect_map(rho_star: np.ndarray, geometry, detection, threshold: float | Non
     on a geometry's locations, rectangles and view parts."""
     return detect(rho_star, geometry.locations, geometry.rect,
                   detection.threshold if threshold is None else threshold, detection.nms_radius,
-                  geometry.view_part, detection.edge_radius, detection.edge_view)
+                  CameraViews.of(geometry), detection.edge_radius, detection.edge_view)
 
 
 def joint_detections(rho_map: np.ndarray, geometry, detection, log_odds=None) -> tuple[np.ndarray, list[Detected]]:

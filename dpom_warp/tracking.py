@@ -75,7 +75,7 @@ class Cells:
     step: float
     entry: np.ndarray  # (K,) bool
     nms_radius: float = 0.4  # a map's peaks closer than this are one object (detection.nms_radius)
-    view_part: np.ndarray | None = None  # Geometry.view_part, for detection.edge_radius
+    view_part: object = None  # detect.CameraViews (or a Geometry.view_part), for detection.edge_radius
     edge_radius: float = 0.0
     edge_view: float = 0.5
 
@@ -113,7 +113,9 @@ class Cells:
             inside |= (p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)
         entry = (seen & (border | beside | leaves)).ravel() | inside
         steps = [grid.x[2], grid.y[2]] + ([grid.z[2]] if grid.mode == "voxel" else [])
-        return cls(np.asarray(p, float), float(max(steps)), entry, nms_radius, geometry.view_part, edge_radius,
+        from .detect import CameraViews
+
+        return cls(np.asarray(p, float), float(max(steps)), entry, nms_radius, CameraViews.of(geometry), edge_radius,
                    edge_view)
 
     @classmethod

@@ -130,6 +130,41 @@ def test_a_detection_mostly_outside_the_image_beside_one_in_view_is_dropped():
     assert [d.k for d in detect(m, locs, rect, 0.5, 0.35, view, edge_radius=0.45)] == [0, 10, 4]
 
 
+def test_a_rigs_cell_cut_by_one_image_and_hidden_behind_a_detection_in_the_others_is_dropped():
+    """The edge rule in a rig (detect.CameraViews): cells j (x = 0) and k (x = 0.4 m), k weaker.
+    Camera A (at x = -3) sees k behind j, j's rectangle covering all of k's; camera B (at
+    x = 3) has k cut by its image's edge (0.2 of it in view). What any camera sees of k is the
+    edge of j: k goes (the largest share in view over the cameras, 1.0 in A, kept it). k stays
+    where A sees it beside j (rectangles apart), where B does not see it at all (then k is a
+    person hidden behind j, as one camera's would be), and with camera A alone."""
+    from dpom_warp.detect import CameraViews
+
+    locs = np.array([[0.1 * i, 3.0, 0.0] for i in range(5)])
+    m = np.array([[1.0, 0.0, 0.0, 0.0, 0.9]])
+    box = np.tile([0, 0, 1, 1], (5, 1))
+    centre = np.array([[-3.0, 3.0, 2.0], [3.0, 3.0, 2.0]])
+    rect = np.zeros((2, 5, 4), np.int64)
+    rect[0, 0], rect[0, 4] = [10, 10, 29, 59], [12, 12, 27, 52]  # A: j in front of k, covering it
+    rect[1, 0], rect[1, 4] = [5, 0, 30, 49], [0, 0, 9, 49]  # B: k at the image's left edge
+    view = np.ones((2, 5))
+    view[1, 4] = 0.2
+
+    def found(rects, views, centres=centre):
+        area = (rects[..., 2] - rects[..., 0] + 1).clip(0) * (rects[..., 3] - rects[..., 1] + 1).clip(0)
+        cams = CameraViews(views, rects, area, centres)
+        return [d.k for d in detect(m, locs, box, 0.5, 0.35, cams, edge_radius=0.45)]
+
+    assert found(rect, view) == [0]
+    assert [d.k for d in detect(m, locs, box, 0.5, 0.35, view.max(0), edge_radius=0.45)] == [0, 4]
+    apart = rect.copy()
+    apart[0, 4] = [40, 10, 55, 59]
+    assert found(apart, view) == [0, 4]
+    unseen, out = rect.copy(), view.copy()
+    unseen[1, 4], out[1, 4] = [0, 0, -1, -1], 0.0
+    assert found(unseen, out) == [0, 4]
+    assert found(rect[:1], view[:1], centre[:1]) == [0, 4]
+
+
 def test_view_part_is_the_share_of_the_silhouette_rectangle_in_the_image():
     """Geometry.view_part from the box corners' projection: 1 where the rectangle is whole in
     the image, the clipped rectangle's share of the whole one at the edges, 0 with no

@@ -81,7 +81,8 @@ class DetectionSection(Node):
                                                    "this (by more than rounding) goes, metres")
     edge_radius: Num | None = Field(None, ge=0, description=(
         "a detection whose silhouette is mostly outside the image (its share in view under edge_view) is dropped "
-        f"within this distance of one in view, metres (README, Known behaviour); default {EDGE_RADIUS:g} on ground "
+        "within this distance of one in view, metres (in a rig: of every camera that does not see it behind that "
+        f"one; docs/rig.md); default {EDGE_RADIUS:g} on ground "
         f"grids, 0 (off) in voxel mode"))
     edge_view: Num = Field(0.5, gt=0, le=1, description=(
         "the share of a silhouette's rectangle inside the image under which edge_radius applies"))
