@@ -6,13 +6,16 @@ rig's evidence fusion (one mean field over every camera's pixels); and the time 
 against one camera's, measured in the same process on the same frames.
 
     python -m bench.rig [--frames 10] [--output runs/rig] [--scenes rig3 rig3_tight] [--repeats 5]
-                        [--tuning | --draw N] [--object-width 0.5] [--device cpu|cuda:N]
+                        [--tuning | --draw N] [--object-width 0.5] [--device cpu|cuda:N] [--batch N]
 
 Scenes (the same cameras' layout in each: one at the near end looking along the area, one on
 each side looking across it; 256 x 212 pixels, Kinect v2's field of view):
 - rig3: 16 people walking in 6 x 5 m, cameras 2.2 m up, pitched 20 degrees;
 - rig3_tight: 26 people in 4.4 x 3.5 m, 0.5 m apart at least, cameras 1.9 m up, pitched 15:
   people hide each other from each camera (the issue's crowd).
+--batch N adds the rig's throughput through Detector.detect_batch with engine.batch N (N rig
+frames, every camera's, in one engine call; on a GPU, one launch), in rig frames and camera-frames
+a second, and whether its detections are the frame-by-frame ones.
 The tables go to OUTPUT/rig.md and rig.json (bench.docs --only rig puts them in the README).
 """
 
@@ -89,8 +92,30 @@ def fuse_detections(per_camera: list[dict], agree: int) -> dict:
     return out
 
 
+def batched(raw: dict, depths: list, batch: int, repeats: int, want: dict, names: list) -> dict:
+    """The rig's frames through Detector.detect_batch with engine.batch = `batch`: rig frames and
+    camera-frames a second (median of `repeats` passes over at least one full batch, after a
+    warm-up pass), and whether each frame's detections are `want`'s ({frame name: (n, 2)})."""
+    from dpom_warp import Detector
+
+    det = Detector.from_config({**{k: v for k, v in raw.items() if k != "synthetic"}, "engine": {"batch": batch}})
+    order = [i % len(depths) for i in range(max(batch, len(depths)))]
+    frames = [depths[i] for i in order]
+    got = det.detect_batch(frames)  # (the warm-up)
+    same = all(np.array_equal(np.array([[x.x, x.y] for x in r.detections]).reshape(-1, 2), want[names[i]])
+               for r, i in zip(got, order))
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        det.detect_batch(frames)
+        times.append(time.perf_counter() - t)
+    per = statistics.median(times) / len(frames)
+    return {"batch": batch, "rig_frames_per_s": 1 / per, "camera_frames_per_s": len(depths[0]) / per,
+            "same_detections": same}
+
+
 def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0, width: float = WIDTH,
-              device: str = "cpu") -> dict:
+              device: str = "cpu", batch: int = 0) -> dict:
     from dpom_warp import Detector
     from dpom_warp.evaluate import load_ground_truth, score_frames
     from dpom_warp.frames import run_frames, render_synthetic
@@ -129,11 +154,13 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
     median = {k: statistics.median(v) for k, v in times.items()}
     hidden = sum(1 for f in rig_frames for o in truth[f.name]
                  if min(o["visible_in"].get(n, 0.0) for n in names) < 0.1)
+    rate = (batched(raw, depths, batch, repeats, dets["rig"], [f.name for f in rig_frames]) if batch
+            else None)
     return {"scene": name, "tuning": draw == 1000, "draw": draw, "object_width": width, "device": device, "people": SCENES[name]["people"], "frames": len(rig_frames),
             "truth": sum(len(v) for v in frames_truth.values()), "hidden_from_one": hidden,
             "moda": scores, "rig_counts": {k: full["rig"][k] for k in ("tp", "fp", "fn")}, "detection_fusion": {"any": fused[1], "two": fused[2], "best": max(fused.values())},
             "median_s": median, "rig_over_camera": median["rig"] / statistics.mean(median[n] for n in names),
-            "rig_over_sum": median["rig"] / sum(median[n] for n in names)}
+            "rig_over_sum": median["rig"] / sum(median[n] for n in names), "batched": rate}
 
 
 def markdown(results: list[dict], machine: str) -> str:
@@ -149,7 +176,11 @@ def markdown(results: list[dict], machine: str) -> str:
                       f"{r['rig_over_sum']:.2f}x the three cameras' sum) |")
     device = results[0].get("device", "cpu")
     where = machine if device == "cpu" else f"{device} ({machine})"
-    return "\n".join(rows) + f"\n\nMODA at 0.5 m, fast path; {where}."
+    notes = [f"{r['scene']}: engine.batch {b['batch']}, {b['rig_frames_per_s']:.1f} rig frames a second = "
+             f"{b['camera_frames_per_s']:.0f} camera-frames a second (detections "
+             f"{'the same as' if b['same_detections'] else 'NOT the same as'} frame by frame)"
+             for r in results if (b := r.get("batched"))]
+    return "\n".join(rows) + f"\n\nMODA at 0.5 m, fast path; {where}." + "".join("\n\n" + n for n in notes)
 
 
 def main():
@@ -164,6 +195,8 @@ def main():
                     help="another draw: every scene's seed + N, cached apart (1000: the tuning draw)")
     ap.add_argument("--object-width", type=float, default=WIDTH, help="object.width of the rig and of each camera alone")
     ap.add_argument("--device", default="cpu", help="the rig's and each camera's inference device: cpu or cuda:N")
+    ap.add_argument("--batch", type=int, default=0, metavar="N",
+                    help="also the rig's throughput with engine.batch N (detect_batch; 0: not measured)")
     args = ap.parse_args()
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -173,7 +206,7 @@ def main():
     for name in args.scenes:
         draw = 1000 if args.tuning else args.draw
         folder = Path(".cache/bench") / f"{name}_{args.frames}{'_tuning' if draw == 1000 else f'_draw{draw}' if draw else ''}"
-        r = run_scene(name, folder, args.frames, args.repeats, draw, args.object_width, args.device)
+        r = run_scene(name, folder, args.frames, args.repeats, draw, args.object_width, args.device, args.batch)
         print(json.dumps(r))
         results.append(r)
     (out / "rig.json").write_text(json.dumps(results, indent=1))
