@@ -5,7 +5,8 @@ could not estimate: every wall, cupboard or desk inside the grid is then evidenc
 (the end wall of the five-people corridor was three "people"; an office wall faced level, four
 a frame). Walls are no people: of the planes RANSAC (planes.py: the same planes on every run)
 finds in the run's first frames (their per-pixel median, which leaves out most of what moves,
-downsampled by Open3D), other than the floor, each connected patch of inliers is judged alone;
+downsampled by Open3D), other than the floor (beside the grid a plane's whole noise band goes
+with it: `_peeled`), each connected patch of inliers is judged alone;
 an upright one that extends at least `min_extent` metres both ways, covers at least `min_fill`
 of its rectangle, stands over the grid and reaches higher than the object becomes background,
 and so do flat, solid faces of furniture however high (a cabinet's front or end, a desk:
@@ -40,6 +41,7 @@ from .values import Bool, Int, Node, Num
 
 COS_10, SIN_10 = float(np.cos(np.radians(10))), float(np.sin(np.radians(10)))
 LOWEST = 0.25  # metres: a level plane lower than this is the floor (no desk is as low)
+BAND = 3.0  # inlier distances: beside the grid, a plane's points this close go with it (its noise band)
 
 
 class StructureOptions(Node):  # the config's `input.structure` section
@@ -185,8 +187,21 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
                 solids.append(patch)
             elif kind == "face":
                 faces.append(patch)
-        cloud, tol = np.delete(cloud, idx, axis=0), np.delete(tol, idx)
+        cloud, tol = _peeled(cloud, tol, model, idx, grid_xy)
     return planes + [f for f in faces if any(_meet(f, s, 2 * options.margin) for s in solids)]
+
+
+def _peeled(cloud: np.ndarray, tol: np.ndarray, model: np.ndarray, inliers: np.ndarray, grid_xy) -> tuple:
+    """`cloud` and its `tol` less a found plane's `inliers` and, beside the grid's object boxes
+    (`grid_xy`), every point within BAND inlier distances of it: a wall beyond the grid is
+    model.background_outside_grid's, and the third of its noisy readings outside one inlier
+    distance was left as a band that later, tilted planes cut through (16 planes went on a far
+    wall's bands and slices of them before a cabinet over the grid's corner was reached)."""
+    x0, x1, y0, y1 = grid_xy
+    beside = (cloud[:, 0] < x0) | (cloud[:, 0] > x1) | (cloud[:, 1] < y0) | (cloud[:, 1] > y1)
+    gone = beside & (np.abs(cloud @ model[:3] + model[3]) <= BAND * tol)
+    gone[inliers] = True
+    return cloud[~gone], tol[~gone]
 
 
 def _patches(model: np.ndarray, inliers: np.ndarray, grid_xy, in_grid: float, min_points: int,

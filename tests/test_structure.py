@@ -306,3 +306,22 @@ def test_the_medians_noise_is_that_of_a_median_of_normal_readings_never_under_it
     a, b = median_noise((sigma, 0.0), frames)
     assert b == 0.0 and drawn <= a * 1.01 and a <= drawn * 1.1
     assert median_noise((0.002, 0.0015), 1) == (0.002, 0.0015)
+
+
+def test_a_plane_beside_the_grid_takes_its_noise_band_with_it():
+    """structure._peeled by hand: a wall at y = 8 beyond a grid that ends at y = 7 (its points
+    1, 4 and 10 cm off the plane, the inlier distance 3 cm): its inliers go, and so does the
+    reading 4 cm off (within 3 inlier distances, 9 cm), not the one 10 cm off (a thing of its own);
+    over the grid the same plane takes its inliers only (a person 4 cm in front of a wall in
+    the grid stays for the planes after)."""
+    from dpom_warp.structure import _peeled
+
+    cloud = np.array([[0.0, 8.01, 1.0], [0.5, 7.96, 1.0], [1.0, 7.90, 1.0],  # beyond the grid
+                      [0.0, 6.99, 1.0], [0.5, 6.96, 1.0]])  # over it, by a plane at y = 7
+    tol = np.full(len(cloud), 0.03)
+    wall = np.array([0.0, 1.0, 0.0, -8.0])
+    left, left_tol = _peeled(cloud, tol, wall, np.array([0]), (-3.0, 3.0, 0.5, 7.0))
+    assert np.array_equal(left, cloud[[2, 3, 4]]) and len(left_tol) == 3
+    inside = np.array([0.0, 1.0, 0.0, -7.0])
+    left, _ = _peeled(cloud, tol, inside, np.array([3]), (-3.0, 3.0, 0.5, 7.0))
+    assert np.array_equal(left, cloud[[0, 1, 2, 4]])
