@@ -191,15 +191,20 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
     return planes + [f for f in faces if any(_meet(f, s, 2 * options.margin) for s in solids)]
 
 
+def over_grid(points: np.ndarray, grid_xy) -> np.ndarray:
+    """Which of `points` (n, 3) lie over the grid's object boxes (`grid_xy`: x_min, x_max, y_min,
+    y_max, edges included)."""
+    x0, x1, y0, y1 = grid_xy
+    return (points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1)
+
+
 def _peeled(cloud: np.ndarray, tol: np.ndarray, model: np.ndarray, inliers: np.ndarray, grid_xy) -> tuple:
     """`cloud` and its `tol` less a found plane's `inliers` and, beside the grid's object boxes
     (`grid_xy`), every point within BAND inlier distances of it: a wall beyond the grid is
     model.background_outside_grid's, and the third of its noisy readings outside one inlier
     distance was left as a band that later, tilted planes cut through (16 planes went on a far
     wall's bands and slices of them before a cabinet over the grid's corner was reached)."""
-    x0, x1, y0, y1 = grid_xy
-    beside = (cloud[:, 0] < x0) | (cloud[:, 0] > x1) | (cloud[:, 1] < y0) | (cloud[:, 1] > y1)
-    gone = beside & (np.abs(cloud @ model[:3] + model[3]) <= BAND * tol)
+    gone = ~over_grid(cloud, grid_xy) & (np.abs(cloud @ model[:3] + model[3]) <= BAND * tol)
     gone[inliers] = True
     return cloud[~gone], tol[~gone]
 
@@ -232,14 +237,13 @@ def _patches(model: np.ndarray, inliers: np.ndarray, grid_xy, in_grid: float, mi
     label = labels[ij[:, 0], ij[:, 1]]
     sizes = np.bincount(label, minlength=count + 1)
     sizes[0] = 0
-    x0, x1, y0, y1 = grid_xy
     out = []
     for k in np.argsort(-sizes, kind="stable"):
         if sizes[k] < min_points:
             break
         keep = label == k
         patch, points = ab[keep], inliers[keep]
-        if np.mean((points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1)) < in_grid:
+        if np.mean(over_grid(points, grid_xy)) < in_grid:
             continue
         a0, a1 = np.percentile(patch[:, 0], [1, 99])
         b0, b1 = np.percentile(patch[:, 1], [1, 99])

@@ -21,13 +21,16 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import numpy as np
 from pydantic import Field
 
 from .track_files import Track, frame_steps
 from .values import Int, Node, Num, Switch, _numbers
+
+if TYPE_CHECKING:
+    from .detect import CameraViews
 
 SCALE = 1000.0  # costs are integers for the solver: thousandths
 
@@ -75,7 +78,7 @@ class Cells:
     step: float
     entry: np.ndarray  # (K,) bool
     nms_radius: float = 0.4  # a map's peaks closer than this are one object (detection.nms_radius)
-    view_part: object = None  # detect.CameraViews (or a Geometry.view_part), for detection.edge_radius
+    view_part: CameraViews | np.ndarray | None = None  # each camera's (or one's) share in view: detection.edge_radius
     edge_radius: float = 0.0
     edge_view: float = 0.5
 
