@@ -92,17 +92,17 @@ def fuse_detections(per_camera: list[dict], agree: int) -> dict:
     return out
 
 
-def batched(raw: dict, depths: list, batch: int, repeats: int, want: dict, names: list) -> dict:
+def batched(raw: dict, depths: list, batch: int, repeats: int, want: list) -> dict:
     """The rig's frames through Detector.detect_batch with engine.batch = `batch`: rig frames and
     camera-frames a second (median of `repeats` passes over at least one full batch, after a
-    warm-up pass), and whether each frame's detections are `want`'s ({frame name: (n, 2)})."""
+    warm-up pass), and whether each frame's detections are `want`'s (each frame's (n, 2), in order)."""
     from dpom_warp import Detector
 
     det = Detector.from_config({**{k: v for k, v in raw.items() if k != "synthetic"}, "engine": {"batch": batch}})
     order = [i % len(depths) for i in range(max(batch, len(depths)))]
     frames = [depths[i] for i in order]
     got = det.detect_batch(frames)  # (the warm-up)
-    same = all(np.array_equal(np.array([[x.x, x.y] for x in r.detections]).reshape(-1, 2), want[names[i]])
+    same = all(np.array_equal(np.array([[x.x, x.y] for x in r.detections]).reshape(-1, 2), want[i])
                for r, i in zip(got, order))
     times = []
     for _ in range(repeats):
@@ -154,8 +154,7 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
     median = {k: statistics.median(v) for k, v in times.items()}
     hidden = sum(1 for f in rig_frames for o in truth[f.name]
                  if min(o["visible_in"].get(n, 0.0) for n in names) < 0.1)
-    rate = (batched(raw, depths, batch, repeats, dets["rig"], [f.name for f in rig_frames]) if batch
-            else None)
+    rate = batched(raw, depths, batch, repeats, [dets["rig"][f.name] for f in rig_frames]) if batch else None
     return {"scene": name, "tuning": draw == 1000, "draw": draw, "object_width": width, "device": device, "people": SCENES[name]["people"], "frames": len(rig_frames),
             "truth": sum(len(v) for v in frames_truth.values()), "hidden_from_one": hidden,
             "moda": scores, "rig_counts": {k: full["rig"][k] for k in ("tp", "fp", "fn")}, "detection_fusion": {"any": fused[1], "two": fused[2], "best": max(fused.values())},
