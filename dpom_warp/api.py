@@ -112,7 +112,10 @@ class Detector:
             raise ConfigError(f"{where}: {e}") from None
         quiet = log or (lambda *_: None)
         render_synthetic(cfg, quiet)
-        needs = [m.inputs.auto_background or (m.pose_auto and not m.inputs.background) for _, m in cfg.members()]
+        # the run's frames where setting up reads them: auto, and without background frames the
+        # floor fit (extrinsics: auto) and the static planes (input.structure) are found in them
+        needs = [m.inputs.auto_background or (not m.inputs.background and (m.pose_auto or m.inputs.structure.planes))
+                 for _, m in cfg.members()]
         if cfg.is_rig:  # the cameras' frames, paired, where one needs them (auto, or a floor fit on them)
             from .frames import rig_frames
 

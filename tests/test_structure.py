@@ -73,6 +73,14 @@ def test_a_wall_in_the_grid_is_background_and_people_by_it_are_found(tmp_path):
     assert all(near(dets, p) for p in PEOPLE), dets
     per_frame = len(dets) / len(frames)
     assert per_frame == len(PEOPLE), dets
+    # the Python API finds the same planes in the config's frames: the run's detections
+    from dpom_warp.api import Detector
+    from dpom_warp.io import read_depth
+
+    det = Detector.from_config(tmp_path / "planes" / "c.yaml")
+    found = [[d.x, d.y] for i in range(len(frames)) for d in det.detect(
+        read_depth(tmp_path / "planes" / "frames" / f"{i:04d}.png", 0.001, (120, 160))).detections]
+    assert np.allclose(np.array(found).reshape(-1, 2), dets, atol=1e-4), (found, dets)
     plain, _ = run(tmp_path, "plain", frames, structure={"planes": False})
     extra = [d for d in plain if not any(np.hypot(*(d - p)) < 0.5 for p in PEOPLE)]
     assert len(extra) >= 1, plain  # what the planes remove
