@@ -18,6 +18,9 @@ joint test (detection.min_log_odds). Before the summary, a count of the errors b
 
 --tracking: bench.tracking's long scenes instead (people entering and leaving the view; all
 75 frames unless --frames says fewer).
+--bands: also every detection, true or false, whose kept top band has no supporting pixel
+(model.top_support's s = 0: only hidden pixels carry it), with its counts, and how many of
+the true and of the false detections are such.
 """
 
 from __future__ import annotations
@@ -63,6 +66,28 @@ def strongest_near(rho_star, locations, near, found) -> tuple[float, float]:
     return float(flat[k]), nearest(found, locations[k])
 
 
+def unsupported_u(counts, top_hidden: float, top_missing: float) -> float | None:
+    """The top band's u = (s + top_hidden f) / (s + a + f + top_missing m) of a band with no
+    supporting pixel (s = 0) and some judged (`counts`: support, against, hidden, missing, ...);
+    None for any other band."""
+    s, against, hidden, missing = counts[:4]
+    n = against + hidden + top_missing * missing
+    return None if s or not n else top_hidden * hidden / n
+
+
+def band_unsupported(detector, result, locations, d, where: str, true: bool) -> int:
+    """1 (and a line naming it) when detection `d`'s kept top band has no supporting pixel
+    (unsupported_u), else 0."""
+    p = detector.engine.params
+    counts = cell_values(detector, result, int(np.argmin(np.hypot(*(locations - (d.x, d.y)).T))))["counts"]
+    u = unsupported_u(counts, p.top_hidden, p.top_missing)
+    if u is None:
+        return 0
+    print(f"band    {where}: {'true' if true else 'false'} detection at ({d.x:.2f}, {d.y:.2f}), rho* {d.rho:.3f}, "
+          f"band support 0 / against {counts[1]} / hidden {counts[2]} / missing {counts[3]}, u {u:.3f}")
+    return 1
+
+
 def cell_state(v: dict) -> str:
     return (f"rho {v['rho']:.3f}, e {v['e']:.3f}, rho* before the top band {v['before']:.3f}, top band "
             f"s/a/f/missing/in view {'/'.join(str(c) for c in v['counts'])}, readings behind {v['behind']}, rho* "
@@ -101,11 +126,13 @@ def main():
     ap.add_argument("--scenes", nargs="+", choices=list(VARIANTS) + list(tracking.SCENES))
     ap.add_argument("--frames", type=int, help="frames a scene (default 10; a tracking scene: 75)")
     ap.add_argument("--tracking", action="store_true", help="bench.tracking's scenes")
+    ap.add_argument("--bands", action="store_true", help="also list the detections whose top band has no support")
     a = ap.parse_args()
     scenes = a.scenes or list(tracking.SCENES if a.tracking else VARIANTS)
     false_total = missed_total = 0
     kinds = collections.Counter()
     odds = {"true": [], "false": []}  # the detections' log odds in the joint test
+    unsupported = {True: 0, False: 0}  # --bands: true and false detections whose band has no support
     counts = {name: a.frames or (tracking.FRAMES if name in tracking.SCENES else 10) for name in scenes}
     for name in scenes:
         frames = counts[name]
@@ -147,6 +174,9 @@ def main():
             for i, d in enumerate(result.detections):
                 if d.log_odds is not None:
                     odds["true" if i in matched_found else "false"].append(d.log_odds)
+                if a.bands:
+                    unsupported[i in matched_found] += band_unsupported(
+                        detector, result, locations, d, f"{name} {f.name}", i in matched_found)
                 if i in matched_found:
                     continue
                 false_total += 1
@@ -158,6 +188,9 @@ def main():
                 joint = "" if d.log_odds is None else f", log odds {d.log_odds:.1f}"
                 print(f"false   {name} {f.name}: at ({d.x:.2f}, {d.y:.2f}), nearest people {close or 'none'}; "
                       f"{cell_state(v)}{joint}")
+    if a.bands:
+        print(f"top bands with no supporting pixel: {unsupported[True]} true detections, "
+              f"{unsupported[False]} false")
     draw = "tuning draw" if a.tuning else "held-out draw"
     per_scene = " / ".join(str(n) for n in sorted(set(counts.values())))
     print("kinds: " + "; ".join(f"{kind} {n}" for kind, n in kinds.most_common()))

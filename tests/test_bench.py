@@ -106,6 +106,12 @@ def test_errors_sorts_each_error_by_its_kind(tmp_path):
                           np.array([[0.5, 0.0], [2.0, 0.0]])) == pytest.approx((0.9, 0.4))
     assert strongest_near(np.array([0.2, 0.9, 0.4, 1.0]), locs, np.array([0, 2]), np.zeros((0, 2)))[1] == np.inf
 
+    # --bands: u of a band no pixel supports (the five-people frame's low object: 0.25 x 130 / 198)
+    from bench.errors import unsupported_u
+    assert unsupported_u((0, 61, 130, 7, 198), 0.25, 1.0) == pytest.approx(32.5 / 198)
+    assert unsupported_u((0, 61, 130, 7, 198), 0.25, 0.0) == pytest.approx(32.5 / 191)
+    assert unsupported_u((1, 61, 130, 7, 198), 0.25, 1.0) is None and unsupported_u((0, 0, 0, 0, 0), 0.25, 1.0) is None
+
     det = Detector.from_config(small_config(tmp_path), ["device=cpu"])
     cfg = det.config
     generate(cfg.synthetic, cfg.camera, cfg.synthetic_cache)
