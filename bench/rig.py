@@ -7,6 +7,7 @@ against one camera's, measured in the same process on the same frames.
 
     python -m bench.rig [--frames 10] [--output runs/rig] [--scenes rig3 rig3_tight] [--repeats 5]
                         [--tuning | --draw N] [--object-width 0.5] [--device cpu|cuda:N] [--batch N]
+                        [--set KEY.PATH=VALUE ...]
 
 Scenes (the same cameras' layout in each: one at the near end looking along the area, one on
 each side looking across it; 256 x 212 pixels, Kinect v2's field of view):
@@ -16,6 +17,7 @@ each side looking across it; 256 x 212 pixels, Kinect v2's field of view):
 --batch N adds the rig's throughput through Detector.detect_batch with engine.batch N (N rig
 frames, every camera's, in one engine call; on a GPU, one launch), in rig frames and camera-frames
 a second, and whether its detections are the frame-by-frame ones.
+--set: config overrides (as `dpom-warp run --set`) for the rig, each camera alone and the batch.
 The tables go to OUTPUT/rig.md and rig.json (bench.docs --only rig puts them in the README).
 """
 
@@ -92,13 +94,14 @@ def fuse_detections(per_camera: list[dict], agree: int) -> dict:
     return out
 
 
-def batched(raw: dict, depths: list, batch: int, repeats: int, want: list) -> dict:
+def batched(raw: dict, depths: list, batch: int, repeats: int, want: list, sets: list[str] = ()) -> dict:
     """The rig's frames through Detector.detect_batch with engine.batch = `batch`: rig frames and
     camera-frames a second (median of `repeats` passes over at least one full batch, after a
     warm-up pass), and whether each frame's detections are `want`'s (each frame's (n, 2), in order)."""
     from dpom_warp import Detector
 
-    det = Detector.from_config({**{k: v for k, v in raw.items() if k != "synthetic"}, "engine": {"batch": batch}})
+    det = Detector.from_config({**{k: v for k, v in raw.items() if k != "synthetic"}, "engine": {"batch": batch}},
+                               list(sets))
     order = [i % len(depths) for i in range(max(batch, len(depths)))]
     frames = [depths[i] for i in order]
     got = det.detect_batch(frames)  # (the warm-up)
@@ -115,7 +118,7 @@ def batched(raw: dict, depths: list, batch: int, repeats: int, want: list) -> di
 
 
 def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0, width: float = WIDTH,
-              device: str = "cpu", batch: int = 0) -> dict:
+              device: str = "cpu", batch: int = 0, sets: list[str] = ()) -> dict:
     from dpom_warp import Detector
     from dpom_warp.evaluate import load_ground_truth, score_frames
     from dpom_warp.frames import run_frames, render_synthetic
@@ -129,11 +132,12 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
     truth = load_ground_truth(raw["evaluation"]["ground_truth"])
     depths = [read_rig_frame(cfg, f.paths) for f in rig_frames]
     names = [n for n, _ in cfg.cameras]
-    rig = Detector.from_config({k: v for k, v in raw.items() if k != "synthetic"})
+    rig = Detector.from_config({k: v for k, v in raw.items() if k != "synthetic"}, list(sets))
     stride = rig.engine.resolution.stride  # each camera alone at the rig's resolution
     singles = [Detector.from_config({**{k: v for k, v in raw.items() if k != "synthetic"},
                                      "cameras": [{**c, "input": {**c["input"], "stride": stride}}
-                                                 for c in raw["cameras"] if c["name"] == n]}) for n in names]
+                                                 for c in raw["cameras"] if c["name"] == n]}, list(sets))
+               for n in names]
     dets = {"rig": {}, **{n: {} for n in names}}
     times = {"rig": [], **{n: [] for n in names}}
     for f, depth in zip(rig_frames, depths):  # each frame alternately by the rig and each camera alone
@@ -154,8 +158,8 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
     median = {k: statistics.median(v) for k, v in times.items()}
     hidden = sum(1 for f in rig_frames for o in truth[f.name]
                  if min(o["visible_in"].get(n, 0.0) for n in names) < 0.1)
-    rate = batched(raw, depths, batch, repeats, [dets["rig"][f.name] for f in rig_frames]) if batch else None
-    return {"scene": name, "tuning": draw == 1000, "draw": draw, "object_width": width, "device": device, "people": SCENES[name]["people"], "frames": len(rig_frames),
+    rate = batched(raw, depths, batch, repeats, [dets["rig"][f.name] for f in rig_frames], sets) if batch else None
+    return {"scene": name, "sets": list(sets), "tuning": draw == 1000, "draw": draw, "object_width": width, "device": device, "people": SCENES[name]["people"], "frames": len(rig_frames),
             "truth": sum(len(v) for v in frames_truth.values()), "hidden_from_one": hidden,
             "moda": scores, "rig_counts": {k: full["rig"][k] for k in ("tp", "fp", "fn")}, "detection_fusion": {"any": fused[1], "two": fused[2], "best": max(fused.values())},
             "median_s": median, "rig_over_camera": median["rig"] / statistics.mean(median[n] for n in names),
@@ -196,6 +200,8 @@ def main():
     ap.add_argument("--device", default="cpu", help="the rig's and each camera's inference device: cpu or cuda:N")
     ap.add_argument("--batch", type=int, default=0, metavar="N",
                     help="also the rig's throughput with engine.batch N (detect_batch; 0: not measured)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="a config override for the rig and each camera alone (repeatable)")
     args = ap.parse_args()
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -205,7 +211,8 @@ def main():
     for name in args.scenes:
         draw = 1000 if args.tuning else args.draw
         folder = Path(".cache/bench") / f"{name}_{args.frames}{'_tuning' if draw == 1000 else f'_draw{draw}' if draw else ''}"
-        r = run_scene(name, folder, args.frames, args.repeats, draw, args.object_width, args.device, args.batch)
+        r = run_scene(name, folder, args.frames, args.repeats, draw, args.object_width, args.device, args.batch,
+                      args.set)
         print(json.dumps(r))
         results.append(r)
     (out / "rig.json").write_text(json.dumps(results, indent=1))
