@@ -5,7 +5,9 @@ the rendered people's positions (rectangles and sign changes, by hand: not zones
 naive alternative, each frame's raw detections counted in the zone; and the bookkeeping's cost a
 frame with 20 zones and 20 lines (zones.Zones.update on the run's own tracks).
 
-    python -m bench.zones [--frames 60] [--seeds 1 2] [--output runs/zones]
+    python -m bench.zones [--frames 60] [--seeds 1 2] [--output runs/zones] [--set KEY.PATH=VALUE ...]
+
+--set: config overrides for the runs (as `dpom-warp run --set`), e.g. a finer grid.
 
 The truth is the renderer's trajectories (trajectories.json: every person every frame, hidden
 behind a cabinet or another person or not). Writes OUTPUT/zones.md and zones.json (bench.docs --only zones puts the table in the README)."""
@@ -110,11 +112,11 @@ def crossings_at(out: Path, truth: list, hysteresis: float) -> tuple[float, floa
     return match(got, truth_crossings(truth))
 
 
-def run_seed(folder: Path, frames: int, seed: int) -> dict:
+def run_seed(folder: Path, frames: int, seed: int, sets: list[str] = ()) -> dict:
     from dpom_warp.loading import load_config
     from dpom_warp.pipeline import run
 
-    cfg = load_config("configs/demo_people.yaml", config(folder, frames, seed))
+    cfg = load_config("configs/demo_people.yaml", config(folder, frames, seed) + list(sets))
     run(cfg, str(folder / "out"), progress=False, log=lambda *_: None, overwrite=True)
     out = folder / "out"
     truth = json.loads((folder / "scene" / "trajectories.json").read_text())
@@ -144,10 +146,12 @@ def main():
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--output", default="runs/zones")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="a config override for the runs (repeatable)")
     args = ap.parse_args()
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
-    results = [run_seed(Path(".cache/bench") / f"zones_{s}_{args.frames}", args.frames, s) for s in args.seeds]
+    results = [run_seed(Path(".cache/bench") / f"zones_{s}_{args.frames}", args.frames, s, args.set) for s in args.seeds]
     (out / "zones.json").write_text(json.dumps(results, indent=1))
     rows = ["| sequence | frame-zone rows | counts exact: tracks | counts exact: raw detections (naive) | "
             "crossings true / found | precision | recall | bookkeeping, 20 zones + 20 lines |",
