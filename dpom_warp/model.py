@@ -91,7 +91,7 @@ class ModelParams(Node):  # the config's `model` section (config.model_section: 
             last); 0: no pruning by the bound.
         warm_start: start a frame from the previous frame's rho instead of the prior.
         top_support: the top-band test of the soft threshold, for objects standing on the
-            floor (kernels.mean_field.top_band). In the band of the box from top_band x its
+            floor (kernels.people.top_band). In the band of the box from top_band x its
             height to its top, the silhouette pixels with a reading either support the
             object (s: within top_sigmas sigma of its depth), read behind the object (its
             solid, or its facing plane; a: the object would hide them) or in front of it (f:
@@ -159,7 +159,7 @@ class ModelParams(Node):  # the config's `model` section (config.model_section: 
             independent prior).
         exclusion_radius, exclusion_gate: see exclusion.
         behind_cost: evidence a location loses for each pixel of its silhouette's core whose
-            reading lies behind its object beyond the mask test (kernels.mean_field
+            reading lies behind its object beyond the mask test (kernels.people
             behind_count): were the object there, it would hide that reading. MODEL.md's
             masks leave such pixels out, so a cell whose solid half covers a person and half
             the room behind was as good as the person's own; the count does not depend on

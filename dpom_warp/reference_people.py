@@ -13,7 +13,7 @@ from .reference_pixels import kept_silhouette, log_outlier, object_sigma, readin
 def band_out_of_view(seen, area, params: ModelParams):
     """Where a location's top band is out of view: counted (seen >= 0), with fewer than
     top_min_pixels, or fewer than top_unseen_part x |S_k| (area), of its pixels in the image
-    (kernels.mean_field.band_out_of_view)."""
+    (kernels.people.band_out_of_view)."""
     seen = np.asarray(seen)
     return (seen >= 0) & ((seen < params.top_min_pixels) | (seen < params.top_unseen_part * np.asarray(area)))
 
@@ -23,7 +23,7 @@ def top_factor(support, against, hidden, missing, seen, params: ModelParams, are
     sigmoid(top_slope (u - top_support)), u = (s + top_hidden f) / (s + a + f + top_missing m);
     1 with fewer than top_min_pixels judged in the band (read, or missing where top_missing >
     0), top_unseen where the band is out of view (band_out_of_view;
-    kernels.mean_field.top_factor)."""
+    kernels.people.top_factor)."""
     n = support + against + hidden + (missing if params.top_missing > 0 else 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         u = (support + params.top_hidden * hidden) / (support + against + hidden + params.top_missing * missing)
@@ -91,7 +91,7 @@ def behind_count(depth_m, geom: Geometry, params: ModelParams, which, sils: dict
     behind_step (each standing for behind_step^2): in each such row the lattice pixels whose
     rays hit the solid run from column a to b, and those before a + behind_side (b - a) or
     after b - behind_side (b - a) are left out, as are object points below behind_low or above
-    behind_high x the height (ground grids; kernels.mean_field.behind_count). `sils`: some of
+    behind_high x the height (ground grids; kernels.people.behind_count). `sils`: some of
     their silhouettes (silhouettes()). Returns (K,) int64."""
     n = np.zeros(len(geom.rect), np.int64)
     z_img = np.asarray(depth_m, dtype=np.float64)

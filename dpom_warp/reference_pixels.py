@@ -78,6 +78,6 @@ def sigmoid(x):
 def reading_classes(z, mu, passes, params: ModelParams):
     """What each reading z says of an object at depth mu, given whether it passes the test:
     (supports, behind: z > mu, the object would hide it, in front: hidden by something nearer),
-    three boolean arrays, all False without a reading (kernels.mean_field.reading_class)."""
+    three boolean arrays, all False without a reading (kernels.people.reading_class)."""
     valid = valid_reading(z, params)
     return valid & passes, valid & ~passes & (z > mu), valid & ~passes & (z <= mu)

@@ -5,7 +5,9 @@
   tiles where it would not fit), counted then filled into per-pixel lists kept in depth order
   (location id breaking ties).
 - `mean_field`: the exclusive-form mean-field evidence pass, the exclusion prior's pass, damped
-  update, on-device convergence check (batches, graphs), soft threshold with the top-band test.
+  update, on-device convergence check (batches, graphs).
+- `people`: what a location's pixels say beyond the lists: readings behind its object (the behind
+  cost), the top-band test, and eq. 13's soft threshold with it.
 - `sparse`: the pruning bound, and the per-pixel lists compacted to the live locations
   (sparse iterations).
 - `frames`: full-resolution frames reduced to the engine's pixels (median, min or nearest of
@@ -19,9 +21,8 @@ from .background import (background_delta, background_from_frames, cluster_backg
 from .frames import reduce_frames
 from .masks import (PixelTable, TablePair, TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once, table_pairs,
                     table_window)
-from .mean_field import (ONE_STACK, SIZED_STACK, behind_count, behind_points, check_converged, evidence_pass, exclusion_pass,
-                         keep_better_top, soft_threshold, top_band, top_band_clear, top_band_rows,
-                         transparency_pass, update_rho)
+from .mean_field import ONE_STACK, SIZED_STACK, check_converged, evidence_pass, exclusion_pass, transparency_pass, update_rho
+from .people import behind_count, behind_points, keep_better_top, soft_threshold, top_band, top_band_clear, top_band_rows
 from .pixel_model import SHAPE_FIELDS, SHAPE_PLANE, SHAPE_SOLID, GeometryArrays, PixelLists, PixelModel
 from .sparse import (IDLE, PRUNED, TALLY_SUM, bound_pass, compact_again, compact_once, count_entries, count_iteration,
                      count_live, fill_live, frame_tally, gather_live, has_entries, mark_idle, place_active, prune,

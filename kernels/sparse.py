@@ -177,7 +177,7 @@ def update_bound(
     rho: wp.array(dtype=wp.float64),
 ):
     """upper <- min(upper, sigmoid(logit(prior) + the round's bound - behind_cost x behind)),
-    behind[i] the location's readings behind its object (mean_field.behind_count), a fixed
+    behind[i] the location's readings behind its object (people.behind_count), a fixed
     part of its evidence (update_rho subtracts it the same way), except for a settled location
     (bound_pass: upper < settle and upper <= rho, its start), whose bound stays as it is;
     clears the evidence."""
