@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from bench.__main__ import SCENES, load_scene
+from bench.scenes import SCENES, load_scene
 
 
 def median_ms(fn, repeats: int) -> float:

@@ -36,7 +36,7 @@ COUNTS = ("frame", "detections", "iterations", "converged", "live", "entries", "
 def _bench_sets(name: str, exact: bool) -> tuple[str, list[str]]:
     """The bench scene's config and overrides as bench.load_scene makes them (2 frames)."""
     sys.path.insert(0, str(ROOT))
-    from bench.__main__ import scene_sets
+    from bench.scenes import scene_sets
 
     path, sets = scene_sets(name)
     return path, sets + ["engine.exact=true"] * exact
