@@ -169,6 +169,11 @@ class LiveRun:
         self.out = Path(output_dir or cfg.output.dir)
         # the plain run's: device, engine, background (played frames: auto and the floor fit as a plain run's)
         self.setup = setup = set_up(cfg, played, device, log)
+        if not cfg.inputs.play and not cfg.inputs.background and cfg.inputs.structure.planes:
+            log("live: input.structure finds walls and furniture in frames read before a run, and a live camera "
+                "has none: the floor-only model explains the floor alone, so walls and furniture in the grid may "
+                "be taken for people; expected input.background: a few frames of the empty room (or a "
+                "recording's run)")
         self.engine, self.geometry = setup.engine, setup.geometry
         self.workers = workers or default_workers(cfg, setup.device)
         self.worker = FrameWorker(setup.spec, engine=self.engine)

@@ -359,6 +359,24 @@ def test_live_workers_with_warm_start_is_one_line(camera_config, capsys):
     assert "expected no --workers with it" in err
 
 
+def test_a_floor_only_live_run_says_it_finds_no_walls(camera_config, capsys):
+    """Floor-only, a live camera gives no frames before the run to find static planes in (a
+    recording's run does): the run says so in one line naming the key that helps; with
+    background frames it does not."""
+    path, cam, _ = camera_config
+    said = {}
+    cam.start()
+    try:
+        for name, sets in (("floor", ["--set", "input.background=null"]), ("frames", [])):
+            assert main(["run", str(path), "--no-progress", "--max-frames", "2", "--workers", "1", "--overwrite",
+                         *sets]) == 0
+            said[name] = [x for x in capsys.readouterr().out.splitlines() if "input.structure" in x]
+    finally:
+        cam.stop()
+    assert len(said["floor"]) == 1 and "expected input.background: a few frames of the empty room" in said["floor"][0]
+    assert said["frames"] == []
+
+
 def test_no_camera_is_one_line(camera_config, capsys):
     path, cam, _ = camera_config
     cam.unregister()
