@@ -97,6 +97,7 @@ class Detector:
             ConfigError, InputError: one line naming the key or file.
         """
         from .frames import render_synthetic
+        from .names import is_live
         from .session import set_up
         from .sources import expand
 
@@ -113,9 +114,10 @@ class Detector:
         quiet = log or (lambda *_: None)
         render_synthetic(cfg, quiet)
         # the run's frames where setting up reads them: auto, and without background frames the
-        # floor fit (extrinsics: auto) and the static planes (input.structure) are found in them
-        needs = [m.inputs.auto_background or (not m.inputs.background and (m.pose_auto or m.inputs.structure.planes))
-                 for _, m in cfg.members()]
+        # floor fit (extrinsics: auto) and the static planes (input.structure) are found in them;
+        # a live camera has none before (its frames are the ones given to detect)
+        needs = [not is_live(m.inputs.frames) and (m.inputs.auto_background or (
+            not m.inputs.background and (m.pose_auto or m.inputs.structure.planes))) for _, m in cfg.members()]
         if cfg.is_rig:  # the cameras' frames, paired, where one needs them (auto, or a floor fit on them)
             from .frames import rig_frames
 

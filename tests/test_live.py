@@ -377,6 +377,27 @@ def test_a_floor_only_live_run_says_it_finds_no_walls(camera_config, capsys):
     assert said["frames"] == []
 
 
+def test_the_api_on_a_live_cameras_config_reads_no_frames_before(camera_config):
+    """Detector.from_config of a live camera's config, floor-only with its pose given: nothing is
+    read before (the frames are the ones given to detect; a folder's config reads its first
+    frames for the static planes), and a frame given is detected as the same frame's file is by
+    the folder's config."""
+    import numpy as np
+    from PIL import Image
+
+    from dpom_warp import Detector
+
+    path, _, tmp = camera_config
+    plain = yaml.safe_load((tmp / "plain.yaml").read_text())
+    live = Detector.from_config(path, {"input.background": None, "input.structure.planes": False})
+    files = Detector.from_config({**{k: v for k, v in plain.items() if k != "synthetic"}},
+                                 {"input.background": None, "input.structure.planes": False})
+    frame = np.asarray(Image.open(sorted((tmp / "scene" / "frames").glob("*.png"))[0]))
+    got = [(d.x, d.y) for d in live.detect(frame).detections]
+    assert got and got == [(d.x, d.y) for d in files.detect(frame).detections]
+    assert "structure" not in Detector.from_config(path, {"input.background": None}).setup.inference
+
+
 def test_no_camera_is_one_line(camera_config, capsys):
     path, cam, _ = camera_config
     cam.unregister()
