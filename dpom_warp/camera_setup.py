@@ -222,16 +222,18 @@ def set_up_background(cfg: RunConfig, view, bg_frames: list, n_files: int, sampl
     return "floor plane only", None, None
 
 
-def static_structure(cfg: RunConfig, view, camera, files: list[Path], log=print) -> dict:
-    """Large planes other than the floor in the median of `files` made background (structure.py)
-    where a camera's background (its engine.view.CameraView) is the floor model (floor-only, or
-    the pixels auto left to it); returns the report for summary.json's inference.structure."""
+def static_structure(cfg: RunConfig, view, camera, files: list, log=print) -> dict:
+    """Large planes other than the floor in the median of `files` (frame files, or frames in
+    metres at the camera's full resolution: a live camera's first) made background
+    (structure.py) where a camera's background (its engine.view.CameraView) is the floor model
+    (floor-only, or the pixels auto left to it); returns the report for summary.json's
+    inference.structure."""
     from .model import Background
     from .structure import find_planes, median_frame, median_noise, plane_depths
 
     t = time.perf_counter()
     options, p = cfg.inputs.structure, cfg.model
-    seen = median_frame([read_frame(cfg, f) for f in files])
+    seen = median_frame([f if isinstance(f, np.ndarray) else read_frame(cfg, f) for f in files])
     taller = cfg.obj.height + 0.1 if cfg.grid.mode == "ground" else 0.0  # a plane no person is
     planes = find_planes(seen, camera, options, p.z_max, tuple(view.geometry.bounds[:4]), taller,
                          noise=median_noise(p.sensor_noise, len(files)))

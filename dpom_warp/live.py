@@ -156,7 +156,7 @@ class LiveRun:
         from .session import set_up
         from .sources import open_source
         from .frames import played_source
-        from .worker import FrameWorker, Helpers
+        from .worker import FrameWorker
         from .writers import Rerun
 
         self.cfg, self.log, self.max_frames, self.first_frame_timeout = cfg, log, max_frames, first_frame_timeout
@@ -169,11 +169,6 @@ class LiveRun:
         self.out = Path(output_dir or cfg.output.dir)
         # the plain run's: device, engine, background (played frames: auto and the floor fit as a plain run's)
         self.setup = setup = set_up(cfg, played, device, log)
-        if not cfg.inputs.play and not cfg.inputs.background and cfg.inputs.structure.planes:
-            log("live: input.structure finds walls and furniture in frames read before a run, and a live camera "
-                "has none: the floor-only model explains the floor alone, so walls and furniture in the grid may "
-                "be taken for people; expected input.background: a few frames of the empty room (or a "
-                "recording's run)")
         self.engine, self.geometry = setup.engine, setup.geometry
         self.workers = workers or default_workers(cfg, setup.device)
         self.worker = FrameWorker(setup.spec, engine=self.engine)
@@ -188,21 +183,13 @@ class LiveRun:
                                     online_fps=self.fps if self.tracking_on else None, log=log)
         self.run_view, self.writers, self.online = self.frame_loop.view, self.frame_loop.writers, self.frame_loop.online
         self.rerun = self.writers.has(Rerun)
-        log(f"live: {info.kind}, {info.width}x{info.height} at {self.fps:g} frames/s; device {setup.device}, "
-            f"{self.workers} process{'es' * (self.workers > 1)}; background: "
-            f"{setup.background}; until {'the frames end, ' if cfg.inputs.play else ''}Ctrl-C"
-            f"{f' or {max_frames} frames' if max_frames else ''}")
         self.slot = NewestFrame()
+        self.structure_frames = 0  # a live camera's first frames, taken for the static planes
         self.latencies, self.infer_s = [], []
         self.finished = []  # when each frame was written
         self.done, self.taken, self.t_first, self.last_line = 0, 0, None, time.perf_counter()
         self.pending: deque = deque()  # Pending frames, in the order they were taken
-        self.helpers = None
-        if self.workers > 1:
-            try:
-                self.helpers = Helpers(setup.spec, self.engine, self.workers - 1)
-            except BrokenProcessPool as e:  # as one dying later: the run goes on in this process
-                log(f"live: a helper process died starting ({e}); the run goes on in one process")
+        self.helpers = None  # started by run(), once the background is whole (start_helpers)
         # the frames are taken one taker at a time (the main loop, and the feeder thread that
         # hands the helpers theirs), each put in `pending` before the next is taken: stream order
         self.taking, self.state = threading.Lock(), threading.Condition()
@@ -368,11 +355,14 @@ class LiveRun:
     def run(self) -> dict:
         """Until Ctrl-C, --max-frames or the camera stopping; then the run's outputs."""
         self.source.start(self.slot.put)
-        self.feeder = threading.Thread(target=self.feed, daemon=True) if self.helpers is not None else None
         self.finisher = threading.Thread(target=self.finishing, daemon=True)
         self.finisher.start()
         stopped_by, stop_error, clean = "max_frames", None, False
         try:
+            self.find_structure()
+            self.start_helpers()
+            self.feeder = threading.Thread(target=self.feed, daemon=True) if self.helpers is not None else None
+            self.announce()
             stopped_by = self.loop()
             stop_threads(self.feeder, self.stop_feeding)
             self.close_finisher()
@@ -388,6 +378,48 @@ class LiveRun:
         finally:
             stop_error = self.stop(clean)
         return self.summary(stopped_by, stop_error)
+
+    def find_structure(self) -> None:
+        """A live camera's floor-only run: the static planes (input.structure) found in the
+        camera's first input.structure.frames frames, as a recorded run finds them in its first
+        files (a played run's set_up did); those frames are not inferred (summary.json's
+        live.structure_frames)."""
+        from .camera_setup import static_structure
+
+        cfg = self.cfg
+        if cfg.inputs.play or cfg.inputs.background or not cfg.inputs.structure.planes:
+            return
+        frames = []
+        while len(frames) < cfg.inputs.structure.frames:
+            fr = self.slot.take(STALL_S if frames else self.first_frame_timeout)
+            if fr is None:
+                if frames:  # the stream ended or stalled: the planes of what came
+                    break
+                raise ConfigError(f"input.frames: {cfg.inputs.frames}: no frame within "
+                                  f"{self.first_frame_timeout:g} s of starting the camera")
+            frames.append(units_to_metres(fr.depth, cfg.inputs.depth_scale))
+        self.structure_frames = len(frames)
+        report = static_structure(cfg, self.engine.views[0], self.setup.spec.camera, frames, self.log)
+        self.setup.inference["structure"] = report
+        if report["pixels"]:
+            self.setup.background += f"; {len(report['planes'])} static planes ({report['pixels']} pixels)"
+
+    def start_helpers(self) -> None:
+        """workers - 1 helper processes, each with an engine of this one's background."""
+        from .worker import Helpers
+
+        if self.workers > 1:
+            try:
+                self.helpers = Helpers(self.setup.spec, self.engine, self.workers - 1)
+            except BrokenProcessPool as e:  # as one dying later: the run goes on in this process
+                self.log(f"live: a helper process died starting ({e}); the run goes on in one process")
+
+    def announce(self) -> None:
+        info, cfg = self.info, self.cfg
+        self.log(f"live: {info.kind}, {info.width}x{info.height} at {self.fps:g} frames/s; device "
+                 f"{self.setup.device}, {self.workers} process{'es' * (self.workers > 1)}; background: "
+                 f"{self.setup.background}; until {'the frames end, ' if cfg.inputs.play else ''}Ctrl-C"
+                 f"{f' or {self.max_frames} frames' if self.max_frames else ''}")
 
     def loop(self) -> str:
         """Take and infer the newest frame until --max-frames or the camera stops sending;
@@ -448,6 +480,7 @@ class LiveRun:
         names, records = self.frame_loop.names, self.frame_loop.records
         summary = summarise(cfg, [Path(n) for n in names], records, [], None, self.geometry,
                             setup.device, setup.background, None, [])
+        summary["inference"] = setup.inference
         summary["tracking"], tracks = self.tracks()
         summary["live"] = self.live_block(stopped_by, stop_error, wall)
         summary["timings"]["total_s"] = time.perf_counter() - self.t_start
@@ -490,7 +523,7 @@ class LiveRun:
                 # run's shutdown left out) (t_first: the first frame taken, so the first
                 # written: frames are written in the order taken)
                 "frames_per_s_steady": steady_rate(done, self.t_first, latencies, self.finished),
-                "processes": self.workers,
+                "processes": self.workers, "structure_frames": self.structure_frames,
                 "camera_fps": self.fps, "stopped_by": stopped_by, "stop_error": stop_error,
                 "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
                 "latency_ms_p95": 1000 * float(np.percentile(latencies, 95)) if latencies else None,
