@@ -354,13 +354,18 @@ class LiveRun:
     # -- the main loop -----------------------------------------------------------------------
     def run(self) -> dict:
         """Until Ctrl-C, --max-frames or the camera stopping; then the run's outputs."""
+        cfg = self.cfg  # floor-only on a live camera: the static planes come from its first frames
+        planes_first = not (cfg.inputs.play or cfg.inputs.background or not cfg.inputs.structure.planes)
+        if not planes_first:
+            self.start_helpers()  # before the camera: no frame is dropped while they start
         self.source.start(self.slot.put)
         self.finisher = threading.Thread(target=self.finishing, daemon=True)
         self.finisher.start()
         stopped_by, stop_error, clean = "max_frames", None, False
         try:
-            self.find_structure()
-            self.start_helpers()
+            if planes_first:  # the helpers take the background with the planes
+                self.find_structure()
+                self.start_helpers()
             self.feeder = threading.Thread(target=self.feed, daemon=True) if self.helpers is not None else None
             self.announce()
             stopped_by = self.loop()
@@ -387,8 +392,6 @@ class LiveRun:
         from .camera_setup import static_structure
 
         cfg = self.cfg
-        if cfg.inputs.play or cfg.inputs.background or not cfg.inputs.structure.planes:
-            return
         frames = []
         while len(frames) < cfg.inputs.structure.frames:
             fr = self.slot.take(STALL_S if frames else self.first_frame_timeout)
