@@ -222,6 +222,36 @@ class Detector:
                                 cfg.detection.threshold)
         return OnlineTracks(tracker)
 
+    def find_static_planes(self, depths) -> dict:
+        """Walls and furniture (input.structure's planes) found in `depths`, a camera's first
+        frames as `detect` takes them, and made background for the frames that follow, as a
+        live run finds them in its camera's first frames (a config whose input.frames the
+        Detector read has them already). Floor-only, or `auto`'s floor-only pixels. Returns
+        summary.json's inference.structure report (the planes, the pixels made background).
+
+        Raises:
+            ConfigError: background frames (they explain the room), input.structure.planes
+                false, or a rig (its cameras find theirs in the config's input.frames).
+            InputError: a frame as `detect` refuses it, or no frame.
+        """
+        from .camera_setup import static_structure
+
+        cfg = self.config
+        if cfg.is_rig:
+            raise ConfigError("find_static_planes: expected one camera's config; a rig's cameras find their planes "
+                              "in the config's input.frames")
+        if cfg.inputs.background and not cfg.inputs.auto_background:
+            raise ConfigError(f"input.background: expected null or auto for find_static_planes, found background "
+                              f"frames ({cfg.inputs.background}), which explain the room already")
+        if not cfg.inputs.structure.planes:
+            raise ConfigError("input.structure.planes: expected true for find_static_planes, found false")
+        frames = [self._metres(d, i, who="find_static_planes, ") for i, d in enumerate(depths)]
+        if not frames:
+            raise InputError("find_static_planes: expected at least one frame, found none")
+        report = static_structure(cfg, self.engine.views[0], self.camera, frames, log=lambda *_: None)
+        self.setup.inference["structure"] = report
+        return report
+
     def _rig_metres(self, depths, index: int) -> list[np.ndarray]:
         """A rig's frame, a list in camera order or a dict by name, as metres a camera (None: that
         camera has no frame: the frame is inferred from the others, FrameWorker.infer)."""

@@ -91,6 +91,39 @@ def test_a_wall_in_the_grid_is_background_and_people_by_it_are_found(tmp_path):
         assert (tmp_path / "pooled" / "out" / name).read_bytes() == (tmp_path / "planes" / "out" / name).read_bytes()
 
 
+def test_the_api_finds_the_planes_in_frames_it_is_given(tmp_path):
+    """Detector.find_static_planes: a floor-only config with no input.frames (a camera's frames
+    come later) takes the wall for people until it is given the first frames; then the wall is
+    background and each frame's detections are the recorded run's (which found the planes in
+    its first files). Background frames, planes off and no frame are one-line errors."""
+    from dpom_warp.api import Detector
+    from dpom_warp.config import ConfigError
+    from dpom_warp.io import InputError, read_depth
+
+    frames = [rendered(seed=s) for s in range(3)]
+    dets, summary = run(tmp_path, "planes", frames)
+    cfg = yaml.safe_load((tmp_path / "planes" / "c.yaml").read_text())
+    del cfg["input"]["frames"]
+    det = Detector.from_config(cfg)
+    given = [read_depth(tmp_path / "planes" / "frames" / f"{i:04d}.png", 0.001, (120, 160)) for i in range(3)]
+    before = [[d.x, d.y] for d in det.detect(given[0]).detections]
+    assert not all(near(np.array([d]), PEOPLE[0]) or near(np.array([d]), PEOPLE[1]) for d in before), before
+    report = det.find_static_planes(given)
+    assert report["pixels"] == summary["inference"]["structure"]["pixels"]
+    assert [p["normal"] for p in report["planes"]] == [p["normal"] for p in summary["inference"]["structure"]["planes"]]
+    found = [[d.x, d.y] for g in given for d in det.detect(g).detections]
+    assert np.allclose(np.array(found).reshape(-1, 2), dets, atol=1e-4), (found, dets)
+    with pytest.raises(InputError, match="expected at least one frame"):
+        det.find_static_planes([])
+    with pytest.raises(ConfigError, match="input.structure.planes: expected true"):
+        Detector.from_config(cfg, {"input.structure.planes": False}).find_static_planes(given)
+    bg = tmp_path / "bg"
+    bg.mkdir()
+    write_depth_png(bg / "0000.png", frames[0])
+    with pytest.raises(ConfigError, match="input.background: expected null or auto"):
+        Detector.from_config(cfg, {"input.background": str(bg / "*.png")}).find_static_planes(given)
+
+
 def test_no_wall_is_no_plane_and_the_same_run(tmp_path):
     """People on an open floor (no wall, no desk): no plane is structure (a person's front is no
     plane a metre wide), so the run is the run without the key, byte for byte."""
