@@ -94,14 +94,14 @@ def fuse_detections(per_camera: list[dict], agree: int) -> dict:
     return out
 
 
-def batched(raw: dict, depths: list, batch: int, repeats: int, want: list, sets: list[str] = ()) -> dict:
-    """The rig's frames through Detector.detect_batch with engine.batch = `batch`: rig frames and
-    camera-frames a second (median of `repeats` passes over at least one full batch, after a
-    warm-up pass), and whether each frame's detections are `want`'s (each frame's (n, 2), in order)."""
+def batched(run_cfg: dict, depths: list, batch: int, repeats: int, want: list, sets: list[str] = ()) -> dict:
+    """The rig's frames (`run_cfg`: its config, rendered) through Detector.detect_batch with
+    engine.batch = `batch`: rig frames and camera-frames a second (median of `repeats` passes
+    over at least one full batch, after a warm-up pass), and whether each frame's detections are
+    `want`'s (each frame's (n, 2), in order)."""
     from dpom_warp import Detector
 
-    det = Detector.from_config({**{k: v for k, v in raw.items() if k != "synthetic"}, "engine": {"batch": batch}},
-                               list(sets))
+    det = Detector.from_config({**run_cfg, "engine": {"batch": batch}}, list(sets))
     order = [i % len(depths) for i in range(max(batch, len(depths)))]
     frames = [depths[i] for i in order]
     got = det.detect_batch(frames)  # (the warm-up)
@@ -132,9 +132,10 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
     truth = load_ground_truth(raw["evaluation"]["ground_truth"])
     depths = [read_rig_frame(cfg, f.paths) for f in rig_frames]
     names = [n for n, _ in cfg.cameras]
-    rig = Detector.from_config({k: v for k, v in raw.items() if k != "synthetic"}, list(sets))
+    run_cfg = {k: v for k, v in raw.items() if k != "synthetic"}  # rendered above
+    rig = Detector.from_config(run_cfg, list(sets))
     stride = rig.engine.resolution.stride  # each camera alone at the rig's resolution
-    singles = [Detector.from_config({**{k: v for k, v in raw.items() if k != "synthetic"},
+    singles = [Detector.from_config({**run_cfg,
                                      "cameras": [{**c, "input": {**c["input"], "stride": stride}}
                                                  for c in raw["cameras"] if c["name"] == n]}, list(sets))
                for n in names]
@@ -158,7 +159,7 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
     median = {k: statistics.median(v) for k, v in times.items()}
     hidden = sum(1 for f in rig_frames for o in truth[f.name]
                  if min(o["visible_in"].get(n, 0.0) for n in names) < 0.1)
-    rate = batched(raw, depths, batch, repeats, [dets["rig"][f.name] for f in rig_frames], sets) if batch else None
+    rate = batched(run_cfg, depths, batch, repeats, [dets["rig"][f.name] for f in rig_frames], sets) if batch else None
     return {"scene": name, "sets": list(sets), "tuning": draw == 1000, "draw": draw, "object_width": width, "device": device, "people": SCENES[name]["people"], "frames": len(rig_frames),
             "truth": sum(len(v) for v in frames_truth.values()), "hidden_from_one": hidden,
             "moda": scores, "rig_counts": {k: full["rig"][k] for k in ("tp", "fp", "fn")}, "detection_fusion": {"any": fused[1], "two": fused[2], "best": max(fused.values())},

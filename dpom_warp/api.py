@@ -234,7 +234,7 @@ class Detector:
                 false, or a rig (its cameras find theirs in the config's input.frames).
             InputError: a frame as `detect` refuses it, or no frame.
         """
-        from .camera_setup import static_structure
+        from .session import add_static_planes
 
         cfg = self.config
         if cfg.is_rig:
@@ -248,9 +248,7 @@ class Detector:
         frames = [self._metres(d, i, who="find_static_planes, ") for i, d in enumerate(depths)]
         if not frames:
             raise InputError("find_static_planes: expected at least one frame, found none")
-        report = static_structure(cfg, self.engine.views[0], self.camera, frames, log=lambda *_: None)
-        self.setup.inference["structure"] = report
-        return report
+        return add_static_planes(self.setup, frames, log=lambda *_: None)
 
     def _rig_metres(self, depths, index: int) -> list[np.ndarray]:
         """A rig's frame, a list in camera order or a dict by name, as metres a camera (None: that

@@ -189,10 +189,15 @@ def camera_background(cfg: RunConfig, view, prep: CameraPrep, frames: list[Path]
     if not prep.bg_frames and cfg.inputs.structure.planes and frames:  # walls, cupboards, desks: background
         structure = static_structure(cfg, view, prep.camera, frames[:cfg.inputs.structure.frames], log)
         if structure["pixels"]:
-            background += f"; {len(structure['planes'])} static planes ({structure['pixels']} pixels)"
+            background += planes_words(structure)
             given = view.background_state()  # what other workers (--workers, Ray, live helpers) take
     prep.bg_frames.clear()
     return background, given, auto_report, structure
+
+
+def planes_words(report: dict) -> str:
+    """What the run's background words add for the static planes of a static_structure report."""
+    return f"; {len(report['planes'])} static planes ({report['pixels']} pixels)"
 
 
 def set_up_background(cfg: RunConfig, view, bg_frames: list, n_files: int, sample: list[Path], dev: str,

@@ -354,8 +354,8 @@ class LiveRun:
     # -- the main loop -----------------------------------------------------------------------
     def run(self) -> dict:
         """Until Ctrl-C, --max-frames or the camera stopping; then the run's outputs."""
-        cfg = self.cfg  # floor-only on a live camera: the static planes come from its first frames
-        planes_first = not (cfg.inputs.play or cfg.inputs.background or not cfg.inputs.structure.planes)
+        i = self.cfg.inputs  # floor-only on a live camera: the static planes come from its first frames
+        planes_first = not i.play and not i.background and i.structure.planes
         if not planes_first:
             self.start_helpers()  # before the camera: no frame is dropped while they start
         self.source.start(self.slot.put)
@@ -389,7 +389,7 @@ class LiveRun:
         camera's first input.structure.frames frames, as a recorded run finds them in its first
         files (a played run's set_up did); those frames are not inferred (summary.json's
         live.structure_frames)."""
-        from .camera_setup import static_structure
+        from .session import add_static_planes
 
         cfg = self.cfg
         frames = []
@@ -398,14 +398,14 @@ class LiveRun:
             if fr is None:
                 if frames:  # the stream ended or stalled: the planes of what came
                     break
-                raise ConfigError(f"input.frames: {cfg.inputs.frames}: no frame within "
-                                  f"{self.first_frame_timeout:g} s of starting the camera")
+                raise self.no_first_frame()
             frames.append(units_to_metres(fr.depth, cfg.inputs.depth_scale))
         self.structure_frames = len(frames)
-        report = static_structure(cfg, self.engine.views[0], self.setup.spec.camera, frames, self.log)
-        self.setup.inference["structure"] = report
-        if report["pixels"]:
-            self.setup.background += f"; {len(report['planes'])} static planes ({report['pixels']} pixels)"
+        add_static_planes(self.setup, frames, self.log)
+
+    def no_first_frame(self) -> ConfigError:
+        return ConfigError(f"input.frames: {self.cfg.inputs.frames}: no frame within "
+                           f"{self.first_frame_timeout:g} s of starting the camera")
 
     def start_helpers(self) -> None:
         """workers - 1 helper processes, each with an engine of this one's background."""
@@ -435,8 +435,7 @@ class LiveRun:
                 if self.slot.ended:
                     return "end of the frames"
                 if first:
-                    raise ConfigError(f"input.frames: {self.cfg.inputs.frames}: no frame within "
-                                      f"{self.first_frame_timeout:g} s of starting the camera")
+                    raise self.no_first_frame()
                 return "camera stopped sending"
             self.t_first = self.t_first or item.frame.arrived
             if self.feeder is not None and first:

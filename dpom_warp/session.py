@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera_setup import camera_background, prepare_camera
+from .camera_setup import camera_background, planes_words, prepare_camera, static_structure
 from .config import ConfigError, RunConfig
 from .io import InputError
 from .engine import Engine, MemoryBudgetError, resolve_device
@@ -107,6 +107,20 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
         engine = engine if keep_engine else None
     return Setup(dev, WorkerSpec(cfg, prep.camera, dev, given), prep.geometry, prep.ground, background, auto_report,
                  inference, engine, time.perf_counter() - t)
+
+
+def add_static_planes(setup: Setup, frames: list[np.ndarray], log=print) -> dict:
+    """The static planes (input.structure) found in `frames` (metres, full resolution: a live
+    camera's first, given after setting up) made background in the setup's engine (one camera),
+    its spec (what helper processes take), inference report and background words, as set_up
+    makes them from the run's first files; returns the planes' report."""
+    view = setup.engine.views[0]
+    report = static_structure(setup.spec.cfg, view, setup.spec.camera, frames, log)
+    setup.inference["structure"] = report
+    if report["pixels"]:
+        setup.background += planes_words(report)
+        setup.spec.background = view.background_state()
+    return report
 
 
 def refuse_warm_start(cfg: RunConfig, parallel: bool) -> None:

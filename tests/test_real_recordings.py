@@ -23,6 +23,18 @@ def recording_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("DPOM_WARP_CACHE", str(tmp_path / "recordings-cache"))
 
 
+def run_posed(tmp_path, recording) -> None:
+    """`dpom-warp run` on `recording`, its pose given (1.2 m up, pitch 10 degrees), into
+    tmp_path/out without pictures; it must succeed."""
+    cfg = {"device": "cpu", "input": {"frames": str(recording)},
+           "camera": {"extrinsics": {"height": 1.2, "pitch_deg": 10.0}},
+           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]},
+           "output": {"dir": str(tmp_path / "out"), "images": False}}
+    path = tmp_path / "posed.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert main(["run", str(path), "--no-progress"]) == 0
+
+
 def ros1_image_messages(path: Path, topic: str):
     """Depth images of a ROS 1 bag read without rosbags: the bag format's records walked by
     hand (chunks, connections 0x07, message data 0x02; ROS 1 serialisation of sensor_msgs/Image)."""
@@ -92,13 +104,7 @@ def test_realsense_recording_reads_right_and_runs(tmp_path, capsys):
     for a, (enc, b) in zip(ours, theirs):
         assert enc == "mono16" and np.array_equal(a, b)
         assert a[a > 0].min() == 341 and 3000 < a.max() < 3200
-    cfg = {"device": "cpu", "input": {"frames": str(RS_BAG)},
-           "camera": {"extrinsics": {"height": 1.2, "pitch_deg": 10.0}},
-           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]},
-           "output": {"dir": str(tmp_path / "out"), "images": False}}
-    path = tmp_path / "rs.yaml"
-    path.write_text(yaml.safe_dump(cfg))
-    assert main(["run", str(path), "--no-progress"]) == 0
+    run_posed(tmp_path, RS_BAG)
     assert sorted(p.name for p in (tmp_path / "out" / "maps").iterdir()) == ["000000.npy", "000001.npy"]
     capsys.readouterr()
     assert main(["info", str(RS_BAG), "--json"]) == 0
@@ -142,13 +148,7 @@ def test_azure_kinect_recording_reads_right_and_runs(tmp_path):
         theirs = frame.to_ndarray()
     assert theirs.shape == ours.shape and np.array_equal(theirs.astype(np.uint16), ours)
     assert ours[ours > 0].min() == 165 and ours.max() == 3690
-    cfg = {"device": "cpu", "input": {"frames": str(AZURE)},
-           "camera": {"extrinsics": {"height": 1.2, "pitch_deg": 10.0}},
-           "grid": {"x": [-2, 2, 0.1], "y": [0.5, 4.0, 0.1]},
-           "output": {"dir": str(tmp_path / "out"), "images": False}}
-    path = tmp_path / "az.yaml"
-    path.write_text(yaml.safe_dump(cfg))
-    assert main(["run", str(path), "--no-progress"]) == 0
+    run_posed(tmp_path, AZURE)
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["frames"] == 1 and len(summary["config"]["camera"]["distortion"]) == 8
 
