@@ -22,16 +22,17 @@ from .frames import reduce_frames
 from .masks import (PixelTable, TablePair, TileIndex, pair_depth_bounds, pixel_entries, pixel_entries_once, table_pairs,
                     table_window)
 from .mean_field import ONE_STACK, SIZED_STACK, check_converged, evidence_pass, exclusion_pass, transparency_pass, update_rho
-from .people import behind_count, behind_points, keep_better_top, soft_threshold, top_band, top_band_clear, top_band_rows
+from .people import (Bands, BandQuery, band_query, bands_of, behind_count, behind_points, keep_better_top, soft_threshold, top_band,
+                     top_band_clear, top_band_rows)
 from .pixel_model import SHAPE_FIELDS, SHAPE_PLANE, SHAPE_SOLID, GeometryArrays, PixelLists, PixelModel
 from .sparse import (IDLE, PRUNED, TALLY_SUM, bound_pass, compact_again, compact_once, count_entries, count_iteration,
                      count_live, fill_live, frame_tally, gather_live, has_entries, mark_idle, place_active, prune,
                      prune_lists, update_bound)
 
 __all__ = [
-    "GeometryArrays", "IDLE", "SHAPE_FIELDS", "SHAPE_PLANE", "SHAPE_SOLID", "ONE_STACK", "PRUNED", "SIZED_STACK", "TALLY_SUM", "PixelLists", "PixelModel", "PixelTable",
+    "BandQuery", "Bands", "GeometryArrays", "IDLE", "SHAPE_FIELDS", "SHAPE_PLANE", "SHAPE_SOLID", "ONE_STACK", "PRUNED", "SIZED_STACK", "TALLY_SUM", "PixelLists", "PixelModel", "PixelTable",
     "TablePair", "TileIndex",
-    "background_delta", "background_from_frames", "behind_count", "behind_points", "bound_pass", "check_converged",
+    "background_delta", "background_from_frames", "band_query", "bands_of", "behind_count", "behind_points", "bound_pass", "check_converged",
     "cluster_background", "cluster_frames", "compact_again", "compact_once", "count_entries", "count_iteration",
     "count_live", "evidence_pass", "exclusion_pass", "fill_live", "floor_background", "frame_tally", "gather_live",
     "has_entries",

@@ -5,7 +5,8 @@
   (`behind_points` gathers the lattice points, `behind_count` counts them).
 - The top band (model.top_support): in the top of each box, the pixels that support the object,
   read behind it, are hidden in front of it or have no reading (`top_band`, `top_band_rows`,
-  `top_band_clear`; `keep_better_top` for the shorter people of model.top_heights).
+  `top_band_clear`; `keep_better_top` for the shorter people of model.top_heights), into `Bands`
+  (one array a count), the band chosen by a `BandQuery`.
 - Eq. 13's soft threshold with the corrected sign, times the top-band factor (`soft_threshold`).
 
 The NumPy reference of each: dpom_warp.reference_people.
@@ -19,6 +20,63 @@ from .pixel_model import (SHAPE_SOLID, GeometryArrays, PixelModel, f64, is_readi
                           object_sigma)
 
 BandCounts = wp.types.vector(length=5, dtype=wp.int32)  # support, against, hidden, missing, seen
+
+
+@wp.struct
+class Bands:
+    """Each location's top-band counts of a batch (top_band): the pixels that support its
+    object, read behind it (against), in front of it (hidden), have no reading (missing), and
+    those in the image (seen; -1: not counted)."""
+
+    support: wp.array(dtype=wp.int32)
+    against: wp.array(dtype=wp.int32)
+    hidden: wp.array(dtype=wp.int32)
+    missing: wp.array(dtype=wp.int32)
+    seen: wp.array(dtype=wp.int32)
+
+
+@wp.struct
+class BandQuery:
+    """Which band top_band counts: heights lo to hi (metres, world z) of each location's object,
+    seen from a camera whose centre is at centre_z; the locations with rho >= min_rho; a pixel
+    supports it within support_sigmas sigma (0: the mask test); a missing reading counts where
+    the background is read (pi_inf < missing_read)."""
+
+    centre_z: wp.float64
+    lo: wp.float64
+    hi: wp.float64
+    min_rho: wp.float64
+    support_sigmas: wp.float64
+    missing_read: wp.float64
+
+
+def band_query(centre_z: float, lo: float, hi: float, min_rho: float, support_sigmas: float,
+               missing_read: float) -> BandQuery:
+    q = BandQuery()
+    q.centre_z, q.lo, q.hi, q.min_rho, q.support_sigmas, q.missing_read = (
+        centre_z, lo, hi, min_rho, support_sigmas, missing_read)
+    return q
+
+
+def bands_of(arrays) -> Bands:
+    """A Bands of five int32 arrays (support, against, hidden, missing, seen)."""
+    out = Bands()
+    out.support, out.against, out.hidden, out.missing, out.seen = arrays
+    return out
+
+
+@wp.func
+def band_at(c: Bands, i: int) -> BandCounts:
+    return BandCounts(c.support[i], c.against[i], c.hidden[i], c.missing[i], c.seen[i])
+
+
+@wp.func
+def set_band(c: Bands, i: int, n: BandCounts):
+    c.support[i] = n[0]
+    c.against[i] = n[1]
+    c.hidden[i] = n[2]
+    c.missing[i] = n[3]
+    c.seen[i] = n[4]
 
 
 SUPPORTS = wp.constant(0)
@@ -212,9 +270,9 @@ def behind_count(
 
 
 @wp.func
-def band_row(depth: wp.array3d(dtype=wp.float32), geo: GeometryArrays, pm: PixelModel, b: int, k: int, v: int,
-             r: wp.vec4i, span: wp.vec2d, centre_z: wp.float64, lo: wp.float64, hi: wp.float64,
-             support_sigmas: wp.float64, bg: wp.array2d(dtype=wp.float64), missing_read: wp.float64) -> BandCounts:
+def band_row(depth: wp.array3d(dtype=wp.float32), geo: GeometryArrays, pm: PixelModel,
+             bg: wp.array2d(dtype=wp.float64), q: BandQuery, b: int, k: int, v: int, r: wp.vec4i,
+             span: wp.vec2d) -> BandCounts:
     """top_band's counts (support, against, hidden, missing, seen) of row v of location k's
     rectangle r in frame b; with the solid, a row none of whose points can lie in the band
     (row_may_reach, `span` its solid_depth_span) counts nothing."""
@@ -223,18 +281,18 @@ def band_row(depth: wp.array3d(dtype=wp.float32), geo: GeometryArrays, pm: Pixel
     f = int(0)
     m = int(0)
     n = int(0)
-    if geo.shape == SHAPE_SOLID and not row_may_reach(geo, v, r[0], r[2], 1, centre_z, span, lo, hi):
+    if geo.shape == SHAPE_SOLID and not row_may_reach(geo, v, r[0], r[2], 1, q.centre_z, span, q.lo, q.hi):
         return BandCounts(0, 0, 0, 0, 0)
     for u in range(r[0], r[2] + 1):
         d = geo.rays[v, u]
         o = object_depth(geo, k, d)
         mu = o[0]
         if mu > f64(0.0):
-            h = centre_z + mu * d[2]
+            h = q.centre_z + mu * d[2]
             z = f64(depth[b, v, u])
-            if h >= lo and h <= hi:
+            if h >= q.lo and h <= q.hi:
                 n += 1
-                cls = reading_class(pm, z, mu, o[1], support_sigmas)
+                cls = reading_class(pm, z, mu, o[1], q.support_sigmas)
                 if cls == SUPPORTS:
                     s += 1
                 elif cls == BEHIND:
@@ -242,7 +300,7 @@ def band_row(depth: wp.array3d(dtype=wp.float32), geo: GeometryArrays, pm: Pixel
                 elif cls == IN_FRONT:
                     f += 1
                 elif mu <= pm.z_max:
-                    if bg[(b * depth.shape[1] + v) * depth.shape[2] + u, 2] < missing_read:
+                    if bg[(b * depth.shape[1] + v) * depth.shape[2] + u, 2] < q.missing_read:
                         m += 1
     return BandCounts(s, a, f, m, n)
 
@@ -252,76 +310,51 @@ def top_band(
     depth: wp.array3d(dtype=wp.float32),
     geo: GeometryArrays,
     pm: PixelModel,
-    centre_z: wp.float64,
-    lo: wp.float64,
-    hi: wp.float64,
-    min_rho: wp.float64,
-    support_sigmas: wp.float64,
     bg: wp.array2d(dtype=wp.float64),
-    missing_read: wp.float64,
+    q: BandQuery,
     rho: wp.array(dtype=wp.float64),
-    support: wp.array(dtype=wp.int32),
-    against: wp.array(dtype=wp.int32),
-    hidden: wp.array(dtype=wp.int32),
-    missing: wp.array(dtype=wp.int32),
-    seen: wp.array(dtype=wp.int32),
+    out: Bands,
     forward: wp.vec3d,
 ):
-    """The top band of a standing object (heights lo to hi where the pixels' rays meet it: its
-    solid, or its facing plane): how many of its silhouette's pixels there pass the mask test
-    (support), read behind the object (against: it would hide them, so nothing that tall
-    stands there) or in front of it (hidden by something nearer); with `support_sigmas` > 0 a pixel supports it when within that many
-    sigma of the object instead; `missing` counts the pixels without a reading where the object
-    lies within the sensor's range (mu <= z_max: it would be read there) and the background
-    (bg, kernels.background) is mostly read (pi_inf < missing_read: not a sensor's dead
-    region); `seen` counts the
-    band's pixels in the image, with a reading or not (a band outside the image has none). One
-    thread per location of the batch, for those with rho >= min_rho (the others: 0, 0, 0, 0
-    and seen -1). With the solid, the rows of the rectangle that cannot reach the band
-    (row_may_reach, `forward` the optical axis as in behind_points) are skipped: the same
-    counts."""
+    """The top band of a standing object (q: heights lo to hi where the pixels' rays meet it:
+    its solid, or its facing plane): how many of its silhouette's pixels there pass the mask
+    test (support), read behind the object (against: it would hide them, so nothing that tall
+    stands there) or in front of it (hidden by something nearer); with q.support_sigmas > 0 a
+    pixel supports it when within that many sigma of the object instead; `missing` counts the
+    pixels without a reading where the object lies within the sensor's range (mu <= z_max: it
+    would be read there) and the background (bg, kernels.background) is mostly read (pi_inf <
+    q.missing_read: not a sensor's dead region); `seen` counts the band's pixels in the image,
+    with a reading or not (a band outside the image has none). One thread per location of the
+    batch, for those with rho >= q.min_rho (the others: 0, 0, 0, 0 and seen -1). With the
+    solid, the rows of the rectangle that cannot reach the band (row_may_reach, `forward` the
+    optical axis as in behind_points) are skipped: the same counts."""
     i = wp.tid()
     n_loc = geo.rect.shape[0]
     b = i / n_loc
     k = i - b * n_loc
-    c = BandCounts()
-    if rho[i] >= min_rho:
+    c = BandCounts(0, 0, 0, 0, -1)
+    if rho[i] >= q.min_rho:
+        c = BandCounts()
         r = geo.rect[k]
         span = solid_depth_span(geo, k, forward)
         for v in range(r[1], r[3] + 1):
-            c = c + band_row(depth, geo, pm, b, k, v, r, span, centre_z, lo, hi, support_sigmas, bg,
-                             missing_read)
-    support[i] = c[0]
-    against[i] = c[1]
-    hidden[i] = c[2]
-    missing[i] = c[3]
-    if rho[i] >= min_rho:
-        seen[i] = c[4]
-    else:
-        seen[i] = -1
+            c = c + band_row(depth, geo, pm, bg, q, b, k, v, r, span)
+    set_band(out, i, c)
 
 
 @wp.kernel(enable_backward=False)
 def top_band_clear(
     rho: wp.array(dtype=wp.float64),
     min_rho: wp.float64,
-    support: wp.array(dtype=wp.int32),
-    against: wp.array(dtype=wp.int32),
-    hidden: wp.array(dtype=wp.int32),
-    missing: wp.array(dtype=wp.int32),
-    seen: wp.array(dtype=wp.int32),
+    out: Bands,
 ):
     """top_band_rows' start: each location's counts 0, and seen -1 where rho < min_rho (not
     counted), as top_band leaves them."""
     i = wp.tid()
-    support[i] = 0
-    against[i] = 0
-    hidden[i] = 0
-    missing[i] = 0
     if rho[i] >= min_rho:
-        seen[i] = 0
+        set_band(out, i, BandCounts())
     else:
-        seen[i] = -1
+        set_band(out, i, BandCounts(0, 0, 0, 0, -1))
 
 
 @wp.kernel(enable_backward=False)
@@ -329,20 +362,11 @@ def top_band_rows(
     depth: wp.array3d(dtype=wp.float32),
     geo: GeometryArrays,
     pm: PixelModel,
-    centre_z: wp.float64,
-    lo: wp.float64,
-    hi: wp.float64,
-    min_rho: wp.float64,
-    support_sigmas: wp.float64,
     bg: wp.array2d(dtype=wp.float64),
-    missing_read: wp.float64,
+    q: BandQuery,
     rho: wp.array(dtype=wp.float64),
     rows: int,
-    support: wp.array(dtype=wp.int32),
-    against: wp.array(dtype=wp.int32),
-    hidden: wp.array(dtype=wp.int32),
-    missing: wp.array(dtype=wp.int32),
-    seen: wp.array(dtype=wp.int32),
+    out: Bands,
     forward: wp.vec3d,
 ):
     """top_band's counts with one thread per row of each location's rectangle (`rows`: the
@@ -350,7 +374,7 @@ def top_band_rows(
     GPU, where one thread walking a whole rectangle was the threshold step's longest kernel."""
     t = wp.tid()
     i = t / rows
-    if rho[i] < min_rho:
+    if rho[i] < q.min_rho:
         return
     n_loc = geo.rect.shape[0]
     b = i / n_loc
@@ -359,14 +383,13 @@ def top_band_rows(
     v = r[1] + t - i * rows
     if v > r[3]:
         return
-    c = band_row(depth, geo, pm, b, k, v, r, solid_depth_span(geo, k, forward), centre_z, lo, hi, support_sigmas,
-                 bg, missing_read)
+    c = band_row(depth, geo, pm, bg, q, b, k, v, r, solid_depth_span(geo, k, forward))
     if c[4] > 0:
-        wp.atomic_add(support, i, c[0])
-        wp.atomic_add(against, i, c[1])
-        wp.atomic_add(hidden, i, c[2])
-        wp.atomic_add(missing, i, c[3])
-        wp.atomic_add(seen, i, c[4])
+        wp.atomic_add(out.support, i, c[0])
+        wp.atomic_add(out.against, i, c[1])
+        wp.atomic_add(out.hidden, i, c[2])
+        wp.atomic_add(out.missing, i, c[3])
+        wp.atomic_add(out.seen, i, c[4])
 
 
 @wp.func
@@ -377,13 +400,17 @@ def band_out_of_view(seen: int, min_pixels: int, area: wp.float64, part: wp.floa
 
 
 @wp.func
-def top_factor(s: int, a: int, f: int, m: int, seen: int, weight: wp.float64, missing_weight: wp.float64,
-               share: wp.float64, slope: wp.float64, min_pixels: int, unseen: wp.float64, area: wp.float64,
-               part: wp.float64) -> wp.float64:
-    """sigmoid(slope ((s + weight f) / (s + a + f + missing_weight m) - share)); `unseen` where
-    the band is out of view (band_out_of_view), else 1 with fewer than min_pixels judged in the
-    band (read, or missing where missing_weight > 0)."""
-    if band_out_of_view(seen, min_pixels, area, part):
+def top_factor(c: BandCounts, weight: wp.float64, missing_weight: wp.float64, share: wp.float64,
+               slope: wp.float64, min_pixels: int, unseen: wp.float64, area: wp.float64, part: wp.float64) -> wp.float64:
+    """sigmoid(slope ((s + weight f) / (s + a + f + missing_weight m) - share)) of a band's
+    counts c = (s, a, f, m, seen); `unseen` where the band is out of view (band_out_of_view),
+    else 1 with fewer than min_pixels judged in the band (read, or missing where
+    missing_weight > 0)."""
+    s = c[0]
+    a = c[1]
+    f = c[2]
+    m = c[3]
+    if band_out_of_view(c[4], min_pixels, area, part):
         return unseen
     n = s + a + f
     if missing_weight > f64(0.0):
@@ -395,16 +422,8 @@ def top_factor(s: int, a: int, f: int, m: int, seen: int, weight: wp.float64, mi
 
 @wp.kernel(enable_backward=False)
 def keep_better_top(
-    support: wp.array(dtype=wp.int32),
-    against: wp.array(dtype=wp.int32),
-    hidden: wp.array(dtype=wp.int32),
-    missing: wp.array(dtype=wp.int32),
-    seen: wp.array(dtype=wp.int32),
-    other_support: wp.array(dtype=wp.int32),
-    other_against: wp.array(dtype=wp.int32),
-    other_hidden: wp.array(dtype=wp.int32),
-    other_missing: wp.array(dtype=wp.int32),
-    other_seen: wp.array(dtype=wp.int32),
+    mine: Bands,
+    other: Bands,
     weight: wp.float64,
     missing_weight: wp.float64,
     share: wp.float64,
@@ -420,18 +439,13 @@ def keep_better_top(
     location of the batch (reference.mean_field); area holds the L locations of one frame."""
     k = wp.tid()
     a = area[k % area.shape[0]]
-    if band_out_of_view(seen[k], min_pixels, a, part):
+    if band_out_of_view(mine.seen[k], min_pixels, a, part):
         return
-    mine = top_factor(support[k], against[k], hidden[k], missing[k], seen[k], weight, missing_weight, share, slope,
-                      min_pixels, unseen, a, part)
-    other = top_factor(other_support[k], other_against[k], other_hidden[k], other_missing[k], other_seen[k], weight,
-                       missing_weight, share, slope, min_pixels, unseen, a, part)
-    if other > mine:
-        support[k] = other_support[k]
-        against[k] = other_against[k]
-        hidden[k] = other_hidden[k]
-        missing[k] = other_missing[k]
-        seen[k] = other_seen[k]
+    own = band_at(mine, k)
+    shorter = band_at(other, k)
+    if top_factor(shorter, weight, missing_weight, share, slope, min_pixels, unseen, a, part) > top_factor(
+            own, weight, missing_weight, share, slope, min_pixels, unseen, a, part):
+        set_band(mine, k, shorter)
 
 
 @wp.kernel(enable_backward=False)
@@ -441,11 +455,7 @@ def soft_threshold(
     area: wp.array(dtype=wp.float64),
     visible: wp.array(dtype=wp.float64),
     rho: wp.array(dtype=wp.float64),
-    support: wp.array(dtype=wp.int32),
-    against: wp.array(dtype=wp.int32),
-    hidden: wp.array(dtype=wp.int32),
-    missing: wp.array(dtype=wp.int32),
-    seen: wp.array(dtype=wp.int32),
+    top: Bands,
     top_hidden: wp.float64,
     top_missing: wp.float64,
     top_share: wp.float64,
@@ -455,15 +465,14 @@ def soft_threshold(
     unseen_share: wp.float64,
     unseen_part: wp.float64,
     unhidden: int,
-    all_support: wp.array(dtype=wp.int32),
-    all_against: wp.array(dtype=wp.int32),
+    whole: Bands,
     share: wp.array(dtype=wp.float64),
     rho_star: wp.array(dtype=wp.float64),
 ):
     """Eq. 13 with the corrected sign: rho* = sigmoid(alpha e + beta) rho, e = visible / |S_k|
     (area holds the L locations of one frame; the arrays hold the frames of a batch), or with
-    `unhidden` e = visible / (pixels of S_k reading at or behind the object: all_support +
-    all_against, the top_band counts over the whole silhouette) where there are any; times
+    `unhidden` e = visible / (pixels of S_k reading at or behind the object: whole.support +
+    whole.against, the top_band counts over the whole silhouette) where there are any; times
     the top-band factor (top_band, top_factor; top_share = 0: none), and where the band is out
     of view (band_out_of_view, unseen_part) by sigmoid(top_slope (e - unseen_share)) unless
     unseen_share is 0 (ModelParams.top_unseen_share)."""
@@ -471,15 +480,15 @@ def soft_threshold(
     a = area[k % area.shape[0]]
     if a > f64(0.0):
         d = a
-        if unhidden != 0 and all_support[k] + all_against[k] > 0:
-            d = f64(all_support[k] + all_against[k])
+        if unhidden != 0 and whole.support[k] + whole.against[k] > 0:
+            d = f64(whole.support[k] + whole.against[k])
         e = visible[k] / d
         share[k] = e
         rho_star[k] = sigmoid(alpha * e + beta) * rho[k]
         if top_share > f64(0.0):
-            factor = top_factor(support[k], against[k], hidden[k], missing[k], seen[k], top_hidden, top_missing,
-                                top_share, top_slope, top_min_pixels, top_unseen, a, unseen_part)
-            if unseen_share > f64(0.0) and band_out_of_view(seen[k], top_min_pixels, a, unseen_part):
+            factor = top_factor(band_at(top, k), top_hidden, top_missing, top_share, top_slope, top_min_pixels,
+                                top_unseen, a, unseen_part)
+            if unseen_share > f64(0.0) and band_out_of_view(top.seen[k], top_min_pixels, a, unseen_part):
                 factor = factor * sigmoid(top_slope * (e - unseen_share))
             rho_star[k] = rho_star[k] * factor
     else:

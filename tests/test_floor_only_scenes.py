@@ -191,10 +191,11 @@ def test_band_out_of_view_counts_like_the_reference(device):
     counts = [wp.zeros(len(gate), dtype=wp.int32, device=device) for _ in range(5)]
     h = geom.height
     wp.launch(K.top_band, dim=len(gate), device=device,
-              inputs=[engine.views[0].depth, engine.views[0].geo, engine.pm, float(geom.centre[2]), params.top_band * h, h,
-                      TOP_MIN_RHO, params.top_sigmas, engine.views[0].bg, MISSING_READ,
+              inputs=[engine.views[0].depth, engine.views[0].geo, engine.pm, engine.views[0].bg,
+                      K.band_query(float(geom.centre[2]), params.top_band * h, h, TOP_MIN_RHO, params.top_sigmas,
+                                   MISSING_READ),
                       wp.array(gate, dtype=wp.float64, device=device),
-                      *counts, engine.views[0].forward])
+                      K.bands_of(counts), engine.views[0].forward])
     want = ref.top_band(depth, geom, params, gate, ref.floor_background(geom, params, depth))
     for got, w in zip(counts, want):
         np.testing.assert_array_equal(got.numpy(), w)

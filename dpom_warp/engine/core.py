@@ -156,7 +156,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
             self.visible = wp.zeros(L, dtype=wp.float64)
             self.share = wp.zeros(L, dtype=wp.float64)
             # the whole silhouette's support, against, hidden, missing and seen pixels (share_of unhidden)
-            self.all_counts = tuple(wp.zeros(L, dtype=wp.int32) for _ in range(5))
+            self.whole = K.bands_of([wp.zeros(L, dtype=wp.int32) for _ in range(5)])
             self.rho_star = wp.zeros(L, dtype=wp.float64)
             self.max_change = wp.zeros((batch, max(1, params.max_iterations)), dtype=wp.float64)
             self.done = wp.zeros(batch, dtype=wp.int32)

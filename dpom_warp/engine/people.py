@@ -75,12 +75,13 @@ class Prior:
             self.n_behind = wp.zeros(L, dtype=wp.int32)  # silhouette pixels read behind (behind_count)
             # the top band's support, against, hidden, missing and seen pixels (kernels.top_band)
             self.top_counts = tuple(wp.zeros(L, dtype=wp.int32) for _ in range(5))
+            self.top = K.bands_of(self.top_counts)
 
     def top_terms(self, top_share: float) -> list:
         """kernels.soft_threshold's top-band arguments: the counts, then the factor's parameters
         (`top_share` 0: no factor, the others unread)."""
         p = self.params
-        return [*self.top_counts, p.top_hidden, p.top_missing, top_share, p.top_slope, p.top_min_pixels,
+        return [self.top, p.top_hidden, p.top_missing, top_share, p.top_slope, p.top_min_pixels,
                 p.top_unseen, p.top_unseen_share, p.top_unseen_part]
 
     def count(self, engine) -> None:
@@ -153,7 +154,8 @@ class PeoplePrior(Prior):
         self.top_share = self.params.top_support if engine.views[0].geometry.height > 0 else 0.0
         with wp.ScopedDevice(engine.device):
             # a shorter solid's band counts (params.top_heights)
-            self.other_top = [wp.zeros(L, dtype=wp.int32) for _ in range(5 if self.cameras[0].shorter else 0)]
+            self.other_top = (K.bands_of([wp.zeros(L, dtype=wp.int32) for _ in range(5)])
+                              if self.cameras[0].shorter else None)
             self.candidate = wp.zeros(L, dtype=wp.int32)  # the joint test's locations (joint)
             self.candidate_behind = wp.zeros(L, dtype=wp.int32)  # and their readings behind
 
@@ -185,12 +187,12 @@ class PeoplePrior(Prior):
             engine._soft_threshold(0.0, unhidden)
         height = engine.views[0].geometry.height  # the object's, the same seen from every camera
         gate = engine.rho if unhidden else engine.rho_star
-        engine._bands(p.top_band * height, height, gate, self.top_counts, p.top_sigmas)
+        engine._bands(p.top_band * height, height, gate, self.top, p.top_sigmas)
         for i, short in enumerate(p.top_heights):
             engine._bands(p.top_band * short, short, gate, self.other_top, p.top_sigmas,
                           [cam.shorter[i][1] for cam in self.cameras])
             engine._launch(K.keep_better_top, engine.batch * engine.n_locations,
-                           [*self.top_counts, *self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
+                           [self.top, self.other_top, p.top_hidden, p.top_missing, top, p.top_slope,
                             p.top_min_pixels, p.top_unseen, engine.area, p.top_unseen_part])
 
     def joint(self, engine, rho_star: np.ndarray) -> list:

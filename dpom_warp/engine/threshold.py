@@ -27,7 +27,7 @@ class ThresholdMixin:
             v.launch(K.transparency_pass, self.batch * v.n_pixels, [v.lists, self.rho, self.visible])
         unhidden = int(self.params.share_of == "unhidden")
         if unhidden:
-            self._bands(-BAND_ALL, BAND_ALL, self.rho, self.all_counts)
+            self._bands(-BAND_ALL, BAND_ALL, self.rho, self.whole)
         self.prior.threshold(self, unhidden)
         self._soft_threshold(self.prior.top_share, unhidden)
 
@@ -37,10 +37,10 @@ class ThresholdMixin:
         p = self.params
         self._launch(K.soft_threshold, self.batch * self.n_locations,
                      [p.alpha, p.beta, self.area, self.visible, self.rho, *self.prior.top_terms(top_share), unhidden,
-                      *self.all_counts[:2], self.share, self.rho_star])
+                      self.whole, self.share, self.rho_star])
 
     def _bands(self, lo, hi, gate, counts, sigmas=0.0, geos: list | None = None) -> None:
-        """The counts (support, against, hidden, missing, seen) of the band between heights lo and
+        """The counts (a kernels.Bands: support, against, hidden, missing, seen) of the band between heights lo and
         hi of the locations whose `gate` reaches TOP_MIN_RHO, seen by each camera (with `geos`,
         each camera's GeometryArrays of another solid): a thread a row of each rectangle on a
         GPU, a thread a location elsewhere (kernels.top_band)."""
@@ -53,11 +53,11 @@ class ThresholdMixin:
             raise ValueError(f"a rig's top band: {L} locations x {max(v.top_rows for v in self.views)} rows "
                              f"exceed Warp's 2^31 threads; coarsen grid.x/grid.y")
         if by_row:
-            self._launch(K.top_band_clear, L, [gate, TOP_MIN_RHO, *counts])
+            self._launch(K.top_band_clear, L, [gate, TOP_MIN_RHO, counts])
         for i, v in enumerate(self.views):
-            args = [v.depth, v.geo if geos is None else geos[i], self.pm, float(v.geometry.centre[2]), lo, hi,
-                    TOP_MIN_RHO, sigmas, v.bg, MISSING_READ, gate]
+            query = K.band_query(float(v.geometry.centre[2]), lo, hi, TOP_MIN_RHO, sigmas, MISSING_READ)
+            args = [v.depth, v.geo if geos is None else geos[i], self.pm, v.bg, query, gate]
             if by_row:
-                v.launch(K.top_band_rows, L * v.top_rows, [*args, v.top_rows, *counts, v.forward])
+                v.launch(K.top_band_rows, L * v.top_rows, [*args, v.top_rows, counts, v.forward])
             else:
-                v.launch(K.top_band, L, [*args, *counts, v.forward])
+                v.launch(K.top_band, L, [*args, counts, v.forward])
