@@ -168,7 +168,7 @@ def test_live_run_on_two_processes_gives_the_plain_runs_maps_in_stream_order(cam
         cam.stop()
     summary = assert_plain_maps_in_stream_order(tmp / "out", want, 12)
     assert summary["live"]["processes"] == 2
-    from test_errors import own_start_files
+    from test_long_runs import own_start_files
 
     assert not own_start_files()  # the helpers' start file removed with them
     workers = {p["worker"] for p in summary["per_frame"]}
