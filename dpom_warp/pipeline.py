@@ -411,13 +411,18 @@ def retrack(run_dir: str | Path, overrides: list[str], log=print) -> dict:
     writers = Writers([ZoneTables(view)] + ([Pictures(view)] if cfg.output.images else []) +
                       ([Rerun(view)] if cfg.output.rerun or cfg.output.view else []) +
                       [TrackTables(view), Summary(view)])
+    # a live run's maps are the frames it took of its camera's: their rate is the camera's, as the
+    # live tracker had it (their timestamps' intervals span the frames dropped between)
+    camera_fps = (summary.get("live") or {}).get("camera_fps")
     try:
         report, end = track_run(view, writers, done, truth, log,
-                                fps=fps_of([p.get("timestamp") for p in summary["per_frame"]]),
+                                fps=camera_fps or fps_of([p.get("timestamp") for p in summary["per_frame"]]),
                                 timestamps={p["frame"]: p.get("timestamp") for p in summary["per_frame"]})
     except BaseException:
         writers.close()
         raise
+    if camera_fps:
+        report["fps_from"] = "camera"
     # the run's config stays as made (summary.json's config, run.json): a later plain `track`
     # tracks as the run did; what this one used is in its tracking block
     report["settings"] = {"set": list(overrides), "tracking": cfg.resolved["tracking"], "input_fps": cfg.inputs.fps,
