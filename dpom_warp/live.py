@@ -119,14 +119,17 @@ def run_live(cfg: RunConfig, output_dir: str | None = None, device: str | None =
 
 def check_live(cfg: RunConfig, workers: int | None) -> None:
     """What a live run cannot do, said before the camera starts (played frames are known
-    before: auto background and pose are fitted on them as in a plain run)."""
-    if cfg.inputs.auto_background and not cfg.inputs.play:
-        raise ConfigError("input.background: auto estimates the background from the run's frames; a live "
-                          "run has none in advance; expected background frames or null")
-    if cfg.pose_auto and not cfg.inputs.play:
-        raise ConfigError("camera.extrinsics: auto fits the floor on frames read before the run; expected "
-                          "the live camera's pose ({height, pitch_deg, ...}; `dpom-warp fit-ground` on a "
-                          "few saved frames gives it)")
+    before: auto background and pose are fitted on them as in a plain run); a rig's, of each
+    camera."""
+    for c, (_, m) in enumerate(cfg.members()):
+        at = f"cameras[{c}]." if cfg.is_rig else ""
+        if m.inputs.auto_background and not m.inputs.play:
+            raise ConfigError(f"{at}input.background: auto estimates the background from the run's frames; a live "
+                              f"run has none in advance; expected background frames or null")
+        if m.pose_auto and not m.inputs.play:
+            raise ConfigError(f"{at}camera.extrinsics: auto fits the floor on frames read before the run; expected "
+                              f"the live camera's pose ({{height, pitch_deg, ...}}; `dpom-warp fit-ground` on a "
+                              f"few saved frames gives it)")
     if workers is not None and workers > 1 and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers with it")
@@ -161,8 +164,16 @@ class LiveRun:
 
         self.cfg, self.log, self.max_frames, self.first_frame_timeout = cfg, log, max_frames, first_frame_timeout
         self.t_start = time.perf_counter()
+        self.rig = cfg.is_rig
         if cfg.inputs.play:  # the plain run's frames, sent at their own rate
             self.source, played = played_source(cfg, log, max_frames)
+        elif self.rig:  # every camera's frames paired with the first's as they arrive
+            from .sources.rig import RigStream
+
+            self.source = RigStream([open_source(m.inputs.frames, key=f"cameras[{c}].input.frames")
+                                     for c, (_, m) in enumerate(cfg.cameras)], [n for n, _ in cfg.cameras],
+                                    cfg.rig.tolerance)
+            played = []
         else:
             self.source, played = open_source(cfg.inputs.frames), []  # a live kind of names.READERS
         self.info = info = self.source.info()
@@ -222,10 +233,19 @@ class LiveRun:
             fr = self.slot.take(timeout)
             if fr is None:
                 return None
-            depth = units_to_metres(fr.depth, self.cfg.inputs.depth_scale)
+            depth = self.metres(fr)
             # what the engines take: on a GPU the frame itself (the engine reduces it there)
-            small = depth if self.engine.reduce_on_device else self.engine.resolution.frames(depth)
+            reduce = self.engine.resolution.frames
+            small = (depth if self.engine.reduce_on_device else
+                     [reduce(d) if d is not None else None for d in depth] if self.rig else reduce(depth))
             return then(fr, depth, small)
+
+    def metres(self, fr):
+        """A frame's depth in metres (a rig's: one a camera, None where it has none)."""
+        if not self.rig:
+            return units_to_metres(fr.depth, self.cfg.inputs.depth_scale)
+        return [units_to_metres(d, m.inputs.depth_scale) if d is not None else None
+                for d, (_, m) in zip(fr.depth, self.cfg.cameras)]
 
     def mine(self, fr, depth, small) -> Pending:
         item = Pending(fr, depth, small, process=self.worker.name)
@@ -272,7 +292,7 @@ class LiveRun:
         """Infer a pending frame with this process's engine (main loop only: the engine is not
         shared between threads) and hand its result to the finisher."""
         t0 = time.perf_counter()
-        res = self.engine.infer(item.small)
+        res = self.worker.infer(item.small)  # a rig's frame missing a camera: the others' engine
         with self.state:
             item.result, item.future, item.infer_s, item.process = res, None, time.perf_counter() - t0, self.worker.name
             self.state.notify_all()
@@ -329,9 +349,13 @@ class LiveRun:
         cfg, fr, res = self.cfg, item.frame, item.result
         due = cfg.output.images and self.done % cfg.output.images_every == 0
         self.worker.pictures = due and not self.tracking_on  # with tracks: drawn once committed (OnlineTracks)
-        _, output, _ = self.worker._finish(FrameItem(fr.name or f"{fr.index:06d}"), item.depth, res, 0.0,
-                                           item.infer_s, [])
+        paths = tuple(p.name or f"{p.index:06d}" if p is not None else None for p in fr.parts) if self.rig else None
+        _, output, _ = self.worker._finish(FrameItem(fr.name or f"{fr.index:06d}", paths=paths), item.depth, res,
+                                           0.0, item.infer_s, [])
         output.record["stats"]["worker"] = item.process
+        if self.rig:  # when each camera's frame arrived, against the first camera's (the pairing)
+            output.record["stats"]["arrived_ms"] = {n: 1000 * (p.arrived - fr.arrived) if p is not None else None
+                                                    for (n, _), p in zip(cfg.cameras, fr.parts)}
         self.frame_loop.accept(output.name, output, None, fr.timestamp, depth=item.depth if due or self.rerun else None,
                          result_dets=self.worker.detections(res)[1] if self.rerun else None)
         self.finished.append(time.perf_counter())
@@ -354,8 +378,9 @@ class LiveRun:
     # -- the main loop -----------------------------------------------------------------------
     def run(self) -> dict:
         """Until Ctrl-C, --max-frames or the camera stopping; then the run's outputs."""
-        i = self.cfg.inputs  # floor-only on a live camera: the static planes come from its first frames
-        planes_first = not i.play and not i.background and i.structure.planes
+        # floor-only on a live camera (of a rig: any): the static planes come from its first frames
+        planes_first = not self.cfg.inputs.play and any(not m.inputs.background and m.inputs.structure.planes
+                                                        for _, m in self.cfg.members())
         if not planes_first:
             self.start_helpers()  # before the camera: no frame is dropped while they start
         self.source.start(self.slot.put)
@@ -399,7 +424,7 @@ class LiveRun:
                 if frames:  # the stream ended or stalled: the planes of what came
                     break
                 raise self.no_first_frame()
-            frames.append(units_to_metres(fr.depth, cfg.inputs.depth_scale))
+            frames.append(self.metres(fr))
         self.structure_frames = len(frames)
         add_static_planes(self.setup, frames, self.log)
 
@@ -419,7 +444,8 @@ class LiveRun:
 
     def announce(self) -> None:
         info, cfg = self.info, self.cfg
-        self.log(f"live: {info.kind}, {info.width}x{info.height} at {self.fps:g} frames/s; device "
+        size = "" if self.rig else f", {info.width}x{info.height}"
+        self.log(f"live: {info.kind}{size} at {self.fps:g} frames/s; device "
                  f"{self.setup.device}, {self.workers} process{'es' * (self.workers > 1)}; background: "
                  f"{self.setup.background}; until {'the frames end, ' if cfg.inputs.play else ''}Ctrl-C"
                  f"{f' or {self.max_frames} frames' if self.max_frames else ''}")
@@ -427,7 +453,7 @@ class LiveRun:
     def loop(self) -> str:
         """Take and infer the newest frame until --max-frames or the camera stops sending;
         returns what stopped it."""
-        while self.reserve():
+        while self.reserve() or self.feeder_gives_back():
             first = self.t_first is None
             item = self.take(self.first_frame_timeout if first else STALL_S, self.mine)
             if item is None:
@@ -451,6 +477,15 @@ class LiveRun:
                 self.log(f"live: {self.done} frames, {rate:.1f} frames/s, {self.slot.dropped} dropped, latency "
                          f"{1000 * statistics.median(self.latencies[-30:]):.0f} ms")
         return "max_frames"
+
+    def feeder_gives_back(self) -> bool:
+        """At --max-frames: whether the feeder thread, stopped, gave back a place it held while
+        waiting for a frame for the helpers (a slow camera's next frame is then this loop's; it
+        ended runs a frame short), and this loop took it."""
+        if self.feeder is None or not self.feeder.is_alive():
+            return False
+        stop_threads(self.feeder, self.stop_feeding)
+        return self.reserve()
 
     def stop(self, clean: bool) -> str | None:
         """The threads, the camera and the helpers stopped, whichever way the run ends; the
@@ -529,4 +564,6 @@ class LiveRun:
                 "camera_fps": self.fps, "stopped_by": stopped_by, "stop_error": stop_error,
                 "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
                 "latency_ms_p95": 1000 * float(np.percentile(latencies, 95)) if latencies else None,
-                "infer_ms_median": 1000 * statistics.median(infer_s) if infer_s else None}
+                "infer_ms_median": 1000 * statistics.median(infer_s) if infer_s else None,
+                **({"cameras": {n: {"received": r} for (n, _), r in zip(self.cfg.cameras, self.source.received)},
+                    "tolerance_s": self.source.tolerance} if self.rig else {})}

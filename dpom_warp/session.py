@@ -109,18 +109,33 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
                  inference, engine, time.perf_counter() - t)
 
 
-def add_static_planes(setup: Setup, frames: list[np.ndarray], log=print) -> dict:
+def add_static_planes(setup: Setup, frames: list, log=print) -> dict:
     """The static planes (input.structure) found in `frames` (metres, full resolution: a live
-    camera's first, given after setting up) made background in the setup's engine (one camera),
-    its spec (what helper processes take), inference report and background words, as set_up
-    makes them from the run's first files; returns the planes' report."""
-    view = setup.engine.views[0]
-    report = static_structure(setup.spec.cfg, view, setup.spec.camera, frames, log)
-    setup.inference["structure"] = report
-    if report["pixels"]:
-        setup.background += planes_words(report)
-        setup.spec.background = view.background_state()
-    return report
+    camera's first, given after setting up) made background in the setup's engine, its spec
+    (what helper processes take), inference report and background words, as set_up makes them
+    from the run's first files; returns the planes' report. A rig's frames have one depth a
+    camera (None: none there): each floor-only camera's planes in its own frames, the report by
+    camera name."""
+    cfg, engine = setup.spec.cfg, setup.engine
+    if not cfg.is_rig:
+        view = engine.views[0]
+        report = static_structure(cfg, view, setup.spec.camera, frames, log)
+        setup.inference["structure"] = report
+        if report["pixels"]:
+            setup.background += planes_words(report)
+            setup.spec.background = view.background_state()
+        return report
+    reports = {}
+    for c, ((name, m), view) in enumerate(zip(cfg.cameras, engine.views)):
+        own = [f[c] for f in frames if f[c] is not None]
+        if own and not m.inputs.background and m.inputs.structure.planes:
+            reports[name] = static_structure(m, view, setup.spec.camera[c], own, _named(log, name))
+            if reports[name]["pixels"]:
+                setup.background += f"; camera {name}{planes_words(reports[name])}"
+    setup.inference["structure"] = reports
+    states = [engine.background_state(c) for c in range(len(engine.views))]
+    setup.spec.background = states if any(s is not None for s in states) else None
+    return reports
 
 
 def refuse_warm_start(cfg: RunConfig, parallel: bool) -> None:

@@ -546,7 +546,7 @@ def _helper_infer(small: np.ndarray):
     """(result, inference seconds, the process's name) of one frame at the engine's resolution."""
     worker = _pool_worker[0]
     t = time.perf_counter()
-    res = worker.engine.infer(small)
+    res = worker.infer(small)  # a rig's frame missing a camera: the others' engine
     return res, time.perf_counter() - t, worker.name
 
 
@@ -557,14 +557,15 @@ class Helpers:
     the main process and the run goes on without helpers."""
 
     def __init__(self, spec, engine, n: int):
-        spec = dataclasses.replace(spec, background=engine.background_state())
-        shape = (engine.views[0].height, engine.views[0].width)  # the run's camera's (one today)
+        rig = isinstance(spec.camera, list)
+        states = [engine.background_state(c) for c in range(len(engine.views))]
+        spec = dataclasses.replace(spec, background=states if rig else states[0])
+        empty = [np.zeros((v.height, v.width), np.float32) for v in engine.views]  # a frame of each camera
         compile_kernels(engine)
         self.n, self.running = n, []
         self.pool, self.start_file = helper_pool(spec, n, _helper_start)
         try:
-            warm = [self.pool.submit(_helper_infer, np.zeros(shape, np.float32))
-                    for _ in range(n)]
+            warm = [self.pool.submit(_helper_infer, empty if rig else empty[0]) for _ in range(n)]
             for w in warm:  # started, engines built: the first frames do not wait for them
                 w.result()
         except BaseException:

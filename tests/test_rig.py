@@ -207,9 +207,10 @@ def test_a_rigs_object_is_wider_unless_given(tmp_path, obj, cameras, width):
     (lambda r: r["cameras"][1]["input"].update(stride=2),
      r"^cameras\[1\]\.input\.stride: expected cameras\[0\]'s 'auto' \(a rig is inferred at one resolution\), found 2$"),
     (lambda r: r["cameras"][1]["input"].update(play=True),
-     r"^cameras\[1\]\.input\.play: a rig runs on recorded frames; expected frame files or recordings, found a live"),
+     r"^cameras\[1\]\.input\.play: a rig's recorded frames are not played as live cameras; expected a recorded"),
     (lambda r: r["cameras"][1]["input"].update(frames="realsense"),
-     r"^cameras\[1\]\.input\.frames: a rig runs on recorded frames; expected frame files or recordings, found a live"),
+     r"^cameras\[1\]\.input\.frames: expected recorded frames as cameras\[0\]'s \(a rig is live or recorded\), "
+     r"found a live camera$"),
     (lambda r: r["cameras"][1]["camera"].update(extrinsics={"T_world_from_camera": [
         [1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, -0.5], [0, 0, 0, 1]]}),
      r"^cameras\[1\]\.camera\.extrinsics: expected a pose above the floor \(z = 0\), found the camera 0\.50 m under it$"),

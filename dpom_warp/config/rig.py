@@ -27,9 +27,9 @@ class RigSection(Node):
     """How the cameras of a rig (`cameras:`) are put together."""
 
     tolerance: Num | None = Field(None, gt=0, description=(
-        "seconds: a recording's frame is paired with the first camera's nearest frame within this, else "
-        "that camera has no frame there (inferred from the others); null: half the first camera's frame "
-        "period, 1 / (2 input.fps)"))
+        "seconds: a recording's frame is paired with the first camera's nearest frame within this (a live "
+        "camera's by when it arrived), else that camera has no frame there (inferred from the others); null: "
+        "half the first camera's frame period, 1 / (2 input.fps) (a live camera's own rate)"))
 
 
 class RigCamera(Node):
@@ -53,7 +53,8 @@ def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
     """(names, one single-camera mapping a camera: the shared sections with the camera's input and
     camera) of a config mapping with `cameras:`; with several cameras, `object.width` left out is
     RIG_WIDTH. One-line errors for a list that is not one, an item without a name or input, names
-    that repeat, and `cameras:` beside a top-level input or camera."""
+    that repeat, `cameras:` beside a top-level input or camera, live cameras beside recorded
+    frames, and one live camera twice."""
     cams = raw["cameras"]
     if not isinstance(cams, list) or not cams:
         found = "an empty list" if isinstance(cams, list) else _fmt(cams)
@@ -66,7 +67,7 @@ def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
     obj = shared.get("object")
     if len(cams) > 1 and (obj is None or isinstance(obj, dict) and "width" not in obj):
         shared["object"] = {**(obj or {}), "width": RIG_WIDTH}
-    names, singles = [], []
+    names, singles, live = [], [], []
     for i, item in enumerate(cams):
         if not isinstance(item, dict):
             raise ConfigError(f"cameras[{i}]: expected a mapping {{name, input, camera}}, found {_fmt(item)}")
@@ -82,10 +83,18 @@ def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
         if "input" not in item:
             raise ConfigError(f"cameras[{i}].input: required key is missing (the camera's frames)")
         inp = item["input"] if isinstance(item["input"], dict) else {}
-        if inp.get("play") is True or (isinstance(inp.get("frames"), str) and is_live(inp["frames"])):
-            raise ConfigError(f"cameras[{i}].input.{'play' if inp.get('play') is True else 'frames'}: a rig runs on "
-                              f"recorded frames; expected frame files or recordings, found a live camera (live rigs "
-                              f"are not supported yet)")
+        if inp.get("play") is True:
+            raise ConfigError(f"cameras[{i}].input.play: a rig's recorded frames are not played as live cameras; "
+                              f"expected a recorded run of them, or live cameras (input.frames: realsense:SERIAL)")
+        live.append(isinstance(inp.get("frames"), str) and is_live(inp["frames"]))
+        if live[i] != live[0]:
+            raise ConfigError(f"cameras[{i}].input.frames: expected {'a live camera' if live[0] else 'recorded frames'}"
+                              f" as cameras[0]'s (a rig is live or recorded), found "
+                              f"{'a live camera' if live[i] else 'recorded frames'}")
+        same = [j for j, other in enumerate(cams[:i]) if live[i] and other["input"].get("frames") == inp["frames"]]
+        if same:
+            raise ConfigError(f"cameras[{i}].input.frames: expected another camera than cameras[{same[0]}]'s, found "
+                              f"{inp['frames']} again (name each by its serial: realsense:SERIAL)")
         names.append(name)
         singles.append({**shared, "input": item["input"], **({"camera": item["camera"]} if "camera" in item else {})})
     return names, singles
@@ -95,8 +104,8 @@ def parse_rig(raw: dict, single):
     """A rig's config (`cameras:`): each camera validated by `single` (a mapping to a RunConfig:
     run.parse_config, or loading's, which fills camera keys in first) as a single-camera config of
     the shared sections with its own input and camera (errors naming `cameras[i]`), then what the
-    cameras must share: one inference stride and reduction (one engine), recorded frames (a live
-    rig is not supported). The RunConfig's inputs and camera are the first camera's; `cameras`
+    cameras must share: one inference stride and reduction (one engine), live cameras or recorded
+    frames (rig_items). The RunConfig's inputs and camera are the first camera's; `cameras`
     holds each camera's own."""
 
     names, singles = rig_items(raw)

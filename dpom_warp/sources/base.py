@@ -49,7 +49,8 @@ class SourceInfo:
 class Frame:
     """One frame of a source: its index in the depth stream, its timestamp (seconds, None when
     the source has none), and the depth (2-D, in the source's units: integers, or float32
-    metres with 0 / NaN / inf for no reading) or why it cannot be read."""
+    metres with 0 / NaN / inf for no reading) or why it cannot be read; a live rig's frame has
+    one depth a camera (sources.rig)."""
 
     index: int
     timestamp: float | None
@@ -57,6 +58,7 @@ class Frame:
     reason: str | None = None
     name: str | None = None  # a live frame's name in the run's outputs (default: its index, 6 digits)
     arrived: float | None = None  # a live frame's time.perf_counter() on arrival
+    parts: list | None = None  # a live rig's frame (sources.rig): each camera's Frame (None: none near in time)
 
 
 class Source:
