@@ -137,8 +137,21 @@ def played_source(cfg: RunConfig, log, max_frames: int | None):
         raise type(e)(cfg.blame(str(e))) from None
     names = [f.name for f in got.frames]
     stamps = [got.timestamps[n] for n in names] if got.timestamps and all(n in got.timestamps for n in names) else None
-    return PlayedFrames(got.frames, cfg.camera.width, cfg.camera.height, cfg.inputs.fps, stamps,
-                        str(cfg.inputs.frames)), got.frames
+    if not cfg.is_rig:
+        return PlayedFrames(got.frames, cfg.camera.width, cfg.camera.height, cfg.inputs.fps, stamps,
+                            str(cfg.inputs.frames)), got.frames
+    # a rig's: each camera plays its frames of the paired rig frames at their rig frame's time
+    # (the first camera's timestamp, else the frame's place at input.fps), all from one start,
+    # so that RigStream pairs them as they were paired here
+    from .sources.rig import RigStream
+
+    times = stamps or [i / cfg.inputs.fps for i in range(len(got.frames))]
+    cameras = []
+    for c, (name, m) in enumerate(cfg.cameras):
+        mine = [(f.paths[c], t) for f, t in zip(got.frames, times) if f.paths[c] is not None]
+        cameras.append(PlayedFrames([p for p, _ in mine], m.camera.width, m.camera.height, cfg.inputs.fps,
+                                    [t for _, t in mine], str(m.inputs.frames), start_at=times[0] if times else 0.0))
+    return RigStream(cameras, [n for n, _ in cfg.cameras], cfg.rig.tolerance), got.frames
 
 
 # -- a rig's frames ------------------------------------------------------------------------------

@@ -155,7 +155,8 @@ def rig_mapping(tmp_path):
 def test_a_rig_config_is_each_camera_with_the_shared_sections(tmp_path):
     """Each camera is its own single-camera config (its input and camera, the shared grid,
     model, ...): the rig's inputs and camera are the first camera's; resolved has cameras and
-    rig, not input and camera; --set reaches a camera by its index."""
+    rig, not input and camera; --set reaches a camera by its index, and every camera's input
+    with input.KEY."""
     from dpom_warp.config import apply_overrides
     from dpom_warp.loading import config_from_mapping
 
@@ -168,6 +169,9 @@ def test_a_rig_config_is_each_camera_with_the_shared_sections(tmp_path):
     assert cfg.resolved["rig"] == {"tolerance": None}
     moved = config_from_mapping(apply_overrides(rig_mapping(tmp_path), ["cameras.1.camera.extrinsics.x=3.0"]))
     assert moved.cameras[1][1].camera.centre[0] == 3.0 and moved.cameras[0][1].camera.centre[0] == 0.0
+    # input.KEY on a rig is every camera's (--play sets input.play so); cameras.N.input.KEY one's
+    both = config_from_mapping(apply_overrides(rig_mapping(tmp_path), ["input.fps=12", "cameras.1.input.fps=7"]))
+    assert [m.inputs.fps for _, m in both.cameras] == [12, 7] and "input" not in both.resolved
     from dpom_warp.config import parse_config
 
     again = parse_config(cfg.resolved)  # a run's summary.json config parses back to the same rig
@@ -207,10 +211,11 @@ def test_a_rigs_object_is_wider_unless_given(tmp_path, obj, cameras, width):
     (lambda r: r["cameras"][1]["input"].update(stride=2),
      r"^cameras\[1\]\.input\.stride: expected cameras\[0\]'s 'auto' \(a rig is inferred at one resolution\), found 2$"),
     (lambda r: r["cameras"][1]["input"].update(play=True),
-     r"^cameras\[1\]\.input\.play: a rig's recorded frames are not played as live cameras; expected a recorded"),
+     r"^cameras\[1\]\.input\.play: expected recorded frames as cameras\[0\]'s \(a rig is live, played or "
+     r"recorded\), found frames played as a live camera's \(input\.play\)$"),
     (lambda r: r["cameras"][1]["input"].update(frames="realsense"),
-     r"^cameras\[1\]\.input\.frames: expected recorded frames as cameras\[0\]'s \(a rig is live or recorded\), "
-     r"found a live camera$"),
+     r"^cameras\[1\]\.input\.frames: expected recorded frames as cameras\[0\]'s \(a rig is live, played or "
+     r"recorded\), found a live camera$"),
     (lambda r: r["cameras"][1]["camera"].update(extrinsics={"T_world_from_camera": [
         [1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, -0.5], [0, 0, 0, 1]]}),
      r"^cameras\[1\]\.camera\.extrinsics: expected a pose above the floor \(z = 0\), found the camera 0\.50 m under it$"),

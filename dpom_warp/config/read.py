@@ -49,13 +49,18 @@ def camera_from_file(raw: dict) -> dict:
 
 
 def apply_overrides(raw: dict, overrides: list[str]) -> dict:
-    """Apply `key.path=value` overrides (value parsed as YAML) to a copy of `raw`."""
+    """Apply `key.path=value` overrides (value parsed as YAML) to a copy of `raw`; on a rig
+    (`cameras:`), `input.KEY` is every camera's (`cameras.N.input.KEY` one camera's)."""
     out = copy.deepcopy(raw) if raw else {}
     for item in overrides or []:
         if "=" not in item:
             raise ConfigError(f"--set {item}: expected key.path=value")
         path, value = item.split("=", 1)
         keys = path.strip().split(".")
+        if keys[0] == "input" and isinstance(out.get("cameras"), list) and "input" not in out:
+            # a rig's input keys are its cameras': input.KEY sets every camera's (--play, --set)
+            out = apply_overrides(out, [f"cameras.{i}.{path.strip()}={value}" for i in range(len(out["cameras"]))])
+            continue
         node = out
         for k in keys[:-1]:
             if isinstance(node, list):  # a rig's camera by its index: cameras.1.input.frames

@@ -21,6 +21,8 @@ PER_CAMERA = ("input", "camera")  # the sections each camera has; the others are
 # (arms and swinging legs included) a person needs a wider body than one camera's 0.4 m
 # (docs/rig.md: chosen on a tuning draw of the rig scenes)
 RIG_WIDTH = 0.5
+KINDS = {"recorded": "recorded frames", "live": "a live camera",
+         "played": "frames played as a live camera's (input.play)"}  # a rig's cameras are all of one kind
 
 
 class RigSection(Node):
@@ -53,8 +55,8 @@ def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
     """(names, one single-camera mapping a camera: the shared sections with the camera's input and
     camera) of a config mapping with `cameras:`; with several cameras, `object.width` left out is
     RIG_WIDTH. One-line errors for a list that is not one, an item without a name or input, names
-    that repeat, `cameras:` beside a top-level input or camera, live cameras beside recorded
-    frames, and one live camera twice."""
+    that repeat, `cameras:` beside a top-level input or camera, cameras of different KINDS, and
+    one live camera twice."""
     cams = raw["cameras"]
     if not isinstance(cams, list) or not cams:
         found = "an empty list" if isinstance(cams, list) else _fmt(cams)
@@ -67,7 +69,7 @@ def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
     obj = shared.get("object")
     if len(cams) > 1 and (obj is None or isinstance(obj, dict) and "width" not in obj):
         shared["object"] = {**(obj or {}), "width": RIG_WIDTH}
-    names, singles, live = [], [], []
+    names, singles, kinds = [], [], []
     for i, item in enumerate(cams):
         if not isinstance(item, dict):
             raise ConfigError(f"cameras[{i}]: expected a mapping {{name, input, camera}}, found {_fmt(item)}")
@@ -83,15 +85,14 @@ def rig_items(raw: dict) -> tuple[list[str], list[dict]]:
         if "input" not in item:
             raise ConfigError(f"cameras[{i}].input: required key is missing (the camera's frames)")
         inp = item["input"] if isinstance(item["input"], dict) else {}
-        if inp.get("play") is True:
-            raise ConfigError(f"cameras[{i}].input.play: a rig's recorded frames are not played as live cameras; "
-                              f"expected a recorded run of them, or live cameras (input.frames: realsense:SERIAL)")
-        live.append(isinstance(inp.get("frames"), str) and is_live(inp["frames"]))
-        if live[i] != live[0]:
-            raise ConfigError(f"cameras[{i}].input.frames: expected {'a live camera' if live[0] else 'recorded frames'}"
-                              f" as cameras[0]'s (a rig is live or recorded), found "
-                              f"{'a live camera' if live[i] else 'recorded frames'}")
-        same = [j for j, other in enumerate(cams[:i]) if live[i] and other["input"].get("frames") == inp["frames"]]
+        kinds.append("played" if inp.get("play") is True else
+                     "live" if isinstance(inp.get("frames"), str) and is_live(inp["frames"]) else "recorded")
+        if kinds[i] != kinds[0]:
+            key = "play" if "played" in (kinds[i], kinds[0]) else "frames"
+            raise ConfigError(f"cameras[{i}].input.{key}: expected {KINDS[kinds[0]]} as cameras[0]'s (a rig is live, "
+                              f"played or recorded), found {KINDS[kinds[i]]}")
+        same = [j for j, other in enumerate(cams[:i])
+                if kinds[i] == "live" and other["input"].get("frames") == inp["frames"]]
         if same:
             raise ConfigError(f"cameras[{i}].input.frames: expected another camera than cameras[{same[0]}]'s, found "
                               f"{inp['frames']} again (name each by its serial: realsense:SERIAL)")
@@ -104,8 +105,8 @@ def parse_rig(raw: dict, single):
     """A rig's config (`cameras:`): each camera validated by `single` (a mapping to a RunConfig:
     run.parse_config, or loading's, which fills camera keys in first) as a single-camera config of
     the shared sections with its own input and camera (errors naming `cameras[i]`), then what the
-    cameras must share: one inference stride and reduction (one engine), live cameras or recorded
-    frames (rig_items). The RunConfig's inputs and camera are the first camera's; `cameras`
+    cameras must share: one inference stride and reduction (one engine), one kind of frames (live,
+    played or recorded: rig_items). The RunConfig's inputs and camera are the first camera's; `cameras`
     holds each camera's own."""
 
     names, singles = rig_items(raw)

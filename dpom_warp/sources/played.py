@@ -19,16 +19,19 @@ class PlayedFrames(Source):
     """`files` (depth frame files, in order) sent at `timestamps` (seconds, one per file: a
     recording's clock) or, without, at `fps`. A frame is read ahead and sent when due, as
     Frame(index, timestamp, depth in the files' units) named by its file's stem; after the
-    last, on_frame(None): the stream has ended."""
+    last, on_frame(None): the stream has ended. `start_at`: the time (on the timestamps' clock)
+    `start` stands for (default the first frame's: it is sent at once); a rig's cameras share
+    one, so that their frames are sent together as they were recorded (sources.rig)."""
 
     def __init__(self, files: list[Path], width: int, height: int, fps: float,
-                 timestamps: list[float] | None = None, path: str = ""):
+                 timestamps: list[float] | None = None, path: str = "", start_at: float | None = None):
         self.files, self.width, self.height, self.path = list(files), width, height, path
         if timestamps is not None and len(timestamps) != len(self.files):
             raise ValueError(f"timestamps: expected one per frame ({len(self.files)}), found {len(timestamps)}")
         self.times = (list(timestamps) if timestamps is not None else [i / fps for i in range(len(self.files))])
         span = self.times[-1] - self.times[0] if self.times else 0.0
         self.fps = (len(self.times) - 1) / span if timestamps is not None and span > 0 else fps
+        self.start_at = start_at if start_at is not None else self.times[0] if self.times else 0.0
         self.stopped, self.thread, self.sent = threading.Event(), None, 0
 
     def info(self) -> SourceInfo:
@@ -42,7 +45,7 @@ class PlayedFrames(Source):
         self.thread.start()
 
     def _play(self, on_frame) -> None:
-        t0 = time.perf_counter() - self.times[0] if self.times else 0.0
+        t0 = time.perf_counter() - self.start_at
         for i, (f, stamp) in enumerate(zip(self.files, self.times)):
             depth = read_depth(f, 1.0)  # the file's own units, as a camera sends them
             wait = t0 + stamp - time.perf_counter()

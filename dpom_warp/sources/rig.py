@@ -1,9 +1,10 @@
 """A rig of live cameras as one live source: every camera started with its own callback, each
 frame of the first camera paired with each other camera's frame that arrived nearest to it on
 this machine's clock (`Frame.arrived`: the cameras' own clocks need not agree), within
-`tolerance` seconds; the rig's frame is sent once every other camera has sent a frame after
-it (nothing nearer can come) or the tolerance has passed, so a camera that lags by less than
-the tolerance is waited for and one that sends nothing costs the tolerance, no more. A camera
+`tolerance` seconds; the rig's frame is sent once no nearer frame can come from any other
+camera (it has sent one after, or its next, a frame period after its last, would be farther)
+or the tolerance has passed, so a camera that lags by less than the tolerance is waited for
+and one that sends nothing costs the tolerance, no more. A camera
 with no frame near in time is None in the rig's frame (inferred from the others, as a recorded
 rig's frame missing a camera is). The rig's stream ends when the first camera's does."""
 
@@ -27,6 +28,7 @@ class RigStream(Source):
     def __init__(self, sources: list[Source], names: list[str], tolerance: float | None = None):
         self.sources, self.names = list(sources), list(names)
         self._infos = [s.info() for s in self.sources]
+        self.periods = [1.0 / i.rate_hz if i.rate_hz else None for i in self._infos]
         rate = self._infos[0].rate_hz
         self.tolerance = tolerance if tolerance is not None else 0.5 / rate if rate else 0.05
         self.lock = threading.Lock()
@@ -74,8 +76,17 @@ class RigStream(Source):
                 self.timer.start()
 
     def complete(self, frame: Frame) -> bool:
-        """Whether every other camera has sent a frame at or after `frame` arrived."""
-        return all(r and r[-1].arrived >= frame.arrived for r in self.recent)
+        """Whether no other camera can send a frame nearer in time to `frame` than it has: each
+        has sent one at or after it, or one before it whose next, a frame period later (its
+        rate), would be farther."""
+        t = frame.arrived
+        for r, period in zip(self.recent, self.periods[1:]):
+            if not r:
+                return False
+            last = r[-1].arrived
+            if last < t and (period is None or last + period - t < t - last):
+                return False
+        return True
 
     def due(self, frame: Frame) -> None:
         """The tolerance has passed since `frame` arrived: sent with what came."""
