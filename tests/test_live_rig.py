@@ -164,7 +164,8 @@ def test_a_live_rig_gives_the_recorded_rigs_maps(recorded, tmp_path, workers, mo
     """Both cameras sending at 5 frames/s from one start: each rig frame pairs the two cameras'
     frames of one rendered frame (the software camera's timestamp says which), and its map is the
     recorded rig run's of that frame, bit for bit, inferred here or (--workers 2) by a helper
-    process; the records say when each camera's frame arrived, summary.json what each sent."""
+    process; the records say when each camera's frame arrived, summary.json what each sent;
+    `dpom-warp track` gives its online tracks again."""
     from dpom_warp.worker import FrameWorker
 
     folder, maps, live = recorded
@@ -195,6 +196,10 @@ def test_a_live_rig_gives_the_recorded_rigs_maps(recorded, tmp_path, workers, mo
         np.testing.assert_array_equal(np.load(out / "maps" / f"{name}.npy"), maps[rendered], err_msg=name)
     if workers == 2:
         assert any(r["worker"].startswith("process ") for r in summary["per_frame"])
+    else:  # `dpom-warp track` on it: the online tracks again from its maps, at the cameras' rate
+        tracks = (out / "tracks.csv").read_text()
+        assert main(["track", str(out), "--set", "output.images=false", "--set", "tracking.method=online"]) == 0
+        assert (out / "tracks.csv").read_text() == tracks
 
 
 def test_a_floor_only_live_rig_finds_each_cameras_planes_in_its_first_frames(recorded, tmp_path):
