@@ -3,6 +3,7 @@ on hand-timed frames), and a live rig run end to end: two SoftwareCameras (pyrea
 software_device, serials 101 and 102) play test_rig_run's rendered two-camera scene, and every
 map of the live run is the recorded rig run's map of the same rendered frame, bit for bit."""
 
+import copy
 import json
 import time
 from pathlib import Path
@@ -169,6 +170,7 @@ def test_a_live_rig_gives_the_recorded_rigs_maps(recorded, tmp_path, workers, mo
     from dpom_warp.worker import FrameWorker
 
     folder, maps, live = recorded
+    live = copy.deepcopy(live)  # (the fixture's, shared by the tests)
     live["output"]["dir"] = str(tmp_path / "out")
     path = write(tmp_path / "live.yaml", live)
     if workers == 2:  # this process slower than the frames come: the helper takes some (its own process is not)
@@ -207,6 +209,7 @@ def test_a_floor_only_live_rig_finds_each_cameras_planes_in_its_first_frames(rec
     camera's for its static planes (not inferred), as a recorded floor-only rig's first files;
     the helper process then infers with them (--workers 2)."""
     folder, _, live = recorded
+    live = copy.deepcopy(live)
     live["output"]["dir"] = str(tmp_path / "out")
     for cam in live["cameras"]:
         cam["input"]["background"] = None
@@ -245,3 +248,27 @@ def test_a_played_rig_gives_the_recorded_rigs_maps(recorded, tmp_path):
         assert record["cameras"] == {"front": name, "side": name}  # the same rendered frame, both cameras
         np.testing.assert_array_equal(np.load(out / "maps" / f"{Path(name).stem}.npy"), maps[int(Path(name).stem)],
                                       err_msg=name)
+
+
+def test_the_api_on_a_live_rig_config_detects_as_the_recorded_rig(recorded, tmp_path):
+    """Detector.from_config of a live rig's config (its cameras found, not started: their
+    intrinsics and depth scale read from them, nothing else) detects a rig frame given as a list,
+    one frame a camera, as the recorded rig run detected the same frame."""
+    import csv
+
+    from dpom_warp import Detector
+
+    folder, _, live = recorded
+    live = copy.deepcopy(live)
+    live["output"]["dir"] = str(tmp_path / "out")
+    cams = software_rig(folder)
+    try:
+        det = Detector.from_config(write(tmp_path / "live.yaml", live))
+        frames = [np.asarray(Image.open(folder / "scene" / n / "frames" / "0002.png")) for n in ("front", "side")]
+        got = [(round(d.x, 4), round(d.y, 4)) for d in det.detect(frames).detections]
+    finally:
+        for cam in cams:
+            cam.unregister()
+    want = [(float(r["x"]), float(r["y"])) for r in csv.DictReader(open(folder / "out" / "detections.csv"))
+            if r["frame"] == "0002.png"]
+    assert got and sorted(got) == sorted(want)
