@@ -7,7 +7,7 @@ against one camera's, measured in the same process on the same frames.
 
     python -m bench.rig [--frames 10] [--output runs/rig] [--scenes rig3 rig3_tight] [--repeats 5]
                         [--tuning | --draw N] [--object-width 0.5] [--device cpu|cuda:N] [--batch N]
-                        [--set KEY.PATH=VALUE ...]
+                        [--set KEY.PATH=VALUE ...] [--live FPS [--workers N ...]]
 
 Scenes (the same cameras' layout in each: one at the near end looking along the area, one on
 each side looking across it; 256 x 212 pixels, Kinect v2's field of view):
@@ -18,6 +18,10 @@ each side looking across it; 256 x 212 pixels, Kinect v2's field of view):
 frames, every camera's, in one engine call; on a GPU, one launch), in rig frames and camera-frames
 a second, and whether its detections are the frame-by-frame ones.
 --set: config overrides (as `dpom-warp run --set`) for the rig, each camera alone and the batch.
+--live FPS also plays each scene's rig frames through the live path at FPS (`dpom-warp run --play`:
+every camera's frames sent at their rig frame's time, paired again as they arrive, the newest
+inferred) with each --workers count: rig frames a second once running, the share dropped, the
+latency, and whether every map written is the recorded rig's (the pairing right).
 The tables go to OUTPUT/rig.md and rig.json (bench.docs --only rig puts them in the README).
 """
 
@@ -167,6 +171,44 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
             "rig_over_sum": median["rig"] / sum(median[n] for n in names), "batched": rate}
 
 
+def live_rig(run_cfg: dict, folder: Path, fps: float, workers: int, want: dict, sets: list[str] = ()) -> dict:
+    """The scene's rig frames played at `fps` through the live path with `workers` processes:
+    its live block's rate, drops and latency, and whether each map is the recorded rig's
+    (`want`: frame stem -> map)."""
+    import yaml
+
+    from dpom_warp.cli import main as cli
+
+    path, out = folder / "live.yaml", folder / f"live_{workers}"
+    path.write_text(yaml.safe_dump(run_cfg))
+    args = ["run", str(path), "--play", "--no-progress", "--overwrite", "--output", str(out), "--workers", str(workers),
+            "--set", f"input.fps={fps:g}"]
+    for item in sets:
+        args += ["--set", item]
+    assert cli(args) == 0
+    live = json.loads((out / "summary.json").read_text())["live"]
+    maps = sorted(out.glob("maps/*.npy"))
+    same = sum(np.array_equal(np.load(m), want[m.stem]) for m in maps)
+    return {"fps": fps, "workers": workers, "frames": live["frames"], "received": live["received"],
+            "dropped_share": live["dropped_share"], "rig_frames_per_s": live["frames_per_s_steady"],
+            "latency_ms": live["latency_ms_median"], "maps_as_recorded": same}
+
+
+def recorded_maps(run_cfg: dict, folder: Path, sets: list[str] = ()) -> dict:
+    """The rig's maps of a recorded run of its frames (frame stem -> map)."""
+    import yaml
+
+    from dpom_warp.cli import main as cli
+
+    path, out = folder / "recorded.yaml", folder / "recorded"
+    path.write_text(yaml.safe_dump(run_cfg))
+    args = ["run", str(path), "--no-progress", "--overwrite", "--output", str(out)]
+    for item in sets:
+        args += ["--set", item]
+    assert cli(args) == 0
+    return {m.stem: np.load(m) for m in out.glob("maps/*.npy")}
+
+
 def markdown(results: list[dict], machine: str) -> str:
     names = [k for k in results[0]["moda"] if k != "rig"]
     rows = ["| scene | people (truth) | " + " | ".join(f"camera {n} alone" for n in names)
@@ -184,6 +226,11 @@ def markdown(results: list[dict], machine: str) -> str:
              f"{b['camera_frames_per_s']:.0f} camera-frames a second (detections "
              f"{'the same as' if b['same_detections'] else 'NOT the same as'} frame by frame)"
              for r in results if (b := r.get("batched"))]
+    notes += [f"{r['scene']} live (`--play` at {v['fps']:g} frames/s, {v['workers']} process"
+              f"{'es' * (v['workers'] > 1)}): {v['rig_frames_per_s'] or 0:.1f} rig frames a second once running, "
+              f"{100 * v['dropped_share']:.0f} % of the {v['received']} dropped, latency median {v['latency_ms']:.0f} ms; "
+              f"{v['maps_as_recorded']} of its {v['frames']} maps the recorded rig's, bit for bit"
+              for r in results for v in r.get("live", [])]
     return "\n".join(rows) + f"\n\nMODA at 0.5 m, fast path; {where}." + "".join("\n\n" + n for n in notes)
 
 
@@ -203,6 +250,9 @@ def main():
                     help="also the rig's throughput with engine.batch N (detect_batch; 0: not measured)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                     help="a config override for the rig and each camera alone (repeatable)")
+    ap.add_argument("--live", type=float, default=0.0, metavar="FPS",
+                    help="also play the rig frames through the live path at FPS (0: not measured)")
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 3], help="--live's process counts")
     args = ap.parse_args()
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -214,6 +264,11 @@ def main():
         folder = Path(".cache/bench") / f"{name}_{args.frames}{'_tuning' if draw == 1000 else f'_draw{draw}' if draw else ''}"
         r = run_scene(name, folder, args.frames, args.repeats, draw, args.object_width, args.device, args.batch,
                       args.set)
+        if args.live:
+            run_cfg = {k: v for k, v in rig_config(name, folder.resolve(), args.frames, draw, args.object_width,
+                                                    args.device).items() if k != "synthetic"}  # (a file's paths: its folder's)
+            want = recorded_maps(run_cfg, folder, args.set)
+            r["live"] = [live_rig(run_cfg, folder, args.live, w, want, args.set) for w in args.workers]
         print(json.dumps(r))
         results.append(r)
     (out / "rig.json").write_text(json.dumps(results, indent=1))

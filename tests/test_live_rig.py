@@ -99,10 +99,12 @@ def test_a_camera_with_no_frame_near_in_time_is_none_after_the_tolerance():
     assert [indices(f) for f in got] == [[0, None]] and got[0].depth[1] is None
 
 
-def test_a_newer_first_frame_sends_the_one_waiting_and_the_end_follows_it():
+def test_a_newer_first_frame_sends_the_one_waiting_and_the_end_follows_the_last():
     """The first camera's frame 0 waits for a second camera that sends nothing near: its frame
-    1 sends frame 0 with what came (nothing), and the first camera's end sends frame 1, then
-    the end (None); the sources stop with the stream."""
+    1 sends frame 0 with what came (nothing). After the first camera's last frame (2) its end
+    waits until that frame is paired (the second camera's frame of the same moment, 1.21,
+    comes after the end: a played rig's cameras end together), then the end (None) follows;
+    the sources stop with the stream."""
     (a, b), rig, got = stream(tolerance=10.0)
     a.send(0, 1.0)
     a.send(1, 1.1)
@@ -111,7 +113,9 @@ def test_a_newer_first_frame_sends_the_one_waiting_and_the_end_follows_it():
     assert [indices(f) for f in got] == [[0, None], [1, 5]]
     a.send(2, 1.2)
     a.send(None, None)
-    assert [indices(f) if f is not None else None for f in got] == [[0, None], [1, 5], [2, 5], None]
+    assert len(got) == 2  # frame 2 waits: the second camera's next is due at 1.22, nearer than 1.12
+    b.send(6, 1.21)
+    assert [indices(f) if f is not None else None for f in got] == [[0, None], [1, 5], [2, 6], None]
     rig.stop()
     assert a.stopped and b.stopped
 

@@ -4,9 +4,9 @@ this machine's clock (`Frame.arrived`: the cameras' own clocks need not agree), 
 `tolerance` seconds; the rig's frame is sent once no nearer frame can come from any other
 camera (it has sent one after, or its next, a frame period after its last, would be farther)
 or the tolerance has passed, so a camera that lags by less than the tolerance is waited for
-and one that sends nothing costs the tolerance, no more. A camera
-with no frame near in time is None in the rig's frame (inferred from the others, as a recorded
-rig's frame missing a camera is). The rig's stream ends when the first camera's does."""
+and one that sends nothing costs the tolerance, no more. A camera with no frame near in time is
+None in the rig's frame (inferred from the others, as a recorded rig's frame missing a camera
+is). The rig's stream ends when the first camera's does, once its last frame is paired."""
 
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ class RigStream(Source):
         self.waiting: Frame | None = None  # the first camera's newest frame, until it is sent
         self.timer: threading.Timer | None = None
         self.on_frame: Callable | None = None
-        self.stopped = False
+        self.stopped = self.ended = False
 
     def info(self) -> SourceInfo:
         first = self._infos[0]
@@ -45,7 +45,7 @@ class RigStream(Source):
         return dataclasses.replace(first, kind=f"a rig of {len(self.sources)} cameras ({kinds})")
 
     def start(self, on_frame: Callable[[Frame | None], None]) -> None:
-        self.on_frame, self.stopped = on_frame, False
+        self.on_frame, self.stopped, self.ended = on_frame, False, False
         for c in reversed(range(len(self.sources))):  # the first camera last: the others' frames are coming
             self.sources[c].start(lambda frame, c=c: self.arrived(c, frame))
 
@@ -61,11 +61,13 @@ class RigStream(Source):
                     if self.waiting is not None and self.complete(self.waiting):
                         self.send()
                 return
+            if frame is None:  # the end follows the frame waiting, once it is sent (or at once)
+                self.ended = True
+                if self.waiting is None or self.complete(self.waiting):
+                    self.send()
+                return
             if self.waiting is not None:  # a newer frame: the one before goes with what came
                 self.send()
-            if frame is None:
-                self.on_frame(None)
-                return
             self.received[0] += 1
             self.waiting = frame
             if self.complete(frame):
@@ -95,14 +97,18 @@ class RigStream(Source):
                 self.send()
 
     def send(self) -> None:
-        """The waiting frame paired (the lock held) and handed on, in the order taken."""
+        """The waiting frame paired (the lock held) and handed on, in the order taken; after
+        it, the end of the stream where the first camera's has ended."""
         frame, self.waiting = self.waiting, None
         if self.timer is not None:
             self.timer.cancel()
             self.timer = None
-        parts = [frame] + [self.nearest(r, frame.arrived) for r in self.recent]
-        self.on_frame(dataclasses.replace(frame, depth=[p.depth if p is not None else None for p in parts],
-                                          parts=parts))
+        if frame is not None:
+            parts = [frame] + [self.nearest(r, frame.arrived) for r in self.recent]
+            self.on_frame(dataclasses.replace(frame, depth=[p.depth if p is not None else None for p in parts],
+                                              parts=parts))
+        if self.ended:
+            self.on_frame(None)
 
     def nearest(self, recent: deque, t: float) -> Frame | None:
         best = min(recent, key=lambda f: abs(f.arrived - t), default=None)
