@@ -229,17 +229,26 @@ class Detector:
         Detector read has them already). Floor-only, or `auto`'s floor-only pixels. Returns
         summary.json's inference.structure report (the planes, the pixels made background).
 
+        A rig's `depths` are rig frames as `detect` takes them (a list in camera order or a dict
+        by name, None where a camera has none): each floor-only camera's planes in its frames, the
+        report by camera name.
+
         Raises:
-            ConfigError: background frames (they explain the room), input.structure.planes
-                false, or a rig (its cameras find theirs in the config's input.frames).
+            ConfigError: background frames (they explain the room; a rig: every camera's), or
+                input.structure.planes false.
             InputError: a frame as `detect` refuses it, or no frame.
         """
         from .session import add_static_planes
 
         cfg = self.config
         if cfg.is_rig:
-            raise ConfigError("find_static_planes: expected one camera's config; a rig's cameras find their planes "
-                              "in the config's input.frames")
+            if not any(not m.inputs.background and m.inputs.structure.planes for _, m in cfg.cameras):
+                raise ConfigError("cameras: expected a camera with input.background null and input.structure.planes "
+                                  "true for find_static_planes, found none (background frames explain the room)")
+            frames = [self._rig_metres(d, i) for i, d in enumerate(depths)]
+            if not frames:
+                raise InputError("find_static_planes: expected at least one frame, found none")
+            return add_static_planes(self.setup, frames, log=lambda *_: None)
         if cfg.inputs.background and not cfg.inputs.auto_background:
             raise ConfigError(f"input.background: expected null or auto for find_static_planes, found background "
                               f"frames ({cfg.inputs.background}), which explain the room already")

@@ -276,3 +276,46 @@ def test_the_api_on_a_live_rig_config_detects_as_the_recorded_rig(recorded, tmp_
     want = [(float(r["x"]), float(r["y"])) for r in csv.DictReader(open(folder / "out" / "detections.csv"))
             if r["frame"] == "0002.png"]
     assert got and sorted(got) == sorted(want)
+
+
+def test_the_api_finds_a_live_rigs_planes_in_rig_frames_it_is_given(recorded, tmp_path):
+    """Detector.find_static_planes on a floor-only live rig's config (the scene with two
+    free-standing cabinets in the grid): given the first five rig frames (a list a frame, one
+    depth a camera), each camera's planes are the ones a recorded floor-only rig run found in its
+    first five files, and a frame is then detected as that run detected it; a rig whose every
+    camera has background frames is a one-line error."""
+    import csv
+
+    from dpom_warp import Detector
+    from dpom_warp.config import ConfigError
+
+    floor = rig_config(tmp_path, out="floor")
+    floor["synthetic"].update(obstacles=2, people=4)
+    for cam in floor["cameras"]:
+        cam["input"]["background"] = None
+    assert main(["run", write(tmp_path / "floor.yaml", floor), "--no-progress"]) == 0
+    want = json.loads((tmp_path / "floor" / "summary.json").read_text())["inference"]["structure"]
+    assert set(want) == {"front", "side"} and any(r["pixels"] > 0 for r in want.values())  # the cabinets
+    live = copy.deepcopy(recorded[2])
+    live["output"]["dir"] = str(tmp_path / "live")
+    for cam in live["cameras"]:
+        cam["input"]["background"] = None
+    with_bg = {k: v for k, v in rig_config(tmp_path, out="bg").items() if k != "synthetic"}  # (the scene as is)
+    with pytest.raises(ConfigError, match="^cameras: expected a camera with input.background null"):
+        Detector.from_config(write(tmp_path / "bg.yaml", with_bg)).find_static_planes([])
+    cams = software_rig(tmp_path)
+    try:
+        det = Detector.from_config(write(tmp_path / "live.yaml", live))
+
+        def rig_frame(i):
+            return [np.asarray(Image.open(tmp_path / "scene" / n / "frames" / f"{i:04d}.png")) for n in ("front", "side")]
+
+        report = det.find_static_planes([rig_frame(i) for i in range(5)])
+        got = [(round(d.x, 4), round(d.y, 4)) for d in det.detect(rig_frame(2)).detections]
+    finally:
+        for cam in cams:
+            cam.unregister()
+    assert {n: r["pixels"] for n, r in report.items()} == {n: r["pixels"] for n, r in want.items()}
+    rows = [(float(r["x"]), float(r["y"])) for r in csv.DictReader(open(tmp_path / "floor" / "detections.csv"))
+            if r["frame"] == "0002.png"]
+    assert got and sorted(got) == sorted(rows)
