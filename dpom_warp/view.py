@@ -30,6 +30,7 @@ class RerunLog:
         self.rr = rr
         self.rec = rr.RecordingStream(name)
         self.paths = ["world/camera"]  # each camera's entity (a rig's: world/cameras/NAME, set by `camera`)
+        self.parts = None  # a rig's geometry.Geometry a camera (`camera`): each camera's own boxes
         if path:
             from pathlib import Path
 
@@ -38,8 +39,10 @@ class RerunLog:
         if spawn:
             self.rec.spawn(connect=not path)
 
-    def camera(self, camera, names: list[str] | None = None) -> None:
-        """The posed camera at `world/camera`; a rig's (a list, `names`) at `world/cameras/NAME`."""
+    def camera(self, camera, names: list[str] | None = None, parts: list | None = None) -> None:
+        """The posed camera at `world/camera`; a rig's (a list, `names`) at `world/cameras/NAME`,
+        each camera's detection boxes from its geometry in `parts` (geometry.RigGeometry.parts)."""
+        self.parts = parts
         rr, rec = self.rr, self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         self.paths = [f"world/cameras/{n}" for n in names] if names else ["world/camera"]
@@ -71,10 +74,13 @@ class RerunLog:
         rr, rec = self.rr, self.rec
         self._at(index, timestamp)
         ident = track_identities(dets, tracks or [])
-        boxes = np.array([d.box for d in dets], float).reshape(-1, 4)
         labels = [(f"#{ident[i]} " if i in ident else "") + f"{d.rho:.2f}" for i, d in enumerate(dets)]
-        rec.log(f"{self.paths[0]}/depth/detections",  # (a rig's: its first camera's)
-                rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, labels=labels))
+        # each camera's boxes: a rig's as that camera sees each detection (those in its view)
+        for path, g in zip(self.paths, self.parts or [None]):
+            seen = [i for i, d in enumerate(dets) if g is None or g.rect_area[d.k] > 0]
+            boxes = np.array([dets[i].box if g is None else g.rect[dets[i].k] for i in seen], float).reshape(-1, 4)
+            rec.log(f"{path}/depth/detections",
+                    rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, labels=[labels[i] for i in seen]))
         if tracks is not None:
             pos = np.array([t["xyz"] for t in tracks], float).reshape(-1, 3)
             colours = [track_colour(t["id"]) for t in tracks]

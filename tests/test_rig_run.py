@@ -132,6 +132,22 @@ def test_a_rig_runs_outputs(runs):
     for chunk in RrdReader(str(runs / "rig.rrd")).stream():
         rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
     assert rows["/world/cameras/front/depth"] == rows["/world/cameras/side/depth"] == 6
+    # each camera's boxes, as it sees the detections (those in its view): with the frame and with its tracks
+    assert rows["/world/cameras/front/depth/detections"] == rows["/world/cameras/side/depth/detections"] == 6
+    from dpom_warp.config import parse_config
+    from dpom_warp.geometry import build_geometry
+
+    cfg = parse_config(summary["config"])
+    dets = detections(runs / "out")
+    for c, (name, m) in enumerate(cfg.cameras):
+        g = build_geometry(m.camera, cfg.grid, cfg.obj)
+        chunk = next(x for x in RrdReader(str(runs / "rig.rrd")).stream()
+                     if x.entity_path == f"/world/cameras/{name}/depth/detections").to_record_batch().to_pydict()
+        for frame, centres in zip(chunk["frame"], chunk["Boxes2D:centers"]):
+            ks = [int(np.argmin(np.hypot(*(g.locations[:, :2] - xy).T))) for xy in dets[f"{frame:04d}.png"]]
+            want = sorted(((g.rect[k][0] + g.rect[k][2]) / 2, (g.rect[k][1] + g.rect[k][3]) / 2)
+                          for k in ks if g.rect_area[k] > 0)
+            assert sorted(tuple(x) for x in centres) == want, (name, frame)
     assert (runs / "out" / "tracks.csv").read_text().count("\n") > 6
 
 
