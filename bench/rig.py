@@ -171,21 +171,27 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
             "rig_over_sum": median["rig"] / sum(median[n] for n in names), "batched": rate}
 
 
-def live_rig(run_cfg: dict, folder: Path, fps: float, workers: int, want: dict, sets: list[str] = ()) -> dict:
-    """The scene's rig frames played at `fps` through the live path with `workers` processes:
-    its live block's rate, drops and latency, and whether each map is the recorded rig's
-    (`want`: frame stem -> map)."""
+def cli_run(run_cfg: dict, path: Path, out: Path, extra: list[str], sets: list[str] = ()) -> Path:
+    """`dpom-warp run` of `run_cfg` (written to `path`) into `out`, with `extra` arguments and
+    the --set items `sets`; returns `out`."""
     import yaml
 
     from dpom_warp.cli import main as cli
 
-    path, out = folder / "live.yaml", folder / f"live_{workers}"
     path.write_text(yaml.safe_dump(run_cfg))
-    args = ["run", str(path), "--play", "--no-progress", "--overwrite", "--output", str(out), "--workers", str(workers),
-            "--set", f"input.fps={fps:g}"]
+    args = ["run", str(path), "--no-progress", "--overwrite", "--output", str(out), *extra]
     for item in sets:
         args += ["--set", item]
     assert cli(args) == 0
+    return out
+
+
+def live_rig(run_cfg: dict, folder: Path, fps: float, workers: int, want: dict, sets: list[str] = ()) -> dict:
+    """The scene's rig frames played at `fps` through the live path with `workers` processes:
+    its live block's rate, drops and latency, and whether each map is the recorded rig's
+    (`want`: frame stem -> map)."""
+    out = cli_run(run_cfg, folder / "live.yaml", folder / f"live_{workers}",
+                  ["--play", "--workers", str(workers), "--set", f"input.fps={fps:g}"], sets)
     live = json.loads((out / "summary.json").read_text())["live"]
     maps = sorted(out.glob("maps/*.npy"))
     same = sum(np.array_equal(np.load(m), want[m.stem]) for m in maps)
@@ -196,16 +202,7 @@ def live_rig(run_cfg: dict, folder: Path, fps: float, workers: int, want: dict, 
 
 def recorded_maps(run_cfg: dict, folder: Path, sets: list[str] = ()) -> dict:
     """The rig's maps of a recorded run of its frames (frame stem -> map)."""
-    import yaml
-
-    from dpom_warp.cli import main as cli
-
-    path, out = folder / "recorded.yaml", folder / "recorded"
-    path.write_text(yaml.safe_dump(run_cfg))
-    args = ["run", str(path), "--no-progress", "--overwrite", "--output", str(out)]
-    for item in sets:
-        args += ["--set", item]
-    assert cli(args) == 0
+    out = cli_run(run_cfg, folder / "recorded.yaml", folder / "recorded", [], sets)
     return {m.stem: np.load(m) for m in out.glob("maps/*.npy")}
 
 
