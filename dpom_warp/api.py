@@ -238,23 +238,21 @@ class Detector:
                 input.structure.planes false.
             InputError: a frame as `detect` refuses it, or no frame.
         """
-        from .session import add_static_planes
+        from .session import add_static_planes, planes_from_frames
 
         cfg = self.config
         if cfg.is_rig:
-            if not any(not m.inputs.background and m.inputs.structure.planes for _, m in cfg.cameras):
+            if not any(planes_from_frames(m) for _, m in cfg.cameras):
                 raise ConfigError("cameras: expected a camera with input.background null and input.structure.planes "
                                   "true for find_static_planes, found none (background frames explain the room)")
             frames = [self._rig_metres(d, i) for i, d in enumerate(depths)]
-            if not frames:
-                raise InputError("find_static_planes: expected at least one frame, found none")
-            return add_static_planes(self.setup, frames, log=lambda *_: None)
-        if cfg.inputs.background and not cfg.inputs.auto_background:
-            raise ConfigError(f"input.background: expected null or auto for find_static_planes, found background "
-                              f"frames ({cfg.inputs.background}), which explain the room already")
-        if not cfg.inputs.structure.planes:
-            raise ConfigError("input.structure.planes: expected true for find_static_planes, found false")
-        frames = [self._metres(d, i, who="find_static_planes, ") for i, d in enumerate(depths)]
+        else:
+            if cfg.inputs.background and not cfg.inputs.auto_background:
+                raise ConfigError(f"input.background: expected null or auto for find_static_planes, found background "
+                                  f"frames ({cfg.inputs.background}), which explain the room already")
+            if not cfg.inputs.structure.planes:
+                raise ConfigError("input.structure.planes: expected true for find_static_planes, found false")
+            frames = [self._metres(d, i, who="find_static_planes, ") for i, d in enumerate(depths)]
         if not frames:
             raise InputError("find_static_planes: expected at least one frame, found none")
         return add_static_planes(self.setup, frames, log=lambda *_: None)

@@ -349,8 +349,8 @@ class LiveRun:
         cfg, fr, res = self.cfg, item.frame, item.result
         due = cfg.output.images and self.done % cfg.output.images_every == 0
         self.worker.pictures = due and not self.tracking_on  # with tracks: drawn once committed (OnlineTracks)
-        paths = tuple(p.name or f"{p.index:06d}" if p is not None else None for p in fr.parts) if self.rig else None
-        _, output, _ = self.worker._finish(FrameItem(fr.name or f"{fr.index:06d}", paths=paths), item.depth, res,
+        paths = tuple(p.output_name if p is not None else None for p in fr.parts) if self.rig else None
+        _, output, _ = self.worker._finish(FrameItem(fr.output_name, paths=paths), item.depth, res,
                                            0.0, item.infer_s, [])
         output.record["stats"]["worker"] = item.process
         if self.rig:  # when each camera's frame arrived, against the first camera's (the pairing)
@@ -378,9 +378,10 @@ class LiveRun:
     # -- the main loop -----------------------------------------------------------------------
     def run(self) -> dict:
         """Until Ctrl-C, --max-frames or the camera stopping; then the run's outputs."""
+        from .session import planes_from_frames
+
         # floor-only on a live camera (of a rig: any): the static planes come from its first frames
-        planes_first = not self.cfg.inputs.play and any(not m.inputs.background and m.inputs.structure.planes
-                                                        for _, m in self.cfg.members())
+        planes_first = not self.cfg.inputs.play and any(planes_from_frames(m) for _, m in self.cfg.members())
         if not planes_first:
             self.start_helpers()  # before the camera: no frame is dropped while they start
         self.source.start(self.slot.put)

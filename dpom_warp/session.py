@@ -109,6 +109,12 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
                  inference, engine, time.perf_counter() - t)
 
 
+def planes_from_frames(cfg: RunConfig) -> bool:
+    """Whether a camera's static planes (input.structure) come from its first frames: no
+    background frames, and input.structure.planes."""
+    return not cfg.inputs.background and cfg.inputs.structure.planes
+
+
 def add_static_planes(setup: Setup, frames: list, log=print) -> dict:
     """The static planes (input.structure) found in `frames` (metres, full resolution: a live
     camera's first, given after setting up) made background in the setup's engine, its spec
@@ -128,7 +134,7 @@ def add_static_planes(setup: Setup, frames: list, log=print) -> dict:
     reports = {}
     for c, ((name, m), view) in enumerate(zip(cfg.cameras, engine.views)):
         own = [f[c] for f in frames if f[c] is not None]
-        if own and not m.inputs.background and m.inputs.structure.planes:
+        if own and planes_from_frames(m):
             reports[name] = static_structure(m, view, setup.spec.camera[c], own, _named(log, name))
             if reports[name]["pixels"]:
                 setup.background += f"; camera {name}{planes_words(reports[name])}"

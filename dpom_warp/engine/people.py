@@ -74,8 +74,13 @@ class Prior:
         with wp.ScopedDevice(engine.device):
             self.n_behind = wp.zeros(L, dtype=wp.int32)  # silhouette pixels read behind (behind_count)
             # the top band's support, against, hidden, missing and seen pixels (kernels.top_band)
-            self.top_counts = tuple(wp.zeros(L, dtype=wp.int32) for _ in range(5))
-            self.top = K.bands_of(self.top_counts)
+            self.top = K.bands_of([wp.zeros(L, dtype=wp.int32) for _ in range(5)])
+
+    @property
+    def top_counts(self) -> tuple:
+        """The top band's count arrays (support, against, hidden, missing, seen)."""
+        t = self.top
+        return t.support, t.against, t.hidden, t.missing, t.seen
 
     def top_terms(self, top_share: float) -> list:
         """kernels.soft_threshold's top-band arguments: the counts, then the factor's parameters

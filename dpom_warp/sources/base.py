@@ -60,6 +60,11 @@ class Frame:
     arrived: float | None = None  # a live frame's time.perf_counter() on arrival
     parts: list | None = None  # a live rig's frame (sources.rig): each camera's Frame (None: none near in time)
 
+    @property
+    def output_name(self) -> str:
+        """The frame's name in a live run's outputs: its name, else its index in 6 digits."""
+        return self.name or f"{self.index:06d}"
+
 
 class Source:
     """A recording, a folder of frames or a live camera. A live camera also has
