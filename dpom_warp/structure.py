@@ -12,7 +12,8 @@ of its rectangle, stands over the grid and reaches higher than the object become
 and so do flat, solid faces of furniture however high (a cabinet's front or end, a desk:
 upright ones `solid_width` wide and `solid_height` tall from the floor up, level ones
 `solid_width` both ways below `flat_below`, each column filled over `solid_fill` of their
-height; a person's front fails one of these), and narrower faces meeting such a face at its
+height, of the part in the image where its edge cuts a column; a person's front fails one of
+these), and narrower faces meeting such a face at its
 edge (a shelf's end, a cabinet's top). Planes tilted more than 10 degrees from level or upright
 are none of these (RANSAC finds such planes through a crowd), nor are level ones under 0.25 m
 (the floor, misread by a drifting frame). Each pixel whose ray meets such a plane inside its
@@ -94,7 +95,7 @@ class StaticPlane:
     inliers: int
     fill: float = 1.0  # the share of the rectangle its inliers fill (0.1 m cells)
     heights: tuple[float, float, float] = (0.0, 0.0, 0.0)  # its inliers' 1st, 50th, 98th percentile of z
-    columns: np.ndarray | None = None  # each 0.1 m column's share of the rectangle's rows filled ...
+    columns: np.ndarray | None = None  # each 0.1 m column's share of the rectangle's rows (in view) filled ...
     columns_from: float = 0.0  # ... the first's a
 
     def solid_span(self, fill: float) -> tuple[float, float]:
@@ -177,7 +178,7 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
         model, idx = segment_plane(cloud, tol)
         if len(idx) < min_points:
             break
-        for patch in _patches(model, cloud[idx], grid_xy, options.in_grid, min_points // 4):
+        for patch in _patches(model, cloud[idx], grid_xy, options.in_grid, min_points // 4, in_view=seen_by(camera)):
             kind = _kind(patch, options, taller)
             if kind in ("solid", "face"):  # its solid columns only
                 patch = patch.narrowed(patch.solid_span(options.solid_fill))
@@ -209,14 +210,24 @@ def _peeled(cloud: np.ndarray, tol: np.ndarray, model: np.ndarray, inliers: np.n
     return cloud[~gone], tol[~gone]
 
 
+def seen_by(camera: Camera):
+    """Whether world points (n, 3) lie in `camera`'s image, in front of it."""
+    def in_view(points: np.ndarray) -> np.ndarray:
+        u, v, z = camera.project(points)
+        return (z > 0) & (u >= 0) & (u <= camera.width) & (v >= 0) & (v <= camera.height)
+    return in_view
+
+
 def _patches(model: np.ndarray, inliers: np.ndarray, grid_xy, in_grid: float, min_points: int,
-             cell: float = 0.1) -> list[StaticPlane]:
+             cell: float = 0.1, in_view=None) -> list[StaticPlane]:
     """The plane of `model` (a, b, c, d) with the rectangle of each connected patch of its
     inliers of at least `min_points` (on a `cell` grid along two in-plane axes: horizontal, and
     up the plane where it is not level; two cabinets' fronts in one plane are two patches), its
     fill and heights, largest first; none where a patch lies mostly beside the grid (`grid_xy`:
     less than `in_grid` of it over) or the plane is tilted more than 10 degrees from level or
-    upright (walls and furniture are either; RANSAC finds tilted planes through a crowd)."""
+    upright (walls and furniture are either; RANSAC finds tilted planes through a crowd).
+    `in_view(points) -> bool`: where given, each column's fill is of its rows whose centre lies
+    in the image (the edge of the image cuts a cabinet's side: what is in view is solid)."""
     from scipy import ndimage
 
     n = model[:3] / np.linalg.norm(model[:3])
@@ -253,6 +264,12 @@ def _patches(model: np.ndarray, inliers: np.ndarray, grid_xy, in_grid: float, mi
         rows = np.arange(np.floor((b0 - lo[1]) / cell), np.floor((b1 - lo[1]) / cell) + 1).astype(np.int64)
         inside = cells[np.isin(cells[:, 1], rows)]  # each column's filled rows within b0..b1
         columns = np.bincount(inside[:, 0], minlength=grid.shape[0]) / len(rows)
+        if in_view is not None:  # a column the image's edge cuts: the share of its rows in view
+            a = lo[0] + (np.arange(grid.shape[0]) + 0.5) * cell
+            b = lo[1] + (rows + 0.5) * cell
+            centres = origin + a[:, None, None] * u + b[None, :, None] * v
+            seen = in_view(centres.reshape(-1, 3)).reshape(len(a), len(b)).sum(1)
+            columns = np.where(seen > 0, np.minimum(columns * len(rows) / np.maximum(seen, 1), 1.0), 0.0)
         out.append(StaticPlane(n, float(d), origin, u, v, (float(a0), float(a1), float(b0), float(b1)),
                                int(keep.sum()), float(fill), heights, columns, float(lo[0])))
     return out

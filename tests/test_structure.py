@@ -188,11 +188,11 @@ def flat_points(width, height, fill=1.0, bottom=0.1, y=3.0, spacing=0.02, seed=0
     return pts[[tuple(c) not in empty for c in cells]]
 
 
-def kind_of(points, normal=(0.0, 1.0, 0.0), taller=1.95):
+def kind_of(points, normal=(0.0, 1.0, 0.0), taller=1.95, in_view=None):
     from dpom_warp.structure import StructureOptions, _kind, _patches
 
     n = np.asarray(normal, float) / np.linalg.norm(normal)
-    patches = _patches(np.array([*n, -n @ points.mean(0)]), points, (-5, 5, 0, 8), 0.2, 50)
+    patches = _patches(np.array([*n, -n @ points.mean(0)]), points, (-5, 5, 0, 8), 0.2, 50, in_view=in_view)
     return (_kind(patches[0], StructureOptions(), taller), patches[0]) if patches else (None, None)
 
 
@@ -221,6 +221,32 @@ def test_flat_solid_faces_are_structure_and_peoples_fronts_are_not():
     floor = flat_points(1.8, 1.8, bottom=2.0)[:, [0, 2, 1]] * [1, 1, 0] + [0, 0, 0.1]
     assert kind_of(floor, (0, 0, 1))[0] is None  # the floor read 0.1 m high by a drifting frame
     assert kind_of(floor + [0, 0, 0.3], (0, 0, 1))[0] == "solid"  # a low stage 0.4 m high
+
+
+def test_a_face_the_images_edge_cuts_is_judged_on_its_part_in_view():
+    """A cabinet's front 0.7 x 1.6 m whose right part the image's edge cuts on a slant (in view:
+    x up to 0.2 m at its top, 0.6 m at the floor; a side face seen at the image's edge in the
+    robustness row with walls and cabinets): each column is filled over the rows in view, so it is
+    "solid", 0.6 m of it; judged on the whole rectangle's height, the columns past 0.2 m are
+    short and it was a narrow face at most (a "person" floor-only). A person's gappy front (30 %
+    of its cells empty) cut the same way is not solid (a narrow face at most, in 27 of 40 draws:
+    its columns with few rows in view fill by chance, structure only where it meets a solid face);
+    with the whole front in view, in_view changes nothing."""
+    def in_view(points):
+        return points[:, 0] <= 0.2 + 0.4 * (1.7 - points[:, 2]) / 1.6
+
+    front = flat_points(0.7, 1.6)
+    cut = front[in_view(front)]
+    assert kind_of(cut)[0] == "face"  # (structure only where it meets a solid face)
+    kind, patch = kind_of(cut, in_view=in_view)
+    assert kind == "solid"
+    from dpom_warp.structure import StructureOptions
+    lo, hi = patch.solid_span(StructureOptions().solid_fill)
+    assert hi - lo == pytest.approx(0.6, abs=0.1)
+    gappy = flat_points(0.7, 1.6, fill=0.7)
+    assert kind_of(gappy[in_view(gappy)], in_view=in_view)[0] != "solid"
+    everywhere = kind_of(front, in_view=lambda p: np.ones(len(p), bool))
+    assert everywhere[0] == "solid" and everywhere[1].solid_span(0.85) == kind_of(front)[1].solid_span(0.85)
 
 
 def test_a_face_meeting_a_solid_at_its_edge_is_structure():
