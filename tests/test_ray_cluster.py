@@ -103,15 +103,14 @@ def test_ray_address_env_and_auto_join_the_cluster(cluster, scene, tmp_path):
     address, env = cluster
     tmp, path = scene
     for name, args, extra_env in (("address", ["--ray", address], {}),
-                                  ("env", ["--ray"], {"RAY_ADDRESS": address}),
                                   ("auto", ["--ray", "auto"], {}),
-                                  ("workers", ["--ray", address, "--workers", "2"], {})):
-        out = tmp_path / name
+                                  ("env, workers", ["--ray", "--workers", "2"], {"RAY_ADDRESS": address})):
+        out = tmp_path / name.replace(", ", "_")
         proc = dpom(["run", str(path), "--no-progress", *args, "--output", str(out)], {**env, **extra_env})
         assert proc.returncode == 0, (name, proc.stderr[-2000:])
         assert_same_files(tmp / "plain", out, 6)
         runner = json.loads((out / "summary.json").read_text())["runner"]
-        actors = 2 if name == "workers" else CPUS  # --workers N, else one per CPU of the cluster
+        actors = 2 if "workers" in name else CPUS  # --workers N, else one per CPU of the cluster
         assert runner["kind"] == "ray" and runner["actors"] == actors, name
         assert f"ray: {actors} actors (one CPU each)" in proc.stdout, name
         assert set(runner["frames_per_worker"]) <= {f"actor {i}" for i in range(actors)}, name
