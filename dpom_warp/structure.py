@@ -227,7 +227,7 @@ def _patches(model: np.ndarray, inliers: np.ndarray, grid_xy, in_grid: float, mi
     less than `in_grid` of it over) or the plane is tilted more than 10 degrees from level or
     upright (walls and furniture are either; RANSAC finds tilted planes through a crowd).
     `in_view(points) -> bool`: where given, each column's fill is of its rows whose centre lies
-    in the image (the edge of the image cuts a cabinet's side: what is in view is solid)."""
+    in the image (the image's edge cuts a shelf's front seen from the side: what is in view is solid)."""
     from scipy import ndimage
 
     n = model[:3] / np.linalg.norm(model[:3])

@@ -225,8 +225,8 @@ def test_flat_solid_faces_are_structure_and_peoples_fronts_are_not():
 
 def test_a_face_the_images_edge_cuts_is_judged_on_its_part_in_view():
     """A cabinet's front 0.7 x 1.6 m whose right part the image's edge cuts on a slant (in view:
-    x up to 0.2 m at its top, 0.6 m at the floor; a side face seen at the image's edge in the
-    robustness row with walls and cabinets): each column is filled over the rows in view, so it is
+    x up to 0.2 m at its top, 0.6 m at the floor; as a shelf's front against a side wall, seen at
+    the image's edge in the robustness row with walls and cabinets): each column is filled over the rows in view, so it is
     "solid", 0.6 m of it; judged on the whole rectangle's height, the columns past 0.2 m are
     short and it was a narrow face at most (a "person" floor-only). A person's gappy front (30 %
     of its cells empty) cut the same way is not solid (a narrow face at most, in 27 of 40 draws:
