@@ -16,6 +16,7 @@ from pydantic import Field, model_validator
 from ._open3d import o3d
 
 from .geometry import Camera
+from .planes import segment_plane
 from .values import Int, Node, Num, Pair, Up, _fail
 
 
@@ -164,8 +165,9 @@ def pose_from_plane(normal: np.ndarray, offset: float) -> np.ndarray:
 
 def _refine(points, normal, offset, options: GroundOptions, max_turn_deg: float | None = None):
     """Weighted least squares of the floor on the points near (normal, offset), iterated to
-    its fixed point and rounded to 1e-10, so that the slightly different planes Open3D's
-    multithreaded RANSAC returns from run to run give the same pose bit for bit.
+    its fixed point and rounded to 1e-10, so that slightly different starting planes that reach
+    one fixed point give the same pose bit for bit (the planes themselves: planes.segment_plane,
+    seeded).
 
     Only depth is noisy; a pixel's direction r = (x/z, y/z, 1) is exact. On the plane
     n . X + d = 0 a point z r satisfies 1/z = -(n . r) / d, which is linear in r, so the
@@ -304,7 +306,9 @@ def _choose(candidates):
 def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), seed: int = 0) -> GroundFit:
     """Find the floor in camera-frame points (several frames may be stacked).
 
-    Planes are peeled off the downsampled cloud with Open3D's RANSAC, largest first. Floor
+    Planes are peeled off the cloud downsampled by Open3D with RANSAC, largest first
+    (planes.segment_plane, seeded: Open3D's own gave other planes from call to call on a
+    loaded machine, and _refine does not always bring them to one pose). Floor
     candidates have enough inliers, the camera on their upper side, and a normal within
     `max_angle_deg` of `up`, or with `up: auto` a normal that a camera pitched -10 to 100
     degrees (roll up to `max_angle_deg`, any near straight down) would see as its floor's;
@@ -328,20 +332,24 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
     if len(in_range) < options.min_inliers:
         raise GroundFitError(f"too few depth readings for a floor ({len(in_range)} points within "
                              f"{options.depth_max} m, need at least {options.min_inliers})")
-    o3d.utility.random.seed(seed)
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(in_range)).voxel_down_sample(options.voxel)
+    cloud = np.asarray(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(in_range))
+                       .voxel_down_sample(options.voxel).points)
     auto = isinstance(options.up, str)
     if not auto:
         up = np.asarray(options.up, dtype=np.float64)
         up /= np.linalg.norm(up)
     candidates, best_other = [], 0
     for _ in range(options.max_planes):
-        if len(cloud.points) < options.min_inliers:
+        if len(cloud) < options.min_inliers:
             break
-        plane, idx = cloud.segment_plane(options.distance_threshold, 3, 1000)
-        n, d = np.asarray(plane[:3], dtype=np.float64), float(plane[3])
-        scale = np.linalg.norm(n)
-        n, d = n / scale, d / scale
+        _, idx = segment_plane(cloud, options.distance_threshold, 1000, seed)
+        if len(idx) < 3:
+            break
+        # the inliers' least-squares plane (as Open3D's segment_plane gives it): a three-point
+        # hypothesis is poorly placed on a wall seen edge-on, which _refine cannot correct
+        centre = cloud[idx].mean(0)
+        n = np.linalg.svd(cloud[idx] - centre, full_matrices=False)[2][2]
+        d = -float(n @ centre)
         if d < 0:  # orient the normal towards the camera (origin): n . 0 + d > 0
             n, d = -n, -d
         if auto:
@@ -353,7 +361,9 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
             candidates.append((penalty, d, n))
         else:
             best_other = max(best_other, len(idx))
-        cloud = cloud.select_by_index(idx, invert=True)
+        rest = np.ones(len(cloud), bool)
+        rest[idx] = False
+        cloud = cloud[rest]
     if not candidates:
         which = (f"is the floor of a camera pitched {-AUTO_MARGIN_DEG:g} to {90 + AUTO_MARGIN_DEG:g} deg "
                  f"(roll up to {options.max_angle_deg:g} deg)" if auto else
