@@ -172,13 +172,14 @@ def find_planes(depth_m: np.ndarray, camera: Camera, options: StructureOptions, 
     r = np.linalg.norm(cloud - camera.centre, axis=1)
     tol = np.maximum(options.distance, noise[0] + noise[1] * r ** 2)
     planes, solids, faces = [], [], []
+    in_view = seen_by(camera)
     for _ in range(options.max_planes):
         if len(cloud) < min_points:
             break
         model, idx = segment_plane(cloud, tol)
         if len(idx) < min_points:
             break
-        for patch in _patches(model, cloud[idx], grid_xy, options.in_grid, min_points // 4, in_view=seen_by(camera)):
+        for patch in _patches(model, cloud[idx], grid_xy, options.in_grid, min_points // 4, in_view=in_view):
             kind = _kind(patch, options, taller)
             if kind in ("solid", "face"):  # its solid columns only
                 patch = patch.narrowed(patch.solid_span(options.solid_fill))
