@@ -138,7 +138,7 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
     rig_frames = run_frames(cfg, log=lambda *_: None).frames
     truth = load_ground_truth(raw["evaluation"]["ground_truth"])
     depths = [read_rig_frame(cfg, f.paths) for f in rig_frames]
-    names = [n for n, _ in cfg.cameras]
+    names = cfg.camera_names
     run_cfg = {k: v for k, v in raw.items() if k != "synthetic"}  # rendered above
     rig = Detector.from_config(run_cfg, list(sets))
     stride = rig.engine.resolution.stride  # each camera alone at the rig's resolution

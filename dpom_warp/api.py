@@ -260,7 +260,7 @@ class Detector:
     def _rig_metres(self, depths, index: int) -> list[np.ndarray]:
         """A rig's frame, a list in camera order or a dict by name, as metres a camera (None: that
         camera has no frame: the frame is inferred from the others, FrameWorker.infer)."""
-        names = [n for n, _ in self.config.cameras]
+        names = self.config.camera_names
         if isinstance(depths, Mapping):
             unknown = sorted(set(depths) - set(names))
             if unknown:

@@ -151,7 +151,7 @@ def played_source(cfg: RunConfig, log, max_frames: int | None):
         mine = [(f.paths[c], t) for f, t in zip(got.frames, times) if f.paths[c] is not None]
         cameras.append(PlayedFrames([p for p, _ in mine], m.camera.width, m.camera.height, cfg.inputs.fps,
                                     [t for _, t in mine], str(m.inputs.frames), start_at=times[0] if times else 0.0))
-    return RigStream(cameras, [n for n, _ in cfg.cameras], cfg.rig.tolerance), got.frames
+    return RigStream(cameras, cfg.camera_names, cfg.rig.tolerance), got.frames
 
 
 # -- a rig's frames ------------------------------------------------------------------------------

@@ -171,7 +171,7 @@ class LiveRun:
             from .sources.rig import RigStream
 
             self.source = RigStream([open_source(m.inputs.frames, key=f"cameras[{c}].input.frames")
-                                     for c, (_, m) in enumerate(cfg.cameras)], [n for n, _ in cfg.cameras],
+                                     for c, (_, m) in enumerate(cfg.cameras)], cfg.camera_names,
                                     cfg.rig.tolerance)
             played = []
         else:

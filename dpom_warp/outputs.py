@@ -155,7 +155,7 @@ def summarise(cfg, done, records, skipped, truth, geometry, dev, background, gro
     drifts = {p["frame"]: p["drift"] for p in per_frame if "drift" in p}
     rig = hasattr(geometry, "parts")  # a rig's (geometry.RigGeometry)
     if drifts and rig:  # each camera's range
-        summary["drift"] = {n: drift_summary({f: d[n] for f, d in drifts.items() if d.get(n)}) for n, _ in cfg.cameras}
+        summary["drift"] = {n: drift_summary({f: d[n] for f, d in drifts.items() if d.get(n)}) for n in cfg.camera_names}
     elif drifts:  # each frame's estimate is in its record (and per_frame); here their range
         summary["drift"] = drift_summary(drifts)
     if rig:  # each camera's frames, and the rig frames it had none for (inferred from the others)
@@ -168,7 +168,7 @@ def summarise(cfg, done, records, skipped, truth, geometry, dev, background, gro
                                   "median_read_s": camera_median("read_s_cameras", n),
                                   "median_lists_s": camera_median("lists_s_cameras", n),
                                   "median_iterations_s": camera_median("iterations_s_cameras", n)}
-                              for n, _ in cfg.cameras}
+                              for n in cfg.camera_names}
     if truth is not None and done:
         dims = 3 if cfg.grid.mode == "voxel" else 2
         det_xy = {f.name: np.array(records[f.name]["xy"]).reshape(-1, dims) for f in done}

@@ -36,7 +36,7 @@ def rig_picture(depths: list, rho_map: np.ndarray, cfg, rig, detections: list, t
     """A PNG file's bytes of a rig's frame: `depths` one a camera, `rig` their full-resolution
     geometry.RigGeometry, `detections` located on the first camera's geometry (their boxes its
     rectangles); `tracks` (outputs.ShownTracks) on the first camera's panel and the map."""
-    names, geometries = [n for n, _ in cfg.cameras], rig.parts
+    names, geometries = cfg.camera_names, rig.parts
     in_view = rig.rect_area > 0  # in view of any camera
     truth = None if truth is None else [{k: v for k, v in o.items() if k != "bbox"} for o in truth]  # (boxes: one camera's)
     main = Image.open(io.BytesIO(frame_picture(

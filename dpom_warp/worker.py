@@ -274,7 +274,7 @@ class FrameWorker:
                       "worker": self.name, **{f"engine_{k}": v for k, v in timings.items()}},
         }
         if self.rig:  # each camera's file (None: inferred from the others) and drift
-            names = [n for n, _ in cfg.cameras]
+            names = cfg.camera_names
             record["cameras"] = {n: (Path(p).name if p is not None else None) for n, p in zip(names, item.paths)}
             record["stats"]["read_s_cameras"] = self.read_cameras.pop(item.path, {})
             present = [n for n, p in zip(names, item.paths) if p is not None]  # the engine's cameras

@@ -205,7 +205,7 @@ class Rerun(Writer):
         super().__init__(run)
         self.log = RerunLog(run.cfg.output.rerun, spawn=run.cfg.output.view)
         if run.cfg.is_rig:  # each camera at world/cameras/NAME
-            self.log.camera(run.camera or [m.camera for _, m in run.cfg.cameras], [n for n, _ in run.cfg.cameras],
+            self.log.camera(run.camera or [m.camera for _, m in run.cfg.cameras], run.cfg.camera_names,
                             run.geometry.parts)
         else:
             self.log.camera(run.camera or run.cfg.camera)

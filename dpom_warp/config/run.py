@@ -68,6 +68,11 @@ class RunConfig:
         """A config with a `cameras:` list (of one camera or more)."""
         return bool(self.cameras)
 
+    @property
+    def camera_names(self) -> list[str]:
+        """A rig's camera names in the config's order (none for a single-camera config)."""
+        return [name for name, _ in self.cameras]
+
     def members(self) -> list[tuple[str, "RunConfig"]]:
         """(name, RunConfig) of each camera: a rig's, else this config's own camera ("camera")."""
         return list(self.cameras) or [("camera", self)]
