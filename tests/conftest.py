@@ -18,6 +18,11 @@ settings.load_profile("ci" if os.environ.get("CI") else os.environ.get("HYPOTHES
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
+# pytest-xdist (pyproject's addopts: two worker processes, a test file each at a time): a
+# kernel cache each, as for any processes that run at once (a cache is written by one process)
+if os.environ.get("PYTEST_XDIST_WORKER") and os.environ.get("WARP_CACHE_PATH"):
+    os.environ["WARP_CACHE_PATH"] = os.path.join(os.environ["WARP_CACHE_PATH"], os.environ["PYTEST_XDIST_WORKER"])
+
 from dpom_warp.warp_setup import init_warp
 
 wp.config.log_level = wp.LOG_ERROR
