@@ -265,6 +265,8 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
         self._run_loop(logit_prior)
         wp.synchronize_device(dev)
         t2 = time.perf_counter()
+        # each camera's launches in the loop (its top band's, in _threshold, come after)
+        loop_s = [v.launch.seconds - b for v, b in zip(self.views, before)]
         self._threshold()
         # each frame's live and pruned locations and the entries prune_lists kept, counted by
         # location, tallied where they are (a GPU copies back a few integers, not the arrays)
@@ -291,8 +293,7 @@ class Engine(SparseMixin, IterationsMixin, ThresholdMixin):
             timings["batch"] = n
         # each camera's lists, and its pixels' launches in the loop (the CPU's: a GPU's return at once)
         timings["lists_s_cameras"] = camera_lists
-        timings["iterations_s_cameras"] = ([v.launch.seconds - b for v, b in zip(self.views, before)]
-                                           if self.views[0].launch.timed else None)
+        timings["iterations_s_cameras"] = loop_s if self.views[0].launch.timed else None
         return [FrameResult(rho=rho[f], rho_star=rho_star[f], evidence_share=share[f],
                             iterations=int(iterations[f]), entries=int(entries[f]),
                             max_change=max_change[f, :iterations[f]].copy(), timings=dict(timings),
