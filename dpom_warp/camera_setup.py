@@ -151,6 +151,9 @@ def prepare_camera(cfg: RunConfig, frames: list[Path], dev: str, log=print) -> C
     sample = ([frames[i] for i in sample_frames(len(frames), cfg.inputs.background_auto.max_frames)]
               if auto_bg else [])
     camera, ground = cfg.camera, None
+    if cfg.imu_tilt:
+        log(f"camera {', '.join(f'{k[:-4]} {v:.2f} deg' for k, v in cfg.imu_tilt.items())} from the recording's "
+            f"accelerometer (camera.extrinsics leaves {' and '.join(cfg.imu_tilt)} out)")
     if cfg.pose_auto:
         if auto_bg and len(sample) >= cfg.inputs.background_auto.min_frames:
             camera, ground = fit_pose_on_estimate(cfg, sample, dev, log)

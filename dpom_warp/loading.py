@@ -30,7 +30,8 @@ def camera_from_recording(raw: dict) -> dict:
     ground = cam.get("ground") if isinstance(cam.get("ground"), dict) else {}
     # extrinsics left out are auto (CameraSection's default): the floor fit then takes the IMU's up too
     wants_up = cam.get("extrinsics", "auto") == "auto" and ground.get("up", "auto") == "auto"
-    if not missing and "depth_scale" in inp and not wants_up:
+    wants_tilt = bool(tilt_left_out(cam.get("extrinsics")))
+    if not missing and "depth_scale" in inp and not wants_up and not wants_tilt:
         return raw
     try:
         info = open_source(inp["frames"], inp.get("topic")).info()
@@ -55,7 +56,38 @@ def camera_from_recording(raw: dict) -> dict:
         if not isinstance(cam.get("ground"), dict):
             cam["ground"] = {}
         cam["ground"]["up"] = [round(float(x), 6) for x in info.gravity_up]
+    if wants_tilt and info.gravity_up:
+        tilt_from_gravity(cam["extrinsics"], info.gravity_up, inp["frames"])
     return out
+
+
+TILT = ("pitch_deg", "roll_deg")
+
+
+def tilt_left_out(extrinsics) -> list[str]:
+    """The tilt angles (pitch_deg, roll_deg) that a camera.extrinsics of angles ({height, ...})
+    leaves out: a recording with an accelerometer gives them (tilt_from_gravity)."""
+    if not isinstance(extrinsics, dict) or "T_world_from_camera" in extrinsics or "height" not in extrinsics:
+        return []
+    return [k for k in TILT if k not in extrinsics]
+
+
+def tilt_from_gravity(extrinsics: dict, up, frames: str) -> None:
+    """camera.extrinsics' pitch_deg and roll_deg left out (a height written, the floor perhaps
+    not in view) filled in from the recording's accelerometer: the pitch and roll of a camera
+    that sees `up` (the depth camera's frame) as the world's up, as a floor with that normal
+    would give them (ground.implied_pitch_roll); the angles the config gives win."""
+    import numpy as np
+
+    from .ground import implied_pitch_roll
+
+    pitch, roll = implied_pitch_roll(np.asarray(up, dtype=np.float64))
+    if pitch > 90:
+        raise ConfigError(f"camera.extrinsics: {frames}'s accelerometer has the camera tilted past straight "
+                          f"down (pitch {pitch:.1f} deg, which camera.extrinsics.pitch_deg cannot say); "
+                          f"expected camera.extrinsics.pitch_deg and roll_deg, or T_world_from_camera")
+    for key, value in zip(TILT, (pitch, roll)):
+        extrinsics.setdefault(key, round(value, 3))
 
 
 def config_from_mapping(raw: dict) -> RunConfig:
@@ -64,9 +96,16 @@ def config_from_mapping(raw: dict) -> RunConfig:
     rig's (`cameras:`) camera by camera (rig_from_mapping)."""
     if isinstance(raw, dict) and "cameras" in raw:
         return rig_from_mapping(raw)
-    if isinstance(raw, dict):
-        raw = camera_from_recording(camera_from_file(camera_shorthand(raw)))
-    return parse_config(raw)
+    if not isinstance(raw, dict):
+        return parse_config(raw)
+    raw = camera_from_file(camera_shorthand(raw))
+    cam = raw.get("camera")
+    left_out = tilt_left_out(cam.get("extrinsics")) if isinstance(cam, dict) else []
+    raw = camera_from_recording(raw)
+    cfg = parse_config(raw)
+    ext = raw["camera"]["extrinsics"] if left_out else {}
+    cfg.imu_tilt = {k: ext[k] for k in left_out if k in ext}  # the angles the accelerometer gave
+    return cfg
 
 
 def rig_from_mapping(raw: dict) -> RunConfig:

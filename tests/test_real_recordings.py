@@ -197,6 +197,51 @@ def test_azure_kinect_accelerometer_gives_up(tmp_path):
     assert tuple(load_config(path).ground.up) == (0, -1, 0)
 
 
+def test_a_height_alone_takes_its_tilt_from_the_accelerometer(tmp_path, capsys):
+    """camera.extrinsics {height: H} on the Azure Kinect recording (a desk: no floor to fit):
+    the pitch and roll it leaves out are the accelerometer's, so that the pose's world up seen
+    from the camera, R^T (0, 0, 1), is the recording's gravity up (to the 3 decimals of a degree
+    the angles are kept to); the run says so. An angle given is kept and only the other taken;
+    a recording without an accelerometer (the RealSense D435 file) leaves them 0, as before."""
+    from dpom_warp.loading import load_config
+    from dpom_warp.sources import open_source
+
+    up = np.array(open_source(AZURE).info().gravity_up)
+    cfg = {"device": "cpu", "input": {"frames": str(AZURE)}, "camera": {"extrinsics": {"height": 1.0}},
+           "grid": {"x": [-1.5, 1.5, 0.1], "y": [0.5, 3.5, 0.1]},
+           "output": {"dir": str(tmp_path / "out"), "images": False}}
+    path = tmp_path / "h.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    loaded = load_config(path)
+    rotation = loaded.camera.T_world_from_camera[:3, :3]
+    np.testing.assert_allclose(rotation.T @ [0, 0, 1], up, atol=1e-4)
+    assert loaded.camera.T_world_from_camera[2, 3] == 1.0 and set(loaded.imu_tilt) == {"pitch_deg", "roll_deg"}
+    assert main(["run", str(path), "--no-progress"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "accelerometer" in x)
+    assert line == (f"camera pitch {loaded.imu_tilt['pitch_deg']:.2f} deg, roll {loaded.imu_tilt['roll_deg']:.2f} deg "
+                    f"from the recording's accelerometer (camera.extrinsics leaves pitch_deg and roll_deg out)")
+    written = json.loads((tmp_path / "out" / "run.json").read_text())["config"]["camera"]["extrinsics"]
+    assert {k: written[k] for k in ("pitch_deg", "roll_deg")} == loaded.imu_tilt
+    cfg["camera"]["extrinsics"] = {"height": 1.0, "pitch_deg": 30.0}  # the pitch given wins
+    path.write_text(yaml.safe_dump(cfg))
+    loaded = load_config(path)
+    assert loaded.resolved["camera"]["extrinsics"]["pitch_deg"] == 30.0 and set(loaded.imu_tilt) == {"roll_deg"}
+    cfg["input"]["frames"] = str(REAL / "realsense_d435" / "single_depth_color_640x480.bag")  # no IMU
+    cfg["camera"]["extrinsics"] = {"height": 1.0}
+    path.write_text(yaml.safe_dump(cfg))
+    loaded = load_config(path)
+    assert loaded.imu_tilt == {}
+    np.testing.assert_allclose(loaded.camera.T_world_from_camera[:3, :3].T @ [0, 0, 1], [0, -1, 0], atol=1e-12)
+    # a camera looking down and past the vertical: up points behind it (-z) and to the image's
+    # bottom (+y), a pitch of 180 - asin(0.95) = 108 deg, which pitch_deg (-90 to 90) cannot say
+    from dpom_warp.config import ConfigError
+    from dpom_warp.loading import tilt_from_gravity
+
+    with pytest.raises(ConfigError, match=r"^camera.extrinsics: x.mkv's accelerometer has the camera tilted past "
+                                          r"straight down \(pitch 108.2 deg"):
+        tilt_from_gravity({"height": 3.0}, [0.0, 0.3122, -0.95], "x.mkv")
+
+
 def run_auto_pose_fails(tmp_path, capsys, recording, camera=None) -> tuple:
     """`dpom-warp run` on `recording` with extrinsics auto (or the `camera` section given), which
     must exit 2: (the config's path, the one error line)."""

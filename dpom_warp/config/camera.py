@@ -76,8 +76,9 @@ class PoseAngles(Node):
     """The camera at (x, y, height) looking along +y, tilted down by pitch."""
 
     height: Num = Field(gt=0, description="metres above the floor")
-    pitch_deg: Num = Field(0.0, ge=-90, le=90, description="downward tilt, degrees")
-    roll_deg: Num = Field(0.0, ge=-180, le=180, description="degrees")
+    pitch_deg: Num = Field(0.0, ge=-90, le=90, description="downward tilt, degrees (left out: the recording's "
+                                                           "accelerometer's, where it has one)")
+    roll_deg: Num = Field(0.0, ge=-180, le=180, description="degrees (left out: the accelerometer's, as pitch_deg)")
     yaw_deg: Num = Field(0.0, ge=-360, le=360, description="degrees")
     x: Num = Field(0.0, description="metres")
     y: Num = Field(0.0, description="metres")

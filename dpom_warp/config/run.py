@@ -62,6 +62,9 @@ class RunConfig:
     zones: tuple = ()  # config.sections.ZoneSection each
     lines: tuple = ()  # config.sections.LineSection each
     counting: Any = None  # config.sections.CountingSection
+    # camera.extrinsics' pitch_deg and roll_deg that the config left out and the recording's
+    # accelerometer gave (loading.tilt_from_gravity), by key
+    imu_tilt: dict = field(default_factory=dict)
 
     @property
     def is_rig(self) -> bool:
