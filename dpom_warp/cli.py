@@ -286,6 +286,9 @@ def _track(args) -> int:
 def _info(args) -> int:
     import json
 
+    import numpy as np
+
+    from .ground import implied_pitch_roll
     from .sources import open_source
 
     info = open_source(args.source, args.topic, "SOURCE").info().as_json()
@@ -293,6 +296,7 @@ def _info(args) -> int:
         print(json.dumps(info, indent=2))
         return 0
     i, d = info["intrinsics"], info["distortion"]
+    tilt = implied_pitch_roll(np.asarray(info["gravity_up"], dtype=np.float64)) if info.get("gravity_up") else None
     lines = [f"{info['path']}: {info['kind']}",
              f"  depth stream: {info['topic'] or '-'} ({info['encoding'] or '-'}), {info['frames']} "
              f"frame{'' if info['frames'] == 1 else 's'} of {info['width']}x{info['height']}",
@@ -304,8 +308,10 @@ def _info(args) -> int:
              "  duration: " + (f"{info['duration_s']:.3f} s, {info['rate_hz']:.2f} frames/s"
                                 if info["duration_s"] else "-"),
              f"  IMU: {'yes' if info['imu'] else 'no'}" + (
-                 f" (up in the depth camera's frame: [{', '.join(f'{x:.4f}' for x in info['gravity_up'])}])"
-                 if info.get("gravity_up") else "")]
+                 f" (up in the depth camera's frame: [{', '.join(f'{x:.4f}' for x in info['gravity_up'])}]: "
+                 f"pitch {tilt[0]:.2f} deg, roll {tilt[1]:.2f} deg"
+                 f"{', as camera.extrinsics {height: H} takes them' if tilt[0] <= 90 else ''})"
+                 if tilt else "")]
     if len(info["streams"]) > 1:
         lines.append(stream_lines(info["streams"]))
     bad = info["unreadable"]

@@ -4,6 +4,7 @@ messages and blocks), `dpom-warp info` on them, their floor fits with the record
 gravity (the IMU), and the one-line errors where no floor is in view."""
 
 import json
+import math
 import struct
 from pathlib import Path
 
@@ -128,6 +129,15 @@ def test_info_names_the_sensor_streams_and_counts_the_rest(capsys):
     assert main(["info", str(AZURE)]) == 0
     out = capsys.readouterr().out
     assert "1 frame of 640x576" in out and "IMU (subtitle)" in out and "distortion: [0.54794, " in out
+    # the tilt the accelerometer gives, by hand for a camera upright (up towards the image's top,
+    # -y): pitch asin(-up_z) below the horizon, roll atan2(-up_x, -up_y)
+    from dpom_warp.sources import open_source
+
+    up = open_source(AZURE).info().gravity_up
+    pitch, roll = math.degrees(math.asin(-up[2])), math.degrees(math.atan2(-up[0], -up[1]))
+    (imu,) = [line for line in out.splitlines() if line.startswith("  IMU: yes (up in the depth camera's frame: [")]
+    assert imu.endswith(f"]: pitch {pitch:.2f} deg, roll {roll:.2f} deg, as camera.extrinsics {{height: H}} "
+                        f"takes them)"), imu
 
 
 def test_azure_kinect_recording_reads_right_and_runs(tmp_path):
