@@ -16,7 +16,7 @@ from pydantic import Field, model_validator
 from ._open3d import o3d
 
 from .geometry import Camera
-from .planes import segment_plane
+from .planes import least_squares_plane, segment_plane
 from .values import Int, Node, Num, Pair, Up, _fail
 
 
@@ -347,9 +347,7 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
             break
         # the inliers' least-squares plane (as Open3D's segment_plane gives it): a three-point
         # hypothesis is poorly placed on a wall seen edge-on, which _refine cannot correct
-        centre = cloud[idx].mean(0)
-        n = np.linalg.svd(cloud[idx] - centre, full_matrices=False)[2][2]
-        d = -float(n @ centre)
+        n, d = least_squares_plane(cloud[idx])
         if d < 0:  # orient the normal towards the camera (origin): n . 0 + d > 0
             n, d = -n, -d
         if auto:

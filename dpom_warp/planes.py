@@ -57,10 +57,16 @@ def segment_plane(points: np.ndarray, distance: float | np.ndarray, iterations: 
     n, d = best[2]
     inliers = np.flatnonzero(np.abs(pts @ n + d) <= tol)
     if len(inliers) >= 3:  # the least-squares plane of the inliers, where it keeps as many
-        centre = pts[inliers].mean(0)
-        fit = np.linalg.svd(pts[inliers] - centre, full_matrices=False)[2][2]
-        fit_d = -float(fit @ centre)
+        fit, fit_d = least_squares_plane(pts[inliers])
         again = np.flatnonzero(np.abs(pts @ fit + fit_d) <= tol)
         if len(again) >= len(inliers):
             n, d, inliers = fit, fit_d, again
     return np.array([*n, d]), inliers
+
+
+def least_squares_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """(n, d), unit n, of the plane n . X + d = 0 nearest `points` (n >= 3, (n, 3)) in the
+    least-squares sense: through their centroid, normal to their direction of least spread."""
+    centre = points.mean(0)
+    n = np.linalg.svd(points - centre, full_matrices=False)[2][2]
+    return n, -float(n @ centre)
