@@ -34,6 +34,8 @@ MODULES = {
     "model": ("dpom_warp/model.py", ["tests/test_model_cases.py"]),
     # the config's value types and checks, with the corpus of bad configs and every stated limit
     "config": ("dpom_warp/values.py", ["tests/test_errors.py", "-k", "bad_config or yaml_syntax or limit"]),
+    "zones": ("dpom_warp/zones.py", ["tests/test_zones.py"]),
+    "drift": ("dpom_warp/drift.py", ["tests/test_drift.py"]),
 }
 KILLED, SURVIVED = 1, 0  # mutmut 3's exit codes of a mutant's test run (its .meta files)
 
@@ -56,6 +58,8 @@ def clone(commit: str, work: Path, module: str) -> Path:
         f.write("\n[tool.mutmut]\n"
                 f"source_paths = [\"{path}\"]\n"
                 f"pytest_add_cli_args_test_selection = {json.dumps(tests)}\n"
+                # one process: mutmut runs pytest in its own process and reads its own plugin's stats
+                "pytest_add_cli_args = [\"-n\", \"0\"]\n"
                 "also_copy = [\"dpom_warp\", \"kernels\", \"configs\", \"bench\", \"tests\", \"README.md\", \"docs\"]\n")
     # the tests find ../shared from the mutants/ copy too
     if shared.exists():
