@@ -4,7 +4,6 @@ other zones, the live stream and the Python API."""
 
 import csv
 import json
-import math
 
 import numpy as np
 import pytest
@@ -29,6 +28,9 @@ def test_inside_counts_the_edges_and_the_vertices():
 def test_sides_and_steps_through_a_segment_by_hand():
     line = Line("door", np.array([0.0, 0.0]), np.array([0.0, 2.0]))  # pointing +y: its left is -x
     np.testing.assert_allclose(side(line, [[-1.0, 1.0], [0.5, 5.0], [0.0, 3.0]]), [1.0, -0.5, 0.0])
+    # a line off the origin, pointing +x: its left is +y, distances from y = 1
+    off = Line("bar", np.array([1.0, 1.0]), np.array([3.0, 1.0]))
+    np.testing.assert_allclose(side(off, [[2.0, 3.0], [0.0, 0.0], [5.0, 1.0], [-4.0, 1.5]]), [2.0, -1.0, 0.0, 0.5])
     assert steps_through(line, np.array([1.0, 1.0]), np.array([-1.0, 1.0]))  # through the middle
     assert steps_through(line, np.array([1.0, 1.0]), np.array([-1.0, 3.0]))  # through the end (0, 2) exactly
     assert not steps_through(line, np.array([1.0, 1.5]), np.array([-1.0, 3.5]))  # over the line beyond its end
@@ -69,6 +71,18 @@ def test_a_track_that_jitters_on_the_line_is_counted_once():
     assert crossings_of(walker([0.5, -0.1, 0.1, -0.15, 0.1, -0.05, -0.6])) == [(5, "door", 7, "in")]
     # the same jitter with no hysteresis: every step over is a crossing
     assert len(crossings_of(walker([0.5, -0.1, 0.1, -0.15]), hysteresis=0.0)) == 3
+
+
+def test_a_frame_on_the_line_is_on_neither_side():
+    """A track that stops exactly on the line (x = 0) has not crossed yet: the crossing is dated
+    at its first frame past it, either way; a track that touches the line and goes back has not
+    crossed. A track exactly `hysteresis` from the line (0.2 m) is not beyond it: more is."""
+    assert crossings_of(walker([0.5, 0.0, -0.5])) == [(2, "door", 7, "in")]
+    assert crossings_of(walker([-0.5, 0.0, 0.5])) == [(2, "door", 7, "out")]
+    assert crossings_of(walker([0.5, 0.0, 0.0, 0.5])) == []
+    assert crossings_of(walker([-0.5, 0.1, 0.0, 0.5])) == [(1, "door", 7, "out")]  # over, onto it, on
+    assert crossings_of(walker([0.5, -0.2, -0.2])) == []
+    assert crossings_of(walker([0.5, -0.2, -0.2 - 1e-6])) == [(1, "door", 7, "in")]
 
 
 def test_crossings_beyond_the_segment_and_through_its_end():
@@ -267,19 +281,27 @@ def test_the_api_counts_an_online_tracker_loop(tmp_path):
     from dpom_warp import Detector
     from dpom_warp.io import read_depth
 
-    path = small_zoned(tmp_path, frames=6)
+    path = small_zoned(tmp_path, frames=6, counting={"hysteresis": 0.25})
+    cfg = yaml.safe_load(path.read_text())
+    cfg["input"]["fps"] = 4.0
+    path.write_text(yaml.safe_dump(cfg))
     det = Detector.from_config(path)
     zones = dpom_warp.Zones.from_config(det.config)
+    assert (zones.hysteresis, zones.fps) == (0.25, 4.0)  # the config's, not the defaults (0.1 m, 15/s)
     online = det.online_tracker()
     frames = sorted((tmp_path / "scene" / "frames").glob("*.png"))
     got = []
+
+    def count(committed):
+        for i, rows in committed:
+            events = zones.update(i, rows)
+            assert events.frame == i
+            got.append((events.counts["left"], sum(p[0] <= 0 for _, p, _ in rows)))
+
     for f in frames:
-        for i, rows in online.push(det.detect(read_depth(f, 0.001, (106, 128)))):
-            got.append((zones.update(i, rows).counts["left"], sum(p[0] <= 0 for _, p, _ in rows)))
-    for i, rows in online.finish():
-        got.append((zones.update(i, rows).counts["left"], sum(p[0] <= 0 for _, p, _ in rows)))
+        count(online.push(det.detect(read_depth(f, 0.001, (106, 128)))))
+    count(online.finish())
     assert len(got) == len(frames) and all(a == b for a, b in got) and any(a > 0 for a, _ in got)
-    assert math.isfinite(zones.hysteresis)
 
 
 def test_many_zones_at_once_agree_with_matplotlib():
@@ -295,3 +317,14 @@ def test_many_zones_at_once_agree_with_matplotlib():
     for polygon, row in zip(polygons, got):
         np.testing.assert_array_equal(row, inside(polygon, points))
     assert got[0].sum() > 300 and not got[0].all()
+    # by hand: points level with a diamond's side vertices (each vertex met once, by the even-odd
+    # count's half-open edges) and the middles of a 0.5 m square's edges (shorter than 1 m)
+    diamond = np.array([[0.0, 1.0], [1.0, 0.0], [2.0, 1.0], [1.0, 2.0]])
+    small = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5]])
+    level = [[1.0, 1.0], [0.5, 1.0], [1.9, 1.0], [2.5, 1.0], [-0.5, 1.0], [2.0, 1.0]]
+    middles = [[0.25, 0.0], [0.5, 0.25], [0.25, 0.5], [0.0, 0.25], [0.25, 0.5 + 1e-6]]
+    got = Regions([diamond, small]).inside(np.array(level + middles, float))
+    assert got[0].tolist() == [True, True, True, False, False, True] + [False] * 5
+    assert got[1].tolist() == [False] * 6 + [True, True, True, True, False]
+    for polygon, row in zip((diamond, small), got):
+        np.testing.assert_array_equal(row, inside(polygon, level + middles))
