@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from dpom_warp.cli import main
-from dpom_warp.zones import Line, Zone, Zones, inside, self_crossing, side, steps_through
+from dpom_warp.zones import Line, Zone, Zones, inside, meets_rectangle, on_segment, self_crossing, side, steps_through
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
 # an L: the square less its top right quarter (concave at (1, 1))
@@ -37,6 +37,11 @@ def test_sides_and_steps_through_a_segment_by_hand():
     assert not steps_through(line, np.array([1.0, 1.0]), np.array([0.5, 1.0]))  # not reaching it
     assert steps_through(line, np.array([0.0, 2.0]), np.array([0.0, 3.0]))  # along it, from its end
     assert not steps_through(line, np.array([0.0, 2.5]), np.array([0.0, 3.0]))  # along the line, past its end
+    assert steps_through(line, np.array([0.0, -1.0]), np.array([0.0, 3.0]))  # along it, over the whole segment
+    assert steps_through(line, np.array([0.0, 1.0]), np.array([-1.0, 1.0]))  # from a point on it
+    assert steps_through(line, np.array([1.0, 1.0]), np.array([0.0, 1.0]))  # onto it
+    assert on_segment(np.array([[0.25, 0.0], [0.25, 0.01]]), np.array([0.0, 0.0]), np.array([0.5, 0.0])).tolist() == [
+        True, False]  # a segment shorter than 1 m
 
 
 def test_a_polygon_that_crosses_itself_is_found():
@@ -113,6 +118,20 @@ def test_counts_and_stays_by_hand():
     assert [(s.enter_frame, s.exit_frame, s.seconds) for s in timed.stays] == [(0, 1, pytest.approx(1.5))]
     with pytest.raises(ValueError, match="frames must come in increasing order"):
         timed.update(2, [])
+
+
+def test_what_meets_the_grid_by_hand():
+    """The check behind "a zone or line wholly outside the grid" (the rectangle x 0 to 2, y 0 to
+    2): a vertex inside, the grid inside the zone, or only an edge across it meet it; a zone
+    beside it at the grid's heights, or a line beside it, do not."""
+    rect = (0.0, 2.0, 0.0, 2.0)
+    assert meets_rectangle(np.array([[1.0, 1.0], [5.0, 1.0], [5.0, 5.0]]), rect, True)  # a vertex in it
+    assert meets_rectangle(np.array([[-1.0, -1.0], [3.0, -1.0], [3.0, 3.0], [-1.0, 3.0]]), rect, True)  # around it
+    band = np.array([[3.0, 0.9], [3.0, 1.1], [-1.0, 1.1], [-1.0, 0.9]])  # across it, its first edge outside
+    assert meets_rectangle(band, rect, True)
+    assert not meets_rectangle(np.array([[-3.0, 0.5], [-2.0, 0.5], [-2.0, 1.0]]), rect, True)  # left of it
+    assert meets_rectangle(np.array([[-1.0, 1.0], [3.0, 1.5]]), rect, False)  # a line across it
+    assert not meets_rectangle(np.array([[-1.0, 1.0], [-0.5, 3.0]]), rect, False)  # a line beside it
 
 
 def small_zoned(tmp_path, frames=20, **changes):
