@@ -42,6 +42,8 @@ def test_sides_and_steps_through_a_segment_by_hand():
     assert steps_through(line, np.array([1.0, 1.0]), np.array([0.0, 1.0]))  # onto it
     assert on_segment(np.array([[0.25, 0.0], [0.25, 0.01]]), np.array([0.0, 0.0]), np.array([0.5, 0.0])).tolist() == [
         True, False]  # a segment shorter than 1 m
+    assert on_segment(np.array([[2.25, 1.0], [2.25, 1.01], [1.5, 1.0], [2.5, 1.0]]), np.array([2.0, 1.0]),
+                      np.array([2.5, 1.0])).tolist() == [True, False, False, True]  # one off the origin
 
 
 def test_a_polygon_that_crosses_itself_is_found():
