@@ -17,6 +17,7 @@ from .config import ConfigError, RunConfig
 from .geometry import build_geometry
 from .ground import fit_ground_files, frames_named
 from .io import InputError, depth_scale_hint
+from .names import is_live
 from .resolution import Resolution
 from .sources import expand
 from .worker import read_frame
@@ -152,8 +153,9 @@ def prepare_camera(cfg: RunConfig, frames: list[Path], dev: str, log=print) -> C
               if auto_bg else [])
     camera, ground = cfg.camera, None
     if cfg.imu_tilt:
-        log(f"camera {', '.join(f'{k[:-4]} {v:.2f} deg' for k, v in cfg.imu_tilt.items())} from the recording's "
-            f"accelerometer (camera.extrinsics leaves {' and '.join(cfg.imu_tilt)} out)")
+        log(f"camera {', '.join(f'{k[:-4]} {v:.2f} deg' for k, v in cfg.imu_tilt.items())} from the "
+            f"{'camera' if is_live(cfg.inputs.frames) else 'recording'}'s accelerometer (camera.extrinsics leaves "
+            f"{' and '.join(cfg.imu_tilt)} out)")
     if cfg.pose_auto:
         if auto_bg and len(sample) >= cfg.inputs.background_auto.min_frames:
             camera, ground = fit_pose_on_estimate(cfg, sample, dev, log)

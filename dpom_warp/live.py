@@ -128,8 +128,8 @@ def check_live(cfg: RunConfig, workers: int | None) -> None:
                               f"run has none in advance; expected background frames or null")
         if m.pose_auto and not m.inputs.play:
             raise ConfigError(f"{at}camera.extrinsics: auto fits the floor on frames read before the run; expected "
-                              f"the live camera's pose ({{height, pitch_deg, ...}}; `dpom-warp fit-ground` on a "
-                              f"few saved frames gives it)")
+                              f"the live camera's pose ({{height, pitch_deg, ...}}: a camera with an accelerometer "
+                              f"needs only {{height: H}}; `dpom-warp fit-ground` on a few saved frames gives it all)")
     if workers is not None and workers > 1 and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers with it")

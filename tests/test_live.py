@@ -12,6 +12,18 @@ import yaml
 from dpom_warp.cli import main
 
 
+def on_the_live_camera(cfg: dict) -> dict:
+    """small_config's mapping run on the live camera (`realsense`): its size, intrinsics and
+    depth units left to the camera, nothing rendered, no ground truth."""
+    del cfg["synthetic"]
+    cfg["input"]["frames"] = "realsense"
+    cfg["input"].pop("depth_scale", None)
+    for k in ("width", "height", "intrinsics"):
+        cfg["camera"].pop(k)
+    cfg["evaluation"]["ground_truth"] = None
+    return cfg
+
+
 @pytest.fixture
 def camera_config(tmp_path):
     from test_cli import small_config
@@ -26,13 +38,7 @@ def camera_config(tmp_path):
     render_synthetic(cfg, lambda *_: None)
     cam = SoftwareCamera.of_files(expand(cfg.inputs.frames, "input.frames"), cfg.camera).register()  # at 30 fps
     (tmp_path / "plain.yaml").write_text(path.read_text())  # the same frames as files (plain_maps)
-    cfg = yaml.safe_load(path.read_text())
-    del cfg["synthetic"]
-    cfg["input"]["frames"] = "realsense"
-    cfg["input"].pop("depth_scale", None)
-    for k in ("width", "height", "intrinsics"):
-        cfg["camera"].pop(k)
-    cfg["evaluation"]["ground_truth"] = None
+    cfg = on_the_live_camera(yaml.safe_load(path.read_text()))
     cfg["output"].update(images_every=5, rerun=str(tmp_path / "live.rrd"))
     path.write_text(yaml.safe_dump(cfg))
     yield path, cam, tmp_path
@@ -122,8 +128,8 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     assert (out / "tracks.csv").read_text() == live_tracks
 
 
-def plain_maps(tmp):
-    """The maps the plain run gives the live test's six rendered frames."""
+def plain_maps(tmp, rendered: int = 6):
+    """The maps the plain run gives the live test's `rendered` frames."""
     import numpy as np
 
     plain_path = tmp / "plain.yaml"  # camera_config's: small_config before the live changes
@@ -131,23 +137,24 @@ def plain_maps(tmp):
     plain["output"]["dir"] = str(tmp / "plain")
     plain_path.write_text(yaml.safe_dump(plain))
     assert main(["run", str(plain_path), "--no-progress"]) == 0
-    return [np.load(tmp / "plain" / "maps" / f"{i:04d}.npy") for i in range(6)]
+    return [np.load(tmp / "plain" / "maps" / f"{i:04d}.npy") for i in range(rendered)]
 
 
 def assert_plain_maps_in_stream_order(out, want, frames):
-    """Every map of the live run is the plain run's of the same rendered frame (bit for bit),
-    written in stream order; returns the per-frame records."""
+    """Every map of the live run is the plain run's of the same rendered frame (bit for bit; the
+    camera plays `want`'s frames over and over), written in stream order; returns the per-frame
+    records."""
     import numpy as np
 
     summary = json.loads((out / "summary.json").read_text())
     assert summary["live"]["frames"] == frames
     names = [p["frame"] for p in summary["per_frame"]]  # in the order written and tracked
     assert len(names) == frames and names == sorted(names)
-    first = [j for j in range(6) if np.array_equal(np.load(out / "maps" / f"{names[0]}.npy"), want[j])]
+    first = [j for j in range(len(want)) if np.array_equal(np.load(out / "maps" / f"{names[0]}.npy"), want[j])]
     assert len(first) == 1  # the stream's first frame is one of the rendered ones, then in order
     for name in names:
         np.testing.assert_array_equal(np.load(out / "maps" / f"{name}.npy"),
-                                      want[(first[0] + int(name) - int(names[0])) % 6], err_msg=name)
+                                      want[(first[0] + int(name) - int(names[0])) % len(want)], err_msg=name)
     return summary
 
 
@@ -540,3 +547,68 @@ def test_realsense_serial_picks_that_camera():
     finally:
         first.unregister()
         second.unregister()
+
+
+def test_a_live_cameras_accelerometer_gives_the_floor_its_up_and_a_height_its_tilt(tmp_path, capsys):
+    """README: a live RealSense with an accelerometer (D435i, D455) is read as a recording's IMU
+    is: `dpom-warp info` shows its up, extrinsics left out take that up as camera.ground.up, and
+    `{height: H}` takes its pitch and roll from it. A software camera plays a scene rendered from
+    pitch 25 deg, roll 4 deg, its motion module reading what that camera reads at rest: +9.81
+    m/s^2 along the world's up seen from the camera, R^T (0, 0, 1) of the rendered pose. The
+    live run given only the height infers every frame as the plain run with the rendered pose
+    does, bit for bit; a camera without an accelerometer gives no up."""
+    import numpy as np
+
+    from test_cli import small_config
+
+    from dpom_warp.frames import render_synthetic
+    from dpom_warp.loading import load_config
+    from dpom_warp.sources import expand, open_source
+    from dpom_warp.sources.software import SoftwareCamera
+
+    path = small_config(tmp_path, frames=3)
+    cfg = yaml.safe_load(path.read_text())
+    cfg["camera"]["extrinsics"] = {"height": 2.2, "pitch_deg": 25.0, "roll_deg": 4.0}
+    path.write_text(yaml.safe_dump(cfg))
+    (tmp_path / "plain.yaml").write_text(path.read_text())
+    rendered = load_config(path)
+    render_synthetic(rendered, lambda *_: None)
+    up = rendered.camera.T_world_from_camera[:3, :3].T @ [0.0, 0.0, 1.0]
+    cam = SoftwareCamera.of_files(expand(rendered.inputs.frames, "input.frames"), rendered.camera,
+                                  accel=9.81 * up).register()
+    try:
+        assert main(["info", "realsense"]) == 0
+        imu = next(x for x in capsys.readouterr().out.splitlines() if "IMU" in x)
+        assert imu.startswith("  IMU: yes (up in the depth camera's frame: [") and "pitch 25.00 deg, roll 4.00 deg" in imu
+        cfg = on_the_live_camera(cfg)
+        cfg["output"]["images"] = False
+        del cfg["camera"]["extrinsics"]  # left out: auto, the floor fit's up is the accelerometer's
+        path.write_text(yaml.safe_dump(cfg))
+        np.testing.assert_allclose(load_config(path).ground.up, up, atol=1e-6)
+        capsys.readouterr()  # a live run cannot fit the floor before it starts: the line says what is enough
+        assert main(["run", str(path), "--no-progress", "--max-frames", "2"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("dpom-warp: error: camera.extrinsics: auto fits the floor on frames read before the run")
+        assert "a camera with an accelerometer needs only {height: H}" in err and "\n" not in err
+        cfg["camera"]["extrinsics"] = {"height": 2.2}
+        path.write_text(yaml.safe_dump(cfg))
+        loaded = load_config(path)
+        assert loaded.imu_tilt == {"pitch_deg": 25.0, "roll_deg": 4.0}  # to the 3 decimals they are kept to
+        want = plain_maps(tmp_path, 3)
+        capsys.readouterr()
+        cam.start()
+        try:
+            assert main(["run", str(path), "--no-progress", "--max-frames", "4", "--workers", "1"]) == 0
+        finally:
+            cam.stop()
+        assert ("camera pitch 25.00 deg, roll 4.00 deg from the camera's accelerometer (camera.extrinsics leaves "
+                "pitch_deg and roll_deg out)") in capsys.readouterr().out.splitlines()
+        assert_plain_maps_in_stream_order(tmp_path / "out", want, 4)
+    finally:
+        cam.unregister()
+    level = SoftwareCamera([np.zeros((24, 32), np.uint16)], 25.0, 26.0, 15.5, 11.5, serial="333").register()
+    try:
+        info = open_source("realsense:333").info()
+        assert not info.imu and info.gravity_up is None
+    finally:
+        level.unregister()

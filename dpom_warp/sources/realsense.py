@@ -1,7 +1,8 @@
 """Live RealSense cameras through pyrealsense2: `input.frames: realsense` (the first camera) or
 `realsense:SERIAL`. The depth sensor streams its default z16 profile; the camera (size,
-intrinsics, distortion) and the depth units come from it. Frames arrive on pyrealsense2's
-thread and are handed to a callback (the live run keeps the newest).
+intrinsics, distortion) and the depth units come from it, and where the camera has an
+accelerometer (D435i, D455), the floor's up from its readings at rest. Frames arrive on
+pyrealsense2's thread and are handed to a callback (the live run keeps the newest).
 """
 
 from __future__ import annotations
@@ -12,9 +13,10 @@ from typing import Callable
 import numpy as np
 
 from ..io import InputError
-from .base import Frame, Source, SourceInfo, need
+from .base import Frame, Source, SourceInfo, gravity_direction, need
 
 LIVE_PREFIX = "realsense"  # input.frames: realsense[:SERIAL] (names.READERS)
+ACCEL_SAMPLES, ACCEL_WAIT_S = 50, 2.0  # the accelerometer readings averaged for up, and the longest wait for them
 
 
 def devices() -> list:
@@ -47,6 +49,7 @@ class RealSenseLive(Source):
         defaults = [p for p in profiles if p.is_default()]
         self.profile = (defaults or profiles)[0].as_video_stream_profile()
         self.started = False
+        self._up = None  # the accelerometer's up once read (gravity_up)
 
     def _depth_profiles(self, sensor):
         rs = self.rs
@@ -64,8 +67,52 @@ class RealSenseLive(Source):
                           frames=0, width=i.width, height=i.height,
                           intrinsics={"fx": i.fx, "fy": i.fy, "cx": i.ppx, "cy": i.ppy}, distortion=distortion,
                           depth_scale=scale, encoding="z16", topic="depth",
-                          rate_hz=float(self.profile.fps()), imu=any(
-                              s.is_motion_sensor() for s in self.device.query_sensors()))
+                          rate_hz=float(self.profile.fps()), imu=self._accelerometer() is not None,
+                          gravity_up=self.gravity_up())
+
+    def _accelerometer(self):
+        """(sensor, profile) of the camera's accelerometer stream (accel, motion_xyz32f; its
+        default rate where it has several), or None."""
+        rs = self.rs
+        for sensor in self.device.query_sensors():
+            found = [p for p in sensor.get_stream_profiles()
+                     if p.stream_type() == rs.stream.accel and p.format() == rs.format.motion_xyz32f]
+            if found:
+                return sensor, ([p for p in found if p.is_default()] or found)[0]
+        return None
+
+    def gravity_up(self) -> list | None:
+        """Up in the depth camera's frame: the mean of ACCEL_SAMPLES accelerometer readings
+        (the camera at rest; librealsense gives them in the depth sensor's axes, x right, y down,
+        z forward, +g upwards), read once; None without an accelerometer, or when it gives no
+        reading of gravity within ACCEL_WAIT_S (another process holding it, say)."""
+        import threading
+
+        accelerometer = None if self._up is not None else self._accelerometer()
+        if accelerometer is None:
+            return self._up
+        sensor, profile = accelerometer
+        readings, enough = [], threading.Event()
+
+        def on_reading(f):
+            m = f.as_motion_frame().get_motion_data()
+            if len(readings) < ACCEL_SAMPLES:
+                readings.append((m.x, m.y, m.z))
+            if len(readings) >= ACCEL_SAMPLES:
+                enough.set()
+
+        try:
+            sensor.open(profile)
+        except RuntimeError:  # busy: the floor fit goes without it
+            return None
+        try:
+            sensor.start(on_reading)
+            enough.wait(ACCEL_WAIT_S)
+            sensor.stop()
+        finally:
+            sensor.close()
+        self._up = gravity_direction(list(readings))
+        return self._up
 
     def start(self, on_frame: Callable[[Frame], None]) -> None:
         """Stream: `on_frame` gets each frame (index, timestamp in seconds, uint16 depth) on

@@ -12,15 +12,18 @@ import numpy as np
 from .base import need
 
 SOFTWARE: list = []  # SoftwareCamera devices in this process, seen as cameras after the real ones
+ACCEL_HZ = 200  # a software camera's accelerometer rate (a D435i's is 63 or 250 Hz)
 
 
 class SoftwareCamera:
     """A camera without hardware: pyrealsense2's software_device with one z16 depth stream,
     playing `frames` ((H, W) uint16 in millimetres, over and over) at `fps` on a thread once
-    `start`ed; `register` makes `input.frames: realsense:SERIAL` find it. For tests, benchmarks
-    and trying the live mode without a camera."""
+    `start`ed; `register` makes `input.frames: realsense:SERIAL` find it. With `accel` (m/s^2,
+    the depth camera's axes, +g upwards as a D435i's accelerometer reads at rest) it also has a
+    motion module whose accelerometer reads that at ACCEL_HZ while registered. For tests,
+    benchmarks and trying the live mode without a camera."""
 
-    def __init__(self, frames, fx, fy, cx, cy, fps: float = 30.0, serial: str = "000111222"):
+    def __init__(self, frames, fx, fy, cx, cy, fps: float = 30.0, serial: str = "000111222", accel=None):
         import threading
 
         rs = self.rs_module()
@@ -40,23 +43,60 @@ class SoftwareCamera:
         self.profile = self.sensor.add_video_stream(vs).as_video_stream_profile()
         self.sensor.add_read_only_option(rs.option.depth_units, 0.001)
         self.stopped, self.sent, self.thread = threading.Event(), 0, None
+        self.accel, self.motion = None if accel is None else tuple(float(a) for a in accel), None
+        if self.accel is not None:
+            self.motion = self._add_accelerometer(rs)
+            self.motion_stopped = threading.Event()
+
+    def _add_accelerometer(self, rs):
+        """The motion module's accelerometer stream (motion_xyz32f at ACCEL_HZ): its profile."""
+        sensor = self.device.add_sensor("Motion Module")
+        stream = rs.motion_stream()
+        stream.type, stream.index, stream.uid, stream.fps = rs.stream.accel, 0, 1, ACCEL_HZ
+        stream.fmt, stream.intrinsics = rs.format.motion_xyz32f, rs.motion_device_intrinsic()
+        self.motion_sensor = sensor
+        return sensor.add_motion_stream(stream).as_motion_stream_profile()
 
     @classmethod
-    def of_files(cls, files, camera, fps: float = 30.0) -> "SoftwareCamera":
+    def of_files(cls, files, camera, fps: float = 30.0, accel=None) -> "SoftwareCamera":
         """A software camera playing depth frame files (16-bit PNGs or .npy arrays, in their
         own depth units) with `camera`'s intrinsics (a geometry.Camera)."""
         from PIL import Image
 
         frames = [np.load(f) if Path(f).suffix.lower() == ".npy" else np.asarray(Image.open(f)) for f in files]
-        return cls([np.asarray(f, np.uint16) for f in frames], camera.fx, camera.fy, camera.cx, camera.cy, fps)
+        return cls([np.asarray(f, np.uint16) for f in frames], camera.fx, camera.fy, camera.cx, camera.cy, fps,
+                   accel=accel)
 
     def register(self) -> "SoftwareCamera":
+        """Seen as a camera (and its accelerometer reading) until unregistered."""
+        import threading
+
         SOFTWARE.append(self)
+        if self.motion is not None:
+            self.motion_stopped.clear()
+            self.motion_thread = threading.Thread(target=self._feed_accelerometer, daemon=True)
+            self.motion_thread.start()
         return self
 
     def unregister(self) -> None:
         if self in SOFTWARE:
             SOFTWARE.remove(self)
+        if self.motion is not None:
+            self.motion_stopped.set()
+            self.motion_thread.join(5)
+
+    def _feed_accelerometer(self):
+        """`accel` at ACCEL_HZ (a reader that has not opened the stream misses them, as from a camera)."""
+        rs = self.rs_module()
+        number, t0 = 0, time.perf_counter()
+        while not self.motion_stopped.is_set():
+            f, v = rs.software_motion_frame(), rs.vector()
+            v.x, v.y, v.z = self.accel
+            f.data, f.timestamp, f.domain = v, 1000.0 * number / ACCEL_HZ, rs.timestamp_domain.hardware_clock
+            f.frame_number, f.profile = number, self.motion
+            self.motion_sensor.on_motion_frame(f)
+            number += 1
+            time.sleep(max(0.0, t0 + number / ACCEL_HZ - time.perf_counter()))
 
     def start(self) -> None:
         """Play from the first frame on a thread of its own."""
