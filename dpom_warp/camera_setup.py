@@ -15,7 +15,7 @@ import numpy as np
 from .background import BackgroundEstimator, sample_frames
 from .config import ConfigError, RunConfig
 from .geometry import build_geometry
-from .ground import fit_ground_files, frames_named
+from .ground import fit_ground_files, fit_ground_named, frames_named
 from .io import InputError, depth_scale_hint
 from .names import is_live
 from .resolution import Resolution
@@ -112,6 +112,17 @@ def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
                  t, log)  # a recording's frames by the recording and frame, not the cache's files
 
 
+def fit_pose_on_frames(cfg: RunConfig, frames_m: list, named: str, log=print):
+    """camera.extrinsics: auto on frames in hand (metres, full resolution: a live camera's first,
+    `named` in messages): the posed camera and summary.json's ground_fit report, as
+    fit_camera_pose gives them for files."""
+    t = time.perf_counter()
+    log(f"fitting the floor on {named} ...")
+    fit = fit_ground_named(frames_m, cfg.camera, cfg.ground, named, cfg.inputs.depth_scale)
+    refuse_low_view_from_above(cfg, fit, named)
+    return posed(cfg, fit, named, [named], t, log)
+
+
 def warn_depth_scale(cfg: RunConfig, path, depth: np.ndarray | None, log=print) -> None:
     """A warning (`log`) when the first frame's readings are no depth camera's at the config's
     input.depth_scale (io.depth_scale_hint); `depth`: the frame at `path`, read if None."""
@@ -174,13 +185,18 @@ def prepare_camera(cfg: RunConfig, frames: list[Path], dev: str, log=print) -> C
             f"grid: none of its {len(geometry.rect)} locations is in the camera's view (the camera "
             f"{'fitted ' if ground else ''}at x {c[0]:.2f} m, y {c[1]:.2f} m, {c[2]:.2f} m up); expected "
             f"grid.x and grid.y{' and grid.z' if cfg.grid.mode == 'voxel' else ''} over what the camera sees{seen}")
-    if ground is not None:  # a floor fit that cannot be wrong quietly
-        warned = pose_warnings(ground, float(np.mean(geometry.rect_area > 0)), len(geometry.rect), ground.get("floor_xy"))
-        for line in warned:
-            log(f"warning: {line}")
-        if warned:
-            ground["warnings"] = warned
+    if ground is not None:
+        warn_fitted_pose(ground, geometry, log)
     return CameraPrep(camera, ground, bg_files, bg_frames, sample, geometry)
+
+
+def warn_fitted_pose(ground: dict, geometry, log=print) -> None:
+    """A floor fit that cannot be wrong quietly: pose_warnings logged and kept in its report."""
+    warned = pose_warnings(ground, float(np.mean(geometry.rect_area > 0)), len(geometry.rect), ground.get("floor_xy"))
+    for line in warned:
+        log(f"warning: {line}")
+    if warned:
+        ground["warnings"] = warned
 
 
 def camera_background(cfg: RunConfig, view, prep: CameraPrep, frames: list[Path], dev: str, parallel: bool,

@@ -15,6 +15,9 @@ feeder thread hands each helper the newest frame the moment it is free, while th
 its own. Stopping writes detections.csv, tracks.csv, track_table.csv and summary.json (with a
 `live` block) as a plain run does.
 
+Its pose left out (extrinsics: auto, one camera without background frames), the floor is
+fitted on the camera's first frames before any is inferred (LiveRun.fit_floor).
+
 A camera that stops sending (unplugged, or its stream stalled: no frame for STALL_S seconds)
 ends the run with every output of the frames inferred so far written, then one line and exit
 code 1; its SDK failing to stop (as an unplugged camera does) loses nothing either.
@@ -22,6 +25,7 @@ code 1; its SDK failing to stop (as an unplugged camera does) loses nothing eith
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import statistics
 import threading
@@ -36,6 +40,7 @@ import numpy as np
 
 from .config import ConfigError, RunConfig
 from .io import WorkerError, units_to_metres
+from .sources import NewestFrame
 
 STALL_S = 5.0  # seconds without a frame after which a streaming camera has stopped sending
 # processes of a live run on the CPU without --workers: one infers the demo's frame in ~40 to
@@ -71,35 +76,6 @@ def default_workers(cfg: RunConfig, device: str) -> int:
     return LIVE_WORKERS
 
 
-class NewestFrame:
-    """A one-frame slot: `put` replaces what is there (counting the frame dropped), `take`
-    waits for a frame and empties the slot; `put(None)`: the stream has ended (`ended`), and
-    `take` then gives the last frame if it is still there, else None at once."""
-
-    def __init__(self):
-        self.cond = threading.Condition()
-        self.frame, self.received, self.dropped, self.ended = None, 0, 0, False
-
-    def put(self, frame) -> None:
-        with self.cond:
-            if frame is None:
-                self.ended = True
-                self.cond.notify_all()
-                return
-            if self.frame is not None:
-                self.dropped += 1
-            self.frame = frame
-            self.received += 1
-            self.cond.notify()
-
-    def take(self, timeout: float):
-        with self.cond:
-            if self.frame is None and not self.ended:
-                self.cond.wait(timeout)
-            frame, self.frame = self.frame, None
-            return frame
-
-
 def stop_threads(thread: threading.Thread | None, stop: threading.Event) -> None:
     """Set `stop` and wait for `thread` (the live run's feeder), if it was started."""
     stop.set()
@@ -126,10 +102,10 @@ def check_live(cfg: RunConfig, workers: int | None) -> None:
         if m.inputs.auto_background and not m.inputs.play:
             raise ConfigError(f"{at}input.background: auto estimates the background from the run's frames; a live "
                               f"run has none in advance; expected background frames or null")
-        if m.pose_auto and not m.inputs.play:
-            raise ConfigError(f"{at}camera.extrinsics: auto fits the floor on frames read before the run; expected "
-                              f"the live camera's pose ({{height, pitch_deg, ...}}: a camera with an accelerometer "
-                              f"needs only {{height: H}}; `dpom-warp fit-ground` on a few saved frames gives it all)")
+        if m.pose_auto and not m.inputs.play and cfg.is_rig:  # one camera's floor: its first frames (LiveRun)
+            raise ConfigError(f"{at}camera.extrinsics: auto: a live rig's cameras are placed in one world by "
+                              f"`dpom-warp calibrate` on recordings of them; expected each camera's pose "
+                              f"({{T_world_from_camera: ...}}, as calibrate writes it)")
     if workers is not None and workers > 1 and cfg.model.warm_start:
         raise ConfigError("model.warm_start: each frame starts from the previous one, so frames "
                           "must run in order in one process; expected no --workers with it")
@@ -178,8 +154,17 @@ class LiveRun:
             self.source, played = open_source(cfg.inputs.frames), []  # a live kind of names.READERS
         self.info = info = self.source.info()
         self.out = Path(output_dir or cfg.output.dir)
+        self.slot, self.started, self.first, ground = NewestFrame(), False, [], None
+        if cfg.pose_auto and not (cfg.inputs.play or cfg.inputs.background):  # the floor in its first frames
+            cfg, ground = self.fit_floor(cfg)
+            self.cfg = cfg
         # the plain run's: device, engine, background (played frames: auto and the floor fit as a plain run's)
         self.setup = setup = set_up(cfg, played, device, log)
+        if ground is not None:
+            from .camera_setup import warn_fitted_pose
+
+            setup.ground = ground
+            warn_fitted_pose(ground, setup.geometry, log)
         self.engine, self.geometry = setup.engine, setup.geometry
         self.workers = workers or default_workers(cfg, setup.device)
         self.worker = FrameWorker(setup.spec, engine=self.engine)
@@ -194,7 +179,6 @@ class LiveRun:
                                     online_fps=self.fps if self.tracking_on else None, log=log)
         self.run_view, self.writers, self.online = self.frame_loop.view, self.frame_loop.writers, self.frame_loop.online
         self.rerun = self.writers.has(Rerun)
-        self.slot = NewestFrame()
         self.structure_frames = 0  # a live camera's first frames, taken for the static planes
         self.latencies, self.infer_s = [], []
         self.finished = []  # when each frame was written
@@ -239,6 +223,31 @@ class LiveRun:
             small = (depth if self.engine.reduce_on_device else
                      [reduce(d) if d is not None else None for d in depth] if self.rig else reduce(depth))
             return then(fr, depth, small)
+
+    def fit_floor(self, cfg: RunConfig):
+        """camera.extrinsics: auto on a live camera without background frames: the camera
+        started and the floor fitted on its first camera.ground.frames frames (with the static
+        planes' frames, taken now too: none of them inferred); the posed config and its report."""
+        from .camera_setup import fit_pose_on_frames
+        from .session import planes_from_frames
+
+        self.source.start(self.slot.put)
+        self.started = True
+        try:
+            self.first = self.first_frames(max(cfg.ground_frames, cfg.inputs.structure.frames * planes_from_frames(cfg)))
+            n = min(cfg.ground_frames, len(self.first))
+            camera, ground = fit_pose_on_frames(cfg, self.first[:n], f"{cfg.inputs.frames}'s first {n} frames", self.log)
+        except BaseException:
+            self.source.stop()
+            raise
+        return dataclasses.replace(cfg, camera=camera, pose_auto=False), ground
+
+    def first_frames(self, n: int) -> list:
+        """The camera's next `n` frames in metres (fewer if the stream ends or stalls), not inferred."""
+        frames = self.slot.take_next(n, self.first_frame_timeout, STALL_S)
+        if not frames:
+            raise self.no_first_frame()
+        return [self.metres(fr) for fr in frames]
 
     def metres(self, fr):
         """A frame's depth in metres (a rig's: one a camera, None where it has none)."""
@@ -384,7 +393,8 @@ class LiveRun:
         planes_first = not self.cfg.inputs.play and any(planes_from_frames(m) for _, m in self.cfg.members())
         if not planes_first:
             self.start_helpers()  # before the camera: no frame is dropped while they start
-        self.source.start(self.slot.put)
+        if not self.started:
+            self.source.start(self.slot.put)
         self.finisher = threading.Thread(target=self.finishing, daemon=True)
         self.finisher.start()
         stopped_by, stop_error, clean = "max_frames", None, False
@@ -417,15 +427,8 @@ class LiveRun:
         live.structure_frames)."""
         from .session import add_static_planes
 
-        cfg = self.cfg
-        frames = []
-        while len(frames) < cfg.inputs.structure.frames:
-            fr = self.slot.take(STALL_S if frames else self.first_frame_timeout)
-            if fr is None:
-                if frames:  # the stream ended or stalled: the planes of what came
-                    break
-                raise self.no_first_frame()
-            frames.append(self.metres(fr))
+        n = self.cfg.inputs.structure.frames
+        frames = self.first[:n] if self.first else self.first_frames(n)  # the floor fit's, else the next
         self.structure_frames = len(frames)
         add_static_planes(self.setup, frames, self.log)
 
@@ -517,7 +520,7 @@ class LiveRun:
         wall = time.perf_counter() - (self.t_first or time.perf_counter())
         names, records = self.frame_loop.names, self.frame_loop.records
         summary = summarise(cfg, [Path(n) for n in names], records, [], None, self.geometry,
-                            setup.device, setup.background, None, [])
+                            setup.device, setup.background, setup.ground, [])
         summary["inference"] = setup.inference
         summary["tracking"], tracks = self.tracks()
         summary["live"] = self.live_block(stopped_by, stop_error, wall)
@@ -561,7 +564,7 @@ class LiveRun:
                 # run's shutdown left out) (t_first: the first frame taken, so the first
                 # written: frames are written in the order taken)
                 "frames_per_s_steady": steady_rate(done, self.t_first, latencies, self.finished),
-                "processes": self.workers, "structure_frames": self.structure_frames,
+                "processes": self.workers, "structure_frames": self.structure_frames, "floor_frames": len(self.first),
                 "camera_fps": self.fps, "stopped_by": stopped_by, "stop_error": stop_error,
                 "latency_ms_median": 1000 * statistics.median(latencies) if latencies else None,
                 "latency_ms_p95": 1000 * float(np.percentile(latencies, 95)) if latencies else None,

@@ -136,6 +136,24 @@ def test_one_live_camera_twice_in_a_rig_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_live_rig_camera_left_to_fit_its_floor_is_one_line(tmp_path, capsys):
+    """One camera's floor fit is no place in the rig's world: a live rig camera with extrinsics
+    auto is a one-line error naming its key and calibrate, before any camera is opened (one
+    live camera fits its floor on its first frames: test_live)."""
+    cfg = {"device": "cpu", "grid": {"x": [-1, 1, 0.1], "y": [1, 3, 0.1]},
+           "cameras": [{"name": n, "input": {"frames": f"realsense:{s}", "depth_scale": 0.001}, "camera": {
+               "width": 64, "height": 48, "intrinsics": {"fx": 50, "fy": 50, "cx": 31.5, "cy": 23.5},
+               "distortion": None, "extrinsics": e, "ground": {"up": [0, -1, 0]}}}
+                       for n, s, e in (("a", 101, {"height": 1.5, "pitch_deg": 10, "roll_deg": 0}), ("b", 102, "auto"))],
+           "output": {"dir": str(tmp_path / "out")}}
+    assert main(["run", write(tmp_path / "rig.yaml", cfg), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("cameras[1].camera.extrinsics: auto: a live rig's cameras are placed in one world by "
+                        "`dpom-warp calibrate` on recordings of them; expected each camera's pose "
+                        "({T_world_from_camera: ...}, as calibrate writes it)") and "\n" not in err, err
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     """test_rig_run's scene run recorded (its maps, by rendered frame), and a live rig config of

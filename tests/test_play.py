@@ -71,7 +71,7 @@ def test_play_with_resume_or_ray_is_one_line(tmp_path, capsys, flag):
 
 def test_the_newest_frame_slot_ends_with_its_stream():
     """put(None): the last frame still there is taken, then take returns None at once."""
-    from dpom_warp.live import NewestFrame
+    from dpom_warp.sources import NewestFrame
 
     slot = NewestFrame()
     slot.put("a")

@@ -27,7 +27,7 @@ import numpy as np
 from ..geometry import Camera
 from ..io import InputError, array_to_metres, atomic_path, write_json_atomic
 from ..names import READERS, is_recording, live_kind
-from .base import INSTALL, Frame, Source, SourceInfo, gravity_direction, need  # noqa: F401 - the package's names
+from .base import INSTALL, Frame, NewestFrame, Source, SourceInfo, gravity_direction, need  # noqa: F401 - the package's names
 
 CACHE_VERSION = 2  # 2: .npy frames
 

@@ -5,6 +5,7 @@ named in one line; gravity from accelerometer readings)."""
 from __future__ import annotations
 
 import dataclasses
+import threading
 from typing import Iterator
 
 import numpy as np
@@ -77,6 +78,46 @@ class Source:
 
     def frames(self) -> Iterator[Frame]:
         raise NotImplementedError
+
+
+class NewestFrame:
+    """A live source's frames as a run takes them, a one-frame slot: `put` replaces what is there (counting the frame dropped), `take`
+    waits for a frame and empties the slot; `put(None)`: the stream has ended (`ended`), and
+    `take` then gives the last frame if it is still there, else None at once."""
+
+    def __init__(self):
+        self.cond = threading.Condition()
+        self.frame, self.received, self.dropped, self.ended = None, 0, 0, False
+
+    def put(self, frame) -> None:
+        with self.cond:
+            if frame is None:
+                self.ended = True
+                self.cond.notify_all()
+                return
+            if self.frame is not None:
+                self.dropped += 1
+            self.frame = frame
+            self.received += 1
+            self.cond.notify()
+
+    def take(self, timeout: float):
+        with self.cond:
+            if self.frame is None and not self.ended:
+                self.cond.wait(timeout)
+            frame, self.frame = self.frame, None
+            return frame
+
+    def take_next(self, n: int, timeout: float, stall: float) -> list:
+        """The next `n` frames taken (the first within `timeout` seconds, each next within
+        `stall`); fewer when the stream ends or stalls, none when no first frame came."""
+        frames = []
+        while len(frames) < n:
+            frame = self.take(stall if frames else timeout)
+            if frame is None:
+                break
+            frames.append(frame)
+        return frames
 
 
 def gravity_direction(readings) -> list | None:
