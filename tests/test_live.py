@@ -629,6 +629,11 @@ def test_a_live_cameras_accelerometer_gives_the_floor_its_up_and_a_height_its_ti
             got = found.get(record["frame"], [])
             assert len(got) == len(people) and all(min(np.hypot(x - a, y - b) for a, b in got) < 0.3
                                                    for x, y in people), (record["frame"], got, people)
+        # `dpom-warp track` poses the camera as the run did (summary.json's ground_fit): the same tracks
+        tracks = (tmp_path / "fitted" / "tracks.csv").read_text()
+        assert main(["track", str(tmp_path / "fitted"), "--set", "output.rerun=null",
+                     "--set", "tracking.method=online"]) == 0
+        assert (tmp_path / "fitted" / "tracks.csv").read_text() == tracks
     finally:
         cam.unregister()
     level = SoftwareCamera([np.zeros((24, 32), np.uint16)], 25.0, 26.0, 15.5, 11.5, serial="333").register()
