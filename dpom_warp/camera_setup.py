@@ -172,6 +172,10 @@ def prepare_camera(cfg: RunConfig, frames: list[Path], dev: str, log=print) -> C
             camera, ground = fit_pose_on_estimate(cfg, sample, dev, log)
         else:
             fit_on = bg_files or frames[:cfg.ground_frames]
+            if not fit_on and is_live(cfg.inputs.frames):  # the Python API: no frame before detect
+                raise ConfigError(f"camera.extrinsics: auto needs frames to fit the floor on, and a live camera "
+                                  f"({cfg.inputs.frames}) has none before detect; expected the camera's pose "
+                                  f"({{height: H}} with an accelerometer) or input.background frames")
             if not fit_on:
                 raise ConfigError("camera.extrinsics: auto needs frames to fit the floor on; expected "
                                   "input.frames or input.background, found neither")

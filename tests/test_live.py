@@ -437,6 +437,12 @@ def test_the_api_on_a_live_cameras_config_reads_no_frames_before(camera_config):
     got = [(d.x, d.y) for d in live.detect(frame).detections]
     assert got and got == [(d.x, d.y) for d in files.detect(frame).detections]
     assert "structure" not in Detector.from_config(path, {"input.background": None}).setup.inference
+    # its pose left out: a live run fits the floor on the camera's first frames; the API has none
+    from dpom_warp.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"^camera.extrinsics: auto needs frames to fit the floor on, and a live "
+                                          r"camera \(realsense\) has none before detect; expected the camera's pose"):
+        Detector.from_config(path, {"input.background": None, "camera.extrinsics": "auto"})
 
 
 def test_no_camera_is_one_line(camera_config, capsys):
