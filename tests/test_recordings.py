@@ -44,9 +44,12 @@ def rows(run: Path, rename=None):
 
 
 def typestore(ros1: bool):
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if ros1:  # Noetic's store has no tf2_msgs; a ROS 1 bag carries the definition it writes
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    return ts
 
 
 def make(ts, msgtype, **values):
@@ -397,6 +400,85 @@ def test_gravity_from_a_ros_imu_in_the_depth_frame(tmp_path, scene):
     other = write_bag(tmp_path / "other.bag", "ros1",
                       messages(ts, frames, "16UC1", camera_of(cfg)) + imu_messages(ts, 5, acc, "imu_link"))
     assert open_source(other).info().gravity_up is None
+
+
+def tf_static(ts, transforms) -> tuple:
+    """A /tf_static message of (parent, child, quaternion x, y, z, w) transforms."""
+    stamp = make(ts, "builtin_interfaces/msg/Time", sec=100, nanosec=0)
+    return ("/tf_static", "tf2_msgs/msg/TFMessage", make(ts, "tf2_msgs/msg/TFMessage", transforms=[make(
+        ts, "geometry_msgs/msg/TransformStamped", header=make(ts, "std_msgs/msg/Header", stamp=stamp, frame_id=parent),
+        child_frame_id=child, transform=make(
+            ts, "geometry_msgs/msg/Transform",
+            translation=make(ts, "geometry_msgs/msg/Vector3", x=0.01, y=0.02, z=0.03),
+            rotation=make(ts, "geometry_msgs/msg/Quaternion", x=q[0], y=q[1], z=q[2], w=q[3])))
+        for parent, child, q in transforms]))
+
+
+def test_a_quaternions_rotation_is_scipys():
+    """transforms.quaternion_matrix (x, y, z, w, normalised first) against SciPy's, on random
+    rotations given at other lengths; a zero quaternion is an error."""
+    from scipy.spatial.transform import Rotation
+
+    from dpom_warp.sources.transforms import quaternion_matrix
+
+    rng = np.random.default_rng(3)
+    for q in Rotation.random(20, random_state=4).as_quat():
+        np.testing.assert_allclose(quaternion_matrix(*(q * rng.uniform(0.2, 5))), Rotation.from_quat(q).as_matrix(),
+                                   atol=1e-12)
+    with pytest.raises(ValueError):
+        quaternion_matrix(0, 0, 0, 0)
+
+
+@pytest.mark.parametrize("kind", ["ros1", "ros2"])
+def test_gravity_from_an_imu_in_another_frame_through_the_static_transforms(tmp_path, scene, kind):
+    """README: an IMU in a frame of its own (a robot's imu_link) is turned into the depth image's
+    frame by the bag's /tf_static, along a chain of transforms walked either way: here
+    depth <- camera_link (written camera_link -> depth, walked backwards) -> imu_link. The
+    IMU reads `want` (the up in the depth frame) as R_imu_depth want g, with the rotations
+    built by SciPy, not by the reader; without /tf_static the IMU gives no up."""
+    from scipy.spatial.transform import Rotation
+
+    from dpom_warp.sources import open_source
+
+    tmp, cfg = scene
+    frames = sorted((tmp / "scene" / "frames").glob("*.png"))[:2]
+    want = np.array([0.3, -9.7, 1.2]) / np.linalg.norm([0.3, -9.7, 1.2])
+    link_from_depth = Rotation.from_euler("xyz", [-90, 0, -90], degrees=True)  # ROS's optical frame under a link
+    imu_from_link = Rotation.from_euler("zyx", [30, -12, 5], degrees=True)
+    reading = 9.81 * (imu_from_link * link_from_depth).apply(want)  # in imu_link's axes
+    ts = typestore(kind == "ros1")
+    msgs = messages(ts, frames, "16UC1", camera_of(cfg)) + imu_messages(ts, 5, reading, "imu_link")
+    plain = write_bag(tmp_path / f"no_tf.{'bag' if kind == 'ros1' else 'db3'}", kind, msgs)
+    assert open_source(plain).info().gravity_up is None
+    tf = tf_static(ts, [("camera_link", "depth", link_from_depth.as_quat()),
+                        ("camera_link", "/imu_link", imu_from_link.inv().as_quat())])
+    bag = write_bag(tmp_path / f"tf.{'bag' if kind == 'ros1' else 'db3'}", kind, [tf] + msgs)
+    np.testing.assert_allclose(open_source(bag).info().gravity_up, want, atol=1e-9)
+
+
+def test_a_realsense_sdk_recordings_accelerometer_gives_up(tmp_path, scene):
+    """A RealSense SDK recording of a camera with an accelerometer (a D435i's, made by the SDK's
+    own recorder from a SoftwareCamera with a motion module): its readings are in the depth
+    sensor's axes (librealsense aligns them; the recording's IMU frame is "Accel", the depth's
+    "Depth"), so its up is their direction, and a config that leaves the extrinsics out takes
+    it as camera.ground.up."""
+    from dpom_warp.loading import load_config
+    from dpom_warp.sources import open_source
+    from dpom_warp.sources.software import SoftwareCamera
+
+    tmp, cfg = scene
+    frames = [np.asarray(Image.open(f)).astype(np.uint16) for f in sorted((tmp / "scene" / "frames").glob("*.png"))[:2]]
+    i = cfg["camera"]["intrinsics"]
+    acc = (0.4, -9.3, -3.1)
+    db3 = tmp_path / "d435i.db3"
+    assert SoftwareCamera(frames, i["fx"], i["fy"], i["cx"], i["cy"], accel=acc).record(db3) == 2
+    info = open_source(db3).info()
+    assert info.imu and any(s["topic"].endswith("/Accel_0/imu/data") for s in info.streams)
+    np.testing.assert_allclose(info.gravity_up, np.array(acc) / np.linalg.norm(acc), atol=1e-6)
+    run = {"device": "cpu", "input": {"frames": str(db3)}, "grid": {"x": [-2, 2, 0.2], "y": [1, 6, 0.2]}}
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(run))
+    np.testing.assert_allclose(load_config(tmp_path / "c.yaml").ground.up, np.array(acc) / np.linalg.norm(acc),
+                               atol=1e-6)
 
 
 def test_fit_ground_topic_picks_the_depth_stream(tmp_path, scene, capsys):

@@ -6,12 +6,15 @@ RealSense recording's "Depth Units") or 32FC1 (metres; NaN, 0 and inf are no rea
 sensor_msgs/CompressedImage topic in ROS's compressedDepth format ("16UC1; compressedDepth
 png": a 12-byte header, then a 16-bit PNG). `input.topic` picks it when there are several.
 The camera comes from the sensor_msgs/CameraInfo topic nearest to it (the longest shared
-namespace): K, D (plumb_bob: 5 coefficients, rational_polynomial: 8), width, height.
+namespace): K, D (plumb_bob: 5 coefficients, rational_polynomial: 8), width, height. A
+sensor_msgs/Imu topic gives the floor's up (`_gravity`; its frame reached through /tf_static:
+transforms.py).
 """
 
 from __future__ import annotations
 
 import io
+import re
 from pathlib import Path
 from typing import Iterator
 
@@ -22,6 +25,8 @@ from .base import Frame, Source, SourceInfo, gravity_direction, need
 
 IMAGE, COMPRESSED, INFO = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/CameraInfo"
 DEPTH_ENCODINGS = {"16UC1": np.uint16, "mono16": np.uint16, "32FC1": np.float32}
+# a RealSense SDK recording's accelerometer (ROS 1 .bag and ROS 2 .db3 alike)
+REALSENSE_SDK_ACCEL = re.compile(r"^/device_\d+/sensor_\d+/(Accel|Motion)_\d+/imu/data$")
 
 
 def _stamp(msg, fallback_ns: int) -> float:
@@ -158,22 +163,35 @@ class Bag(Source):
                           rate_hz=(count - 1) / dur if dur and count > 1 else None, imu=imu, gravity_up=up)
 
     def _gravity(self, r, conns, frame_id, limit: int = 100):
-        """The mean linear acceleration of a sensor_msgs/Imu topic in the depth image's own
-        frame (an IMU in another frame needs the bag's transforms, which are not read)."""
+        """The mean linear acceleration of a sensor_msgs/Imu topic turned into the depth image's
+        frame: as it reads where the IMU is in that frame, or a RealSense SDK recording's
+        accelerometer (the SDK gives it in the depth sensor's axes, its extrinsic rotation the
+        identity); else by the bag's static transforms (/tf_static) from the IMU's frame to the
+        depth image's. None where no Imu topic reads gravity in a frame so reached."""
+        from .transforms import rotation_between, static_rotations
+
+        rotations = None
         for c in conns:
-            acc = []
+            acc, imu_frame = [], None
             for _, _, raw in r.messages(connections=[c]):
                 try:
                     m = r.deserialize(raw, c.msgtype)
                 except Exception:  # noqa: BLE001
                     continue
-                if frame_id is None or m.header.frame_id != frame_id:
+                imu_frame = imu_frame if imu_frame is not None else m.header.frame_id
+                if m.header.frame_id != imu_frame:
                     break
                 a = m.linear_acceleration
                 acc.append((a.x, a.y, a.z))
                 if len(acc) >= limit:
                     break
-            up = gravity_direction(acc)
+            if not acc or frame_id is None:
+                continue
+            turn = np.eye(3) if imu_frame == frame_id or REALSENSE_SDK_ACCEL.match(c.topic) else None
+            if turn is None:
+                rotations = static_rotations(r) if rotations is None else rotations
+                turn = rotation_between(rotations, imu_frame, frame_id)
+            up = gravity_direction([turn @ np.asarray(a) for a in acc]) if turn is not None else None
             if up is not None:
                 return up
         return None

@@ -114,23 +114,40 @@ class SoftwareCamera:
 
     def record(self, path) -> int:
         """Write the frames once, in order, as a RealSense SDK recording at `path` (the SDK's
-        own recorder: a ROS 2 .db3 with compressedDepth images); returns the frames written."""
+        own recorder: a ROS 2 .db3 with compressedDepth images; with `accel`, the accelerometer's
+        readings beside them); returns the frames written."""
         import gc
+        import threading
 
         rs = self.rs_module()
         recorder = rs.recorder(str(path), self.device)
-        sensor = recorder.query_sensors()[0]
+        sensors = recorder.query_sensors()
         got = []
-        sensor.open(sensor.get_stream_profiles()[0])
-        sensor.start(lambda f: got.append(f.get_frame_number()))
+        sensors[0].open(sensors[0].get_stream_profiles()[0])
+        sensors[0].start(lambda f: got.append(f.get_frame_number()))
+        motion = sensors[1] if self.motion is not None else None
+        if motion is not None:  # its readings recorded while the frames are
+            readings = []
+            motion.open(motion.get_stream_profiles()[0])
+            motion.start(lambda f: readings.append(f.get_frame_number()))
+            self.motion_stopped.clear()
+            feed = threading.Thread(target=self._feed_accelerometer, daemon=True)
+            feed.start()
+            deadline = time.perf_counter() + 5.0
+            while len(readings) < 20 and time.perf_counter() < deadline:  # some before the first frame
+                time.sleep(0.002)
         for i, img in enumerate(self.frames):
             self._send(rs, img, i)
             deadline = time.perf_counter() + 5.0
             while len(got) <= i and time.perf_counter() < deadline:
                 time.sleep(0.002)
-        sensor.stop()
-        sensor.close()
-        del sensor, recorder
+        for sensor in [sensors[0]] + ([motion] if motion is not None else []):
+            sensor.stop()
+            sensor.close()
+        if motion is not None:
+            self.motion_stopped.set()
+            feed.join(5)
+        del sensors, motion, recorder
         gc.collect()  # the recorder writes the file out when it goes
         return len(got)
 
