@@ -82,7 +82,7 @@ class Detector:
 
     @classmethod
     def from_config(cls, config: str | Path | Mapping, overrides: list[str] | Mapping | None = None,
-                    device: str | None = None, log=None) -> "Detector":
+                    device: str | None = None, log=None, first_frames=None) -> "Detector":
         """A Detector from a config file (relative paths in it are relative to its folder) or
         a mapping of the same form (relative paths relative to the current folder).
 
@@ -92,6 +92,10 @@ class Detector:
                 {"model.prior": 0.02, ...}.
             device: overrides the config's device ("cpu", "cuda:0", "auto").
             log: called with each setup line (the floor fit, the background); default: silent.
+            first_frames: a live camera's first frames, as `detect` takes them, which a live run
+                takes before inferring any: with extrinsics auto and no background frames the
+                floor is fitted on the first camera.ground.frames of them, and floor-only the
+                static planes are found in the first input.structure.frames (find_static_planes).
 
         Raises:
             ConfigError, InputError: one line naming the key or file.
@@ -124,7 +128,42 @@ class Detector:
             frames = rig_frames(cfg, log=quiet, check=False).frames if any(needs) else []
         else:
             frames = expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, quiet) if needs[0] and cfg.inputs.frames else []
+        if first_frames is not None:
+            return cls.from_first_frames(cfg, first_frames, device, quiet)
         return cls(cfg, set_up(cfg, frames, device, quiet))
+
+    @classmethod
+    def from_first_frames(cls, cfg: RunConfig, depths, device, log) -> "Detector":
+        """from_config's `first_frames`: a live camera's Detector set up as a live run sets it up
+        on the frames it takes first (the floor fit and the static planes), none inferred."""
+        import dataclasses
+
+        from .camera_setup import fit_pose_on_frames, warn_fitted_pose
+        from .names import is_live
+        from .session import planes_from_frames, set_up
+
+        if cfg.is_rig or not is_live(cfg.inputs.frames):
+            raise ConfigError(f"first_frames: expected a live camera's config (input.frames: realsense[:SERIAL]), "
+                              f"found {'a rig' if cfg.is_rig else f'input.frames: {cfg.inputs.frames}'}, whose "
+                              f"frames the Detector reads itself")
+        frames = [checked_metres(d, i, cfg, "first_frames, ") for i, d in enumerate(depths)]
+        if not frames:
+            raise InputError("first_frames: expected at least one frame, found none")
+        ground = None
+        if cfg.pose_auto and not cfg.inputs.background:
+            n = min(cfg.ground_frames, len(frames))
+            camera, ground = fit_pose_on_frames(cfg, frames[:n], f"first_frames (the first {n})", log)
+            cfg = dataclasses.replace(cfg, camera=camera, pose_auto=False)
+        setup = set_up(cfg, [], device, log)
+        if ground is not None:
+            setup.ground = ground
+            warn_fitted_pose(ground, setup.geometry, log)
+        if planes_from_frames(cfg):
+            from .session import add_static_planes
+
+            add_static_planes(setup, frames[:cfg.inputs.structure.frames], log)
+        return cls(cfg, setup)
+
 
     @property
     def camera(self):
@@ -278,20 +317,8 @@ class Detector:
 
     def _metres(self, depth, index: int, cfg: RunConfig | None = None, who: str = "") -> np.ndarray:
         cfg = cfg or self.config
-        depth = np.asarray(depth)
-        shape = (cfg.camera.height, cfg.camera.width)
-        if depth.shape != shape:
-            raise InputError(f"depth ({who}frame {index}): expected an array of shape {shape} (camera.height, "
-                             f"camera.width), found {depth.shape}")
-        integer = np.issubdtype(depth.dtype, np.integer)
-        if not integer and not np.issubdtype(depth.dtype, np.floating):
-            raise InputError(f"depth ({who}frame {index}): expected an integer or float array, found {depth.dtype}")
-        if integer and depth.min(initial=0) < 0:
-            raise InputError(f"depth ({who}frame {index}): expected depth units >= 0, found {depth.min()}")
-        metres = array_to_metres(depth, cfg.inputs.depth_scale)  # integers as read_depth reads them
-        if metres.min(initial=0) < 0:
-            raise InputError(f"depth ({who}frame {index}): expected metres >= 0, found {metres.min():g}")
-        self._check_units(metres, depth.dtype, index, cfg, who)
+        metres = checked_metres(depth, index, cfg, who)
+        self._check_units(metres, np.asarray(depth).dtype, index, cfg, who)
         return metres
 
     def _check_units(self, metres: np.ndarray, dtype, index: int, cfg: RunConfig | None = None, who: str = "") -> None:
@@ -339,6 +366,25 @@ class OnlineTracks:
         if self.tracks is None:
             self.tracks, self.report = self._tracker.finish()
         return self._tracker.take_committed()
+
+
+def checked_metres(depth, index: int, cfg: RunConfig, who: str = "") -> np.ndarray:
+    """A frame as `detect` takes it, in metres: its shape the camera's, integers (the config's
+    depth units) or floats (metres), nothing negative; else an InputError naming the frame."""
+    depth = np.asarray(depth)
+    shape = (cfg.camera.height, cfg.camera.width)
+    if depth.shape != shape:
+        raise InputError(f"depth ({who}frame {index}): expected an array of shape {shape} (camera.height, "
+                         f"camera.width), found {depth.shape}")
+    integer = np.issubdtype(depth.dtype, np.integer)
+    if not integer and not np.issubdtype(depth.dtype, np.floating):
+        raise InputError(f"depth ({who}frame {index}): expected an integer or float array, found {depth.dtype}")
+    if integer and depth.min(initial=0) < 0:
+        raise InputError(f"depth ({who}frame {index}): expected depth units >= 0, found {depth.min()}")
+    metres = array_to_metres(depth, cfg.inputs.depth_scale)  # integers as read_depth reads them
+    if metres.min(initial=0) < 0:
+        raise InputError(f"depth ({who}frame {index}): expected metres >= 0, found {metres.min():g}")
+    return metres
 
 
 def _yaml(value) -> str:

@@ -175,7 +175,8 @@ def prepare_camera(cfg: RunConfig, frames: list[Path], dev: str, log=print) -> C
             if not fit_on and is_live(cfg.inputs.frames):  # the Python API: no frame before detect
                 raise ConfigError(f"camera.extrinsics: auto needs frames to fit the floor on, and a live camera "
                                   f"({cfg.inputs.frames}) has none before detect; expected the camera's pose "
-                                  f"({{height: H}} with an accelerometer) or input.background frames")
+                                  f"({{height: H}} with an accelerometer), input.background frames, or its first "
+                                  f"frames as Detector.from_config's first_frames")
             if not fit_on:
                 raise ConfigError("camera.extrinsics: auto needs frames to fit the floor on; expected "
                                   "input.frames or input.background, found neither")

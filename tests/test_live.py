@@ -441,8 +441,17 @@ def test_the_api_on_a_live_cameras_config_reads_no_frames_before(camera_config):
     from dpom_warp.config import ConfigError
 
     with pytest.raises(ConfigError, match=r"^camera.extrinsics: auto needs frames to fit the floor on, and a live "
-                                          r"camera \(realsense\) has none before detect; expected the camera's pose"):
+                                          r"camera \(realsense\) has none before detect; expected the camera's pose"
+                                          r".* or its first frames as Detector.from_config's first_frames$"):
         Detector.from_config(path, {"input.background": None, "camera.extrinsics": "auto"})
+    from dpom_warp.io import InputError
+
+    with pytest.raises(ConfigError, match=r"^first_frames: expected a live camera's config .*, found input.frames: "):
+        Detector.from_config({k: v for k, v in plain.items() if k != "synthetic"}, first_frames=[frame])
+    with pytest.raises(InputError, match=r"^first_frames: expected at least one frame, found none$"):
+        Detector.from_config(path, {"input.background": None}, first_frames=[])
+    with pytest.raises(InputError, match=r"^depth \(first_frames, frame 1\): expected an array of shape \(106, 128\)"):
+        Detector.from_config(path, {"input.background": None}, first_frames=[frame, frame[:-1]])
 
 
 def test_no_camera_is_one_line(camera_config, capsys):
@@ -635,6 +644,20 @@ def test_a_live_cameras_accelerometer_gives_the_floor_its_up_and_a_height_its_ti
             got = found.get(record["frame"], [])
             assert len(got) == len(people) and all(min(np.hypot(x - a, y - b) for a, b in got) < 0.3
                                                    for x, y in people), (record["frame"], got, people)
+        # the Python API given the camera's first frames sets up as the live run does: the floor
+        # fitted on them, the static planes found in them, then frames detected as they come
+        from dpom_warp import Detector
+
+        det = Detector.from_config(path, first_frames=[cam.frames[i % 3] for i in range(5)])
+        assert det.ground_fit["frames"] == ["first_frames (the first 5)"]
+        assert det.ground_fit["camera_height"] == pytest.approx(2.2, abs=0.02)
+        assert det.ground_fit["pitch_deg"] == pytest.approx(25.0, abs=0.3)
+        assert det.ground_fit["roll_deg"] == pytest.approx(4.0, abs=0.3) and "structure" in det.setup.inference
+        for i in range(3):
+            people = [(o["x"], o["y"]) for o in truth[i]["objects"] if o["visibility"] > 0.5]
+            got = [(d.x, d.y) for d in det.detect(cam.frames[i]).detections]
+            assert len(got) == len(people) and all(min(np.hypot(x - a, y - b) for a, b in got) < 0.3
+                                                   for x, y in people), (i, got, people)
         # `dpom-warp track` poses the camera as the run did (summary.json's ground_fit): the same tracks
         tracks = (tmp_path / "fitted" / "tracks.csv").read_text()
         assert main(["track", str(tmp_path / "fitted"), "--set", "output.rerun=null",
