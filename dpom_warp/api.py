@@ -164,7 +164,6 @@ class Detector:
             add_static_planes(setup, frames[:cfg.inputs.structure.frames], log)
         return cls(cfg, setup)
 
-
     @property
     def camera(self):
         """The posed camera (with extrinsics: auto, the fitted pose); a rig's: a list, one a camera."""

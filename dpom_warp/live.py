@@ -159,7 +159,11 @@ class LiveRun:
             cfg, ground = self.fit_floor(cfg)
             self.cfg = cfg
         # the plain run's: device, engine, background (played frames: auto and the floor fit as a plain run's)
-        self.setup = setup = set_up(cfg, played, device, log)
+        try:
+            self.setup = setup = set_up(cfg, played, device, log)
+        except BaseException:
+            self.stop_early()
+            raise
         if ground is not None:
             from .camera_setup import warn_fitted_pose
 
@@ -238,9 +242,15 @@ class LiveRun:
             n = min(cfg.ground_frames, len(self.first))
             camera, ground = fit_pose_on_frames(cfg, self.first[:n], f"{cfg.inputs.frames}'s first {n} frames", self.log)
         except BaseException:
-            self.source.stop()
+            self.stop_early()
             raise
         return dataclasses.replace(cfg, camera=camera, pose_auto=False), ground
+
+    def stop_early(self) -> None:
+        """The camera stopped when the run fails before its loop (started for the floor fit)."""
+        if self.started:
+            self.started = False
+            self.source.stop()
 
     def first_frames(self, n: int) -> list:
         """The camera's next `n` frames in metres (fewer if the stream ends or stalls), not inferred."""

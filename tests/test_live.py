@@ -581,6 +581,7 @@ def test_a_live_cameras_accelerometer_gives_the_floor_its_up_and_a_height_its_ti
     from dpom_warp.frames import render_synthetic
     from dpom_warp.loading import load_config
     from dpom_warp.sources import expand, open_source
+    from dpom_warp.sources.realsense import RealSenseLive
     from dpom_warp.sources.software import SoftwareCamera
 
     path = small_config(tmp_path, frames=3)
@@ -628,6 +629,18 @@ def test_a_live_cameras_accelerometer_gives_the_floor_its_up_and_a_height_its_ti
             assert main(["run", str(path), "--no-progress", "--max-frames", "3", "--workers", "1"]) == 0
         finally:
             cam.stop()
+        # a floor found that leaves the grid out of view: one line, and the camera let go
+        beside = {**cfg, "grid": {**cfg["grid"], "y": [-6.0, -4.0, 0.2]},  # behind the camera
+                  "output": {**cfg["output"], "dir": str(tmp_path / "beside")}}
+        (tmp_path / "beside.yaml").write_text(yaml.safe_dump(beside))
+        capsys.readouterr()
+        cam.start()
+        try:
+            assert main(["run", str(tmp_path / "beside.yaml"), "--no-progress", "--max-frames", "3"]) == 2
+        finally:
+            cam.stop()
+        assert capsys.readouterr().err.startswith("dpom-warp: error: grid: none of its ")
+        assert not RealSenseLive("realsense").sensor.get_active_streams()  # ... stopped and closed by the failed run
         summary = json.loads((tmp_path / "fitted" / "summary.json").read_text())
         fit, live = summary["ground_fit"], summary["live"]
         assert fit["camera_height"] == pytest.approx(2.2, abs=0.02)
