@@ -37,6 +37,51 @@ def test_the_scale_of_agreeing_pixels_by_hand():
     assert estimate_scale(z, mu, options.model_copy(update={"min_share": 0.1})).trusted
 
 
+def test_the_estimates_bounds_by_hand():
+    """The edges of estimate_scale's rules, each set by hand: a background nearer than 1 m is
+    read like any other; one agreeing pixel is reported as its share (0.001) and not trusted;
+    a sample of one pixel reports a share of 1; exactly MIN_PIXELS (50) agreeing and exactly
+    min_share (0.2) of the sample are enough; an untrusted frame is neither trusted nor applied."""
+    from dpom_warp.drift import MIN_PIXELS
+
+    options = DriftOptions()
+    assert MIN_PIXELS == 50
+    e = estimate_scale(np.full(300, 0.927), np.full(300, 0.9), options)  # 0.9 m away, read 3 % farther
+    assert e.scale == pytest.approx(1.03, abs=1e-12) and e.trusted is True and e.applied is True
+    one = np.where(np.arange(1000) == 0, 2.06, 0.0)  # a single reading, agreeing
+    e = estimate_scale(one, np.full(1000, 2.0), options)
+    assert (e.scale, e.agreeing, e.trusted, e.applied) == (1.0, 0.001, False, False)
+    assert e.trusted is False and e.applied is False
+    assert estimate_scale([2.06], [2.0], options).agreeing == 1.0
+    fifty = np.where(np.arange(100) < 50, 2.06, 0.0)  # 50 agreeing of 100: both bars met exactly
+    e = estimate_scale(fifty, np.full(100, 2.0), options)
+    assert e.trusted is True and e.agreeing == 0.5 and e.scale == pytest.approx(1.03, abs=1e-12)
+    fifth = np.where(np.arange(1000) < 200, 2.06, 0.0)  # 200 of 1000: share exactly 0.2
+    e = estimate_scale(fifth, np.full(1000, 2.0), options)
+    assert e.trusted is True and e.agreeing == 0.2
+
+
+def test_the_background_sample_and_the_summary_by_hand():
+    """background_sample: the pixels with a known, positive background depth, all of them when
+    few, else `n` spread evenly from the first to the last; summary: the frames, those corrected
+    and not trusted, and the trusted scales' range and median."""
+    from dpom_warp.drift import background_sample, summary
+
+    mu = np.array([[2.0, 0.0, 3.0], [1.0, 4.0, 5.0]])
+    known = np.array([[True, True, False], [True, True, True]])
+    assert background_sample(mu, known).tolist() == [0, 3, 4, 5]  # 1: depth 0; 2: not known
+    assert background_sample(np.ones(101), np.ones(101, bool), n=5).tolist() == [0, 25, 50, 75, 100]
+    records = {"a": {"scale": 1.03, "agreeing": 0.6, "trusted": True, "applied": True},
+               "b": {"scale": 1.0, "agreeing": 0.1, "trusted": False, "applied": False},
+               "c": {"scale": 0.99, "agreeing": 0.7, "trusted": True, "applied": True},
+               "d": {"scale": 1.002, "agreeing": 0.7, "trusted": True, "applied": False}}
+    assert summary(records) == {"frames": 4, "corrected": 2, "untrusted": ["b"], "scale_min": 0.99,
+                                "scale_max": 1.03, "scale_median": 1.002}
+    assert summary({}) == {}
+    assert summary({"b": records["b"]}) == {"frames": 1, "corrected": 0, "untrusted": ["b"], "scale_min": None,
+                                            "scale_max": None, "scale_median": None}
+
+
 @pytest.fixture(scope="module")
 def drifting(tmp_path_factory):
     """A small rendered scene (8 frames, 4 background frames) whose depths drift, its config and
