@@ -5,7 +5,7 @@ the tree beside it, so each module runs in a scratch clone of the repository (HE
 
     pip install -e ".[mutation]"
     python -m bench.mutation evaluate tracking [--commit SHA] [--work /tmp/dpom-mutation]
-        [--output runs/mutation/scores.json]
+        [--output runs/mutation/scores.json] [--keyword EXPR]
 
 Each mutant (an operator, a constant, a call's argument changed; mutmut 3) is run against the
 module's related tests (MODULES) that cover its function; it is killed when one fails, and
@@ -40,9 +40,11 @@ MODULES = {
 KILLED, SURVIVED = 1, 0  # mutmut 3's exit codes of a mutant's test run (its .meta files)
 
 
-def clone(commit: str, work: Path, module: str) -> Path:
-    """A scratch clone at `commit` with mutmut's settings for `module` (and ../shared beside it)."""
+def clone(commit: str, work: Path, module: str, keyword: str | None = None) -> Path:
+    """A scratch clone at `commit` with mutmut's settings for `module` (and ../shared beside it);
+    `keyword`: only its tests that pytest's -k selects."""
     path, tests = MODULES[module]
+    tests = tests + ["-k", keyword] if keyword else tests
     where = work / f"{module}-{commit[:10]}"
     if where.exists():
         subprocess.run(["rm", "-rf", str(where)], check=True)
@@ -86,19 +88,22 @@ def main():
     ap.add_argument("--commit", default="HEAD", help="the commit whose tests are scored (default: HEAD)")
     ap.add_argument("--work", default="/tmp/dpom-mutation", help="where the scratch clones go")
     ap.add_argument("--output", default=None, help="a JSON file for the scores (and the survivors)")
+    ap.add_argument("--keyword", default=None, help="only the module's tests pytest -k selects (drift: by_hand, "
+                                                    "the tests that render no scene)")
     a = ap.parse_args()
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", a.commit], check=True, capture_output=True,
                             text=True).stdout.strip()
     results = []
     for module in a.modules:
-        where = clone(commit, Path(a.work), module)
+        where = clone(commit, Path(a.work), module, a.keyword)
         env = dict(os.environ, WARP_CACHE_PATH=str(where / ".cache" / "warp"))
         t = time.perf_counter()
         run = subprocess.run([sys.executable, "-m", "mutmut", "run"], cwd=where, env=env, capture_output=True,
                              text=True)
         if run.returncode != 0:
             raise SystemExit(f"mutmut on {module} failed (exit {run.returncode}): {run.stdout[-2000:]}{run.stderr[-2000:]}")
-        r = score(where, module) | {"commit": commit[:10], "seconds": round(time.perf_counter() - t)}
+        r = score(where, module) | {"commit": commit[:10], "seconds": round(time.perf_counter() - t),
+                                    "keyword": a.keyword}
         results.append(r)
         print(f"{module} ({r['file']}) at {r['commit']}: {r['killed']} of {r['killed'] + r['survived']} mutants "
               f"killed, score {r['score']:.3f} ({r['other']} not run or timed out; {r['seconds']} s)", flush=True)
