@@ -3,7 +3,7 @@
 commands:
   dpom-warp run CONFIG... [--output DIR] [--device D] [--set KEY.PATH=VALUE ...]
                 [--workers N] [--ray [ADDRESS]] [--resume | --overwrite] [--max-frames N] [--play]
-  dpom-warp fit-ground DEPTH... --camera CAMERA.yaml | RECORDING [--output POSE.yaml]
+  dpom-warp fit-ground DEPTH... --camera CAMERA.yaml | RECORDING | realsense[:SERIAL] [--output POSE.yaml]
   dpom-warp calibrate CONFIG --output OUT.yaml [--set KEY.PATH=VALUE ...]
   dpom-warp eval RUN_DIR [--ground-truth GT.json] [--compare RUN_OR_CSV ...] [--plots]
   dpom-warp track RUN_DIR [--set tracking.KEY=VALUE ...] [--zones ZONES.yaml]
@@ -179,15 +179,16 @@ def _fit_ground(args) -> int:
     from .ground import GroundOptions, fit_ground_files, fit_ground_named, frames_named
     from .sources import recording_frames
     from .io import InputError, write_text_atomic
-    from .names import is_recording
+    from .names import is_live, is_recording
 
     camera, scale = load_camera_file(args.camera) if args.camera else (None, None)
     up = args.up
-    if len(args.depth) == 1 and is_recording(args.depth[0]):
+    if len(args.depth) == 1 and (is_recording(args.depth[0]) or is_live(args.depth[0])):
         camera, frames, names, gravity = recording_frames(args.depth[0], args.topic, args.frames, camera)
         if up == "auto" and gravity:  # the accelerometer says where up is, as in a run
             up = tuple(float(x) for x in gravity)
-            print(f"up from the recording's accelerometer: [{', '.join(f'{x:.4f}' for x in up)}]", file=sys.stderr)
+            print(f"up from the {'camera' if is_live(args.depth[0]) else 'recording'}'s accelerometer: "
+                  f"[{', '.join(f'{x:.4f}' for x in up)}]", file=sys.stderr)
         options = GroundOptions(up=up, max_angle_deg=args.max_angle, depth_max=args.depth_max)
         fit = fit_ground_named(frames, camera, options, frames_named(frames, names))
         count = len(frames)
@@ -406,7 +407,8 @@ def parser() -> argparse.ArgumentParser:
                    help="override a config value before calibrating (as for run)")
     g.add_argument("depth", nargs="+", help="depth frames (16-bit PNG or .npy; folders and globs of them) of the "
                                             "same camera, or one recording (ROS bag, Azure Kinect .mkv): its "
-                                            "first --frames frames")
+                                            "first --frames frames, or a live camera (realsense[:SERIAL]): its "
+                                            "next --frames frames")
     g.add_argument("--camera", help="camera YAML: width, height, intrinsics, depth_scale (required for frame "
                                     "files; a recording's own camera otherwise)")
     g.add_argument("--topic", help="a recording's depth topic, where it has several (as input.topic)")

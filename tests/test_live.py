@@ -657,6 +657,18 @@ def test_a_live_cameras_accelerometer_gives_the_floor_its_up_and_a_height_its_ti
             got = found.get(record["frame"], [])
             assert len(got) == len(people) and all(min(np.hypot(x - a, y - b) for a, b in got) < 0.3
                                                    for x, y in people), (record["frame"], got, people)
+        # `dpom-warp fit-ground` on the live camera: its next frames, the accelerometer's up
+        cam.start()
+        try:
+            assert main(["fit-ground", "realsense", "--output", str(tmp_path / "pose.yaml")]) == 0
+        finally:
+            cam.stop()
+        err = capsys.readouterr().err
+        assert "up from the camera's accelerometer: [" in err
+        pose = yaml.safe_load((tmp_path / "pose.yaml").read_text())
+        assert pose["camera_height"] == pytest.approx(2.2, abs=0.02) and pose["pitch_deg"] == pytest.approx(25, abs=0.3)
+        assert pose["roll_deg"] == pytest.approx(4.0, abs=0.3)
+        assert not RealSenseLive("realsense").sensor.get_active_streams()  # the camera let go
         # the Python API given the camera's first frames sets up as the live run does: the floor
         # fitted on them, the static planes found in them, then frames detected as they come
         from dpom_warp import Detector

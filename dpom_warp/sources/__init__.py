@@ -127,7 +127,8 @@ def source_frames(pattern: str, key: str, topic: str | None = None, log=print) -
 
 # -- the first frames of a source, for a floor fit ---------------------------------------------
 def recording_frames(path: str, topic: str | None, count: int, camera: Camera | None = None):
-    """The first `count` readable depth frames of a recording, for a floor fit: (camera,
+    """The first `count` readable depth frames of a recording (or the next of a live camera),
+    for a floor fit: (camera,
     frames in metres, their names for messages, the accelerometer's up or None). The camera
     is the recording's (size, intrinsics, distortion) unless `camera` is given.
 
@@ -144,7 +145,7 @@ def recording_frames(path: str, topic: str | None, count: int, camera: Camera | 
         camera = Camera(info.width, info.height, i["fx"], i["fy"], i["cx"], i["cy"],
                         distortion=tuple(info.distortion) if info.distortion else None)
     frames, names = [], []
-    for frame in source.frames():
+    for frame in (live_frames(source, count, path) if live_kind(path) else source.frames()):
         if frame.depth is None:  # a damaged message: the next one
             continue
         frames.append(array_to_metres(frame.depth, info.depth_scale or 0.001))
@@ -154,3 +155,17 @@ def recording_frames(path: str, topic: str | None, count: int, camera: Camera | 
     if not frames:
         raise InputError(f"{path}: no readable depth frame")
     return camera, frames, names, info.gravity_up
+
+
+def live_frames(source, count: int, path: str, timeout: float = 10.0, stall: float = 5.0) -> list:
+    """A live camera's next `count` frames (the camera started, then stopped): fewer when it
+    stalls, an InputError when none comes within `timeout` seconds."""
+    slot = NewestFrame()
+    source.start(slot.put)
+    try:
+        frames = slot.take_next(count, timeout, stall)
+    finally:
+        source.stop()
+    if not frames:
+        raise InputError(f"{path}: no frame within {timeout:g} s of starting the camera")
+    return frames
