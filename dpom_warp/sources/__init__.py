@@ -127,10 +127,9 @@ def source_frames(pattern: str, key: str, topic: str | None = None, log=print) -
 
 # -- the first frames of a source, for a floor fit ---------------------------------------------
 def recording_frames(path: str, topic: str | None, count: int, camera: Camera | None = None):
-    """The first `count` readable depth frames of a recording (or the next of a live camera),
-    for a floor fit: (camera,
-    frames in metres, their names for messages, the accelerometer's up or None). The camera
-    is the recording's (size, intrinsics, distortion) unless `camera` is given.
+    """The first `count` readable depth frames of a recording (a live camera's next), for a
+    floor fit: (camera, frames in metres, their names for messages, the accelerometer's up or
+    None). The camera is the recording's (size, intrinsics, distortion) unless `camera` is given.
 
     Raises:
         InputError: no camera information and none given, or no readable depth frame.

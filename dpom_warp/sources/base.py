@@ -81,9 +81,10 @@ class Source:
 
 
 class NewestFrame:
-    """A live source's frames as a run takes them, a one-frame slot: `put` replaces what is there (counting the frame dropped), `take`
-    waits for a frame and empties the slot; `put(None)`: the stream has ended (`ended`), and
-    `take` then gives the last frame if it is still there, else None at once."""
+    """A live source's frames as a run takes them, a one-frame slot: `put` replaces what is
+    there (counting the frame dropped), `take` waits for a frame and empties the slot;
+    `put(None)`: the stream has ended (`ended`), and `take` then gives the last frame if it is
+    still there, else None at once."""
 
     def __init__(self):
         self.cond = threading.Condition()

@@ -81,9 +81,10 @@ class SoftwareCamera:
     def unregister(self) -> None:
         if self in SOFTWARE:
             SOFTWARE.remove(self)
-        if self.motion is not None:
+        if getattr(self, "motion_thread", None) is not None:
             self.motion_stopped.set()
             self.motion_thread.join(5)
+            self.motion_thread = None
 
     def _feed_accelerometer(self):
         """`accel` at ACCEL_HZ (a reader that has not opened the stream misses them, as from a camera)."""
@@ -147,7 +148,7 @@ class SoftwareCamera:
         if motion is not None:
             self.motion_stopped.set()
             feed.join(5)
-        del sensors, motion, recorder
+        del sensor, sensors, motion, recorder
         gc.collect()  # the recorder writes the file out when it goes
         return len(got)
 
