@@ -57,8 +57,47 @@ def cluster(tmp_path_factory, scene):
     try:
         yield f"127.0.0.1:{port}", env
     finally:
-        subprocess.run([str(RAY), "stop", "--force"], capture_output=True, timeout=120, env=env)
+        stop_cluster(str(tmp))
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def stop_cluster(folder: str, timeout: float = 30.0) -> None:
+    """Kill this cluster's processes: those naming its temporary `folder` (GCS, raylet, monitors)
+    and their descendants (the agents and actors, whose titles are Ray's own). Not `ray stop
+    --force`, which kills every Ray process on the machine: a local instance of test_ray's in the
+    other xdist worker lost its raylet to it mid-test."""
+    import os
+    import signal
+    import time
+
+    from test_ray import instance_processes
+
+    def family() -> list[int]:
+        children: dict = {}
+        for pid in filter(str.isdigit, os.listdir("/proc")):
+            try:
+                with open(f"/proc/{pid}/stat") as f:
+                    state, ppid = f.read().rsplit(")", 1)[1].split()[:2]
+            except (OSError, ValueError):
+                continue
+            if state != "Z":  # a zombie is gone already
+                children.setdefault(int(ppid), []).append(int(pid))
+        todo, found = instance_processes(folder), set()
+        while todo:
+            pid = todo.pop()
+            if pid not in found:
+                found.add(pid)
+                todo += children.get(pid, [])
+        return sorted(found)
+
+    deadline = time.time() + timeout
+    while (pids := family()) and time.time() < deadline:
+        for pid in pids:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        time.sleep(0.2)
 
 
 @pytest.fixture(scope="module")
