@@ -136,11 +136,8 @@ class Detector:
     def from_first_frames(cls, cfg: RunConfig, depths, device, log) -> "Detector":
         """from_config's `first_frames`: a live camera's Detector set up as a live run sets it up
         on the frames it takes first (the floor fit and the static planes), none inferred."""
-        import dataclasses
-
-        from .camera_setup import fit_pose_on_frames, warn_fitted_pose
         from .names import is_live
-        from .session import planes_from_frames, set_up
+        from .session import add_static_planes, planes_from_frames, set_up_on_first_frames
 
         if cfg.is_rig or not is_live(cfg.inputs.frames):
             raise ConfigError(f"first_frames: expected a live camera's config (input.frames: realsense[:SERIAL]), "
@@ -149,18 +146,8 @@ class Detector:
         frames = [checked_metres(d, i, cfg, "first_frames, ") for i, d in enumerate(depths)]
         if not frames:
             raise InputError("first_frames: expected at least one frame, found none")
-        ground = None
-        if cfg.pose_auto and not cfg.inputs.background:
-            n = min(cfg.ground_frames, len(frames))
-            camera, ground = fit_pose_on_frames(cfg, frames[:n], f"first_frames (the first {n})", log)
-            cfg = dataclasses.replace(cfg, camera=camera, pose_auto=False)
-        setup = set_up(cfg, [], device, log)
-        if ground is not None:
-            setup.ground = ground
-            warn_fitted_pose(ground, setup.geometry, log)
+        cfg, setup = set_up_on_first_frames(cfg, frames, "first_frames (the first {n})", device=device, log=log)
         if planes_from_frames(cfg):
-            from .session import add_static_planes
-
             add_static_planes(setup, frames[:cfg.inputs.structure.frames], log)
         return cls(cfg, setup)
 

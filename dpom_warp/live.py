@@ -16,7 +16,7 @@ its own. Stopping writes detections.csv, tracks.csv, track_table.csv and summary
 `live` block) as a plain run does.
 
 Its pose left out (extrinsics: auto, one camera without background frames), the floor is
-fitted on the camera's first frames before any is inferred (LiveRun.fit_floor).
+fitted on the camera's first frames before any is inferred (LiveRun.take_first).
 
 A camera that stops sending (unplugged, or its stream stalled: no frame for STALL_S seconds)
 ends the run with every output of the frames inferred so far written, then one line and exit
@@ -25,7 +25,6 @@ code 1; its SDK failing to stop (as an unplugged camera does) loses nothing eith
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import statistics
 import threading
@@ -132,7 +131,7 @@ class LiveRun:
     def __init__(self, cfg: RunConfig, output_dir, device, log, max_frames, overwrite, first_frame_timeout,
                  workers):
         from .loop import open_loop
-        from .session import set_up
+        from .session import set_up_on_first_frames
         from .sources import open_source
         from .frames import played_source
         from .worker import FrameWorker
@@ -154,21 +153,18 @@ class LiveRun:
             self.source, played = open_source(cfg.inputs.frames), []  # a live kind of names.READERS
         self.info = info = self.source.info()
         self.out = Path(output_dir or cfg.output.dir)
-        self.slot, self.started, self.first, ground = NewestFrame(), False, [], None
-        if cfg.pose_auto and not (cfg.inputs.play or cfg.inputs.background):  # the floor in its first frames
-            cfg, ground = self.fit_floor(cfg)
-            self.cfg = cfg
-        # the plain run's: device, engine, background (played frames: auto and the floor fit as a plain run's)
+        self.slot, self.started, self.first = NewestFrame(), False, []
+        # the plain run's: device, engine, background (played frames: auto and the floor fit as a
+        # plain run's; a live camera's pose left out: the floor in its first frames)
         try:
-            self.setup = setup = set_up(cfg, played, device, log)
+            if cfg.pose_auto and not (cfg.inputs.play or cfg.inputs.background):
+                self.take_first(cfg)
+            cfg, self.setup = set_up_on_first_frames(cfg, self.first, f"{cfg.inputs.frames}'s first {{n}} frames",
+                                                     played, device, log)
         except BaseException:
             self.stop_early()
             raise
-        if ground is not None:
-            from .camera_setup import warn_fitted_pose
-
-            setup.ground = ground
-            warn_fitted_pose(ground, setup.geometry, log)
+        self.cfg, setup = cfg, self.setup
         self.engine, self.geometry = setup.engine, setup.geometry
         self.workers = workers or default_workers(cfg, setup.device)
         self.worker = FrameWorker(setup.spec, engine=self.engine)
@@ -228,23 +224,15 @@ class LiveRun:
                      [reduce(d) if d is not None else None for d in depth] if self.rig else reduce(depth))
             return then(fr, depth, small)
 
-    def fit_floor(self, cfg: RunConfig):
-        """camera.extrinsics: auto on a live camera without background frames: the camera
-        started and the floor fitted on its first camera.ground.frames frames (with the static
-        planes' frames, taken now too: none of them inferred); the posed config and its report."""
-        from .camera_setup import fit_pose_on_frames
+    def take_first(self, cfg: RunConfig) -> None:
+        """extrinsics: auto on a live camera without background frames: the camera started and
+        its first frames taken for the floor fit (camera.ground.frames) and the static planes
+        (input.structure.frames), none of them inferred."""
         from .session import planes_from_frames
 
         self.source.start(self.slot.put)
         self.started = True
-        try:
-            self.first = self.first_frames(max(cfg.ground_frames, cfg.inputs.structure.frames * planes_from_frames(cfg)))
-            n = min(cfg.ground_frames, len(self.first))
-            camera, ground = fit_pose_on_frames(cfg, self.first[:n], f"{cfg.inputs.frames}'s first {n} frames", self.log)
-        except BaseException:
-            self.stop_early()
-            raise
-        return dataclasses.replace(cfg, camera=camera, pose_auto=False), ground
+        self.first = self.first_frames(max(cfg.ground_frames, cfg.inputs.structure.frames * planes_from_frames(cfg)))
 
     def stop_early(self) -> None:
         """The camera stopped when the run fails before its loop (started for the floor fit)."""

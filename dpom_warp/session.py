@@ -109,6 +109,27 @@ def set_up(cfg: RunConfig, frames: list[Path], device: str | None = None, log=pr
                  inference, engine, time.perf_counter() - t)
 
 
+def set_up_on_first_frames(cfg: RunConfig, first: list, label: str, frames: list[Path] = (), device: str | None = None,
+                           log=print) -> tuple[RunConfig, Setup]:
+    """set_up for a live camera given its first frames (metres; the live run's, the API's
+    first_frames), none inferred: with its pose left out (extrinsics: auto, no background
+    frames) the floor is fitted on the first camera.ground.frames of them (`label`: how
+    messages name them, "{n}" their number), and the setup keeps the fit's report and warnings
+    as set_up's own fit does. Returns the posed config and the setup; `frames`: set_up's."""
+    from .camera_setup import fit_pose_on_frames, warn_fitted_pose
+
+    ground = None
+    if first and cfg.pose_auto and not cfg.inputs.background:
+        n = min(cfg.ground_frames, len(first))
+        camera, ground = fit_pose_on_frames(cfg, first[:n], label.replace("{n}", str(n)), log)
+        cfg = dataclasses.replace(cfg, camera=camera, pose_auto=False)
+    setup = set_up(cfg, list(frames), device, log)
+    if ground is not None:
+        setup.ground = ground
+        warn_fitted_pose(ground, setup.geometry, log)
+    return cfg, setup
+
+
 def planes_from_frames(cfg: RunConfig) -> bool:
     """Whether a camera's static planes (input.structure) come from its first frames: no
     background frames, and input.structure.planes."""
