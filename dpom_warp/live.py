@@ -151,7 +151,7 @@ class LiveRun:
             played = []
         else:
             self.source, played = open_source(cfg.inputs.frames), []  # a live kind of names.READERS
-        self.info = info = self.source.info()
+        self.info = info = self.source.stream_info()  # the accelerometer was read with the config
         self.out = Path(output_dir or cfg.output.dir)
         self.slot, self.started, self.first = NewestFrame(), False, []
         # the plain run's: device, engine, background (played frames: auto and the floor fit as a

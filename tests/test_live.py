@@ -612,17 +612,20 @@ def found_where_rendered(got: list, objects: list) -> bool:
     return len(got) == len(people) and all(min(np.hypot(x - a, y - b) for a, b in got) < 0.3 for x, y in people)
 
 
-def test_a_live_cameras_accelerometer_gives_the_floor_its_up_and_a_height_its_tilt(tilted, tmp_path, capsys):
+def test_a_live_cameras_accelerometer_gives_the_floor_its_up_and_a_height_its_tilt(tilted, tmp_path, capsys,
+                                                                                   monkeypatch):
     """README: a live RealSense with an accelerometer (D435i, D455) is read as a recording's IMU
     is: `dpom-warp info` shows its up, extrinsics left out take that up as camera.ground.up, and
     `{height: H}` takes its pitch and roll from it. On the tilted scene's camera (its
     accelerometer reading the rendered pose's up): the live run given only the height infers
-    every frame as the plain run with the rendered pose does, bit for bit; a camera without an
-    accelerometer gives no up."""
+    every frame as the plain run with the rendered pose does, bit for bit, reading the
+    accelerometer once (with the config; the run's start does not read it again); a camera
+    without an accelerometer gives no up."""
     import numpy as np
 
     from dpom_warp.loading import load_config
-    from dpom_warp.sources import open_source
+    from dpom_warp.sources import open_source, realsense
+    from dpom_warp.sources.base import gravity_direction
     from dpom_warp.sources.software import SoftwareCamera
 
     tmp, plain, cfg, up, _ = tilted
@@ -643,11 +646,14 @@ def test_a_live_cameras_accelerometer_gives_the_floor_its_up_and_a_height_its_ti
         (tmp_path / "plain.yaml").write_text(yaml.safe_dump(plain))
         want = plain_maps(tmp_path, 3)
         capsys.readouterr()
+        reads = []  # the readings of each time the accelerometer is read (made an up)
+        monkeypatch.setattr(realsense, "gravity_direction", lambda r: reads.append(len(r)) or gravity_direction(r))
         cam.start()
         try:
             assert main(["run", str(path), "--no-progress", "--max-frames", "4", "--workers", "1"]) == 0
         finally:
             cam.stop()
+        assert len(reads) == 1 and reads[0] == realsense.ACCEL_SAMPLES
         assert ("camera pitch 25.00 deg, roll 4.00 deg from the camera's accelerometer (camera.extrinsics leaves "
                 "pitch_deg and roll_deg out)") in capsys.readouterr().out.splitlines()
         assert_plain_maps_in_stream_order(tmp_path / "out", want, 4)

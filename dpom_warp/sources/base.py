@@ -76,6 +76,12 @@ class Source:
     def info(self) -> SourceInfo:
         raise NotImplementedError
 
+    def stream_info(self) -> SourceInfo:
+        """What a run streaming the source needs of it (its kind, size and rate): `info()`, but
+        for what costs time to read and the config has taken already (a live camera's
+        accelerometer)."""
+        return self.info()
+
     def frames(self) -> Iterator[Frame]:
         raise NotImplementedError
 

@@ -7,6 +7,7 @@ pyrealsense2's thread and are handed to a callback (the live run keeps the newes
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Callable
 
@@ -57,6 +58,12 @@ class RealSenseLive(Source):
                 if p.stream_type() == rs.stream.depth and p.format() == rs.format.z16]
 
     def info(self) -> SourceInfo:
+        """The camera as `stream_info` gives it, with its accelerometer's up (gravity_up: read once)."""
+        return dataclasses.replace(self.stream_info(), gravity_up=self.gravity_up())
+
+    def stream_info(self) -> SourceInfo:
+        """The camera, without reading its accelerometer (the up was read when the config was
+        loaded; the live run only needs the stream's kind, size and rate): `imu` says whether it has one."""
         rs = self.rs
         i = self.profile.get_intrinsics()
         coeffs = [float(c) for c in i.coeffs]
@@ -67,8 +74,7 @@ class RealSenseLive(Source):
                           frames=0, width=i.width, height=i.height,
                           intrinsics={"fx": i.fx, "fy": i.fy, "cx": i.ppx, "cy": i.ppy}, distortion=distortion,
                           depth_scale=scale, encoding="z16", topic="depth",
-                          rate_hz=float(self.profile.fps()), imu=self._accelerometer() is not None,
-                          gravity_up=self.gravity_up())
+                          rate_hz=float(self.profile.fps()), imu=self._accelerometer() is not None)
 
     def _accelerometer(self):
         """(sensor, profile) of the camera's accelerometer stream (accel, motion_xyz32f; its

@@ -27,7 +27,7 @@ class RigStream(Source):
 
     def __init__(self, sources: list[Source], names: list[str], tolerance: float | None = None):
         self.sources, self.names = list(sources), list(names)
-        self._infos = [s.info() for s in self.sources]
+        self._infos = [s.stream_info() for s in self.sources]
         self.periods = [1.0 / i.rate_hz if i.rate_hz else None for i in self._infos]
         rate = self._infos[0].rate_hz
         self.tolerance = tolerance if tolerance is not None else 0.5 / rate if rate else 0.05
