@@ -15,6 +15,7 @@ from .geometry import closer
 
 EDGE_RADIUS = 0.45  # detection.edge_radius's default on ground grids (config; README, How it works)
 MIN_LOG_ODDS = 10.0  # detection.min_log_odds's default, nats (README, How it works)
+GIVE_WAY = 0.99  # detection.give_way's default: a rig's suppression between two certain cells (docs/rig.md)
 
 
 @dataclass(frozen=True)
@@ -99,7 +100,7 @@ def local_maxima(rho_map: np.ndarray) -> np.ndarray:
 
 def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, threshold: float,
            nms_radius: float, view_part: np.ndarray | CameraViews | None = None, edge_radius: float = 0.0,
-           edge_view: float = 0.5) -> list[Detected]:
+           edge_view: float = 0.5, give_way: float = 0.0) -> list[Detected]:
     """Detections of one frame, strongest first.
 
     Args:
@@ -115,6 +116,7 @@ def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, thresh
             (Geometry.view_part), or each camera's (CameraViews: a rig's); None: every
             location in view.
         edge_radius, edge_view: after the suppression, edge_drop.
+        give_way: in a rig, the suppression's give-way level (suppress).
     """
     from scipy.ndimage import uniform_filter
 
@@ -125,13 +127,45 @@ def detect(rho_star: np.ndarray, locations: np.ndarray, rect: np.ndarray, thresh
     # neighbourhood holds the most, the middle of its blob; then by index
     mass = uniform_filter(rho_star.astype(np.float64), 3, mode="constant").ravel()
     cand = cand[np.lexsort((cand, -mass[cand], -flat[cand]))]
-    kept: list[int] = []
-    for k in cand:
-        if not any(closer(np.linalg.norm(locations[k] - locations[j]), nms_radius) for j in kept):
-            kept.append(int(k))
+    kept = suppress(cand, flat, locations, nms_radius, view_part, give_way)
     kept = edge_drop(kept, flat, locations, view_part, edge_radius, edge_view)
     return [Detected(k, *(float(c) for c in locations[k]), float(flat[k]),
                      tuple(int(b) for b in rect[k])) for k in kept]
+
+
+def suppress(cand: np.ndarray, flat: np.ndarray, locations: np.ndarray, radius: float,
+             views: np.ndarray | CameraViews | None = None, give_way: float = 0.0) -> list[int]:
+    """Greedy non-maximum suppression of `cand` (cells, in the order they are taken): each kept
+    unless closer than `radius` to one kept before it. In a rig of several cameras (`views` a
+    CameraViews of more than one), a kept cell of rho* (`flat`) at least `give_way` (0: never)
+    that suppresses two such cells not closer than `radius` to each other stands between two
+    people, one object explaining neither (the cameras see people from several sides, which pins
+    each one's cell): it gives way, and the suppression is made again without it (docs/rig.md).
+    One camera sees a person's front only and spreads it over certain cells along its rays and
+    across its width, so there the rule would split people in two: it is a rig's alone."""
+    def greedy(cells) -> list[int]:
+        kept: list[int] = []
+        for k in cells:
+            if not any(closer(np.linalg.norm(locations[k] - locations[j]), radius) for j in kept):
+                kept.append(int(k))
+        return kept
+
+    kept = greedy(cand)
+    if give_way <= 0 or not isinstance(views, CameraViews) or len(views.view_part) < 2:
+        return kept
+
+    def between(k: int) -> bool:
+        if flat[k] < give_way:
+            return False
+        near = [j for j in cand if j != k and flat[j] >= give_way
+                and closer(np.linalg.norm(locations[k] - locations[j]), radius)]
+        return any(not closer(np.linalg.norm(locations[a] - locations[b]), radius)
+                   for i, a in enumerate(near) for b in near[i + 1:])
+
+    while (middle := next((k for k in kept if between(k)), None)) is not None:
+        cand = cand[cand != middle]
+        kept = greedy(cand)
+    return kept
 
 
 def edge_drop(kept: list[int], flat: np.ndarray, locations: np.ndarray,
@@ -163,7 +197,7 @@ def detect_map(rho_star: np.ndarray, geometry, detection, threshold: float | Non
     on a geometry's locations, rectangles and view parts."""
     return detect(rho_star, geometry.locations, geometry.rect,
                   detection.threshold if threshold is None else threshold, detection.nms_radius,
-                  CameraViews.of(geometry), detection.edge_radius, detection.edge_view)
+                  CameraViews.of(geometry), detection.edge_radius, detection.edge_view, detection.give_way)
 
 
 def joint_detections(rho_map: np.ndarray, geometry, detection, log_odds=None) -> tuple[np.ndarray, list[Detected]]:

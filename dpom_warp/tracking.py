@@ -81,10 +81,11 @@ class Cells:
     view_part: CameraViews | np.ndarray | None = None  # each camera's (or one's) share in view: detection.edge_radius
     edge_radius: float = 0.0
     edge_view: float = 0.5
+    give_way: float = 0.0  # a rig's suppression between two certain cells (detection.give_way)
 
     @classmethod
     def of(cls, geometry, grid, image_size, regions=(), nms_radius: float = 0.4, edge_radius: float = 0.0,
-           edge_view: float = 0.5) -> "Cells":
+           edge_view: float = 0.5, give_way: float = 0.0) -> "Cells":
         """From a run's full-resolution geometry: entry cells are the cells the camera sees on
         the grid's border, beside a cell it does not see, whose silhouette leaves the image
         (`image_size` = (width, height)), or inside a configured region [x0, x1, y0, y1]. A rig's
@@ -119,16 +120,16 @@ class Cells:
         from .detect import CameraViews
 
         return cls(np.asarray(p, float), float(max(steps)), entry, nms_radius, CameraViews.of(geometry), edge_radius,
-                   edge_view)
+                   edge_view, give_way)
 
     @classmethod
     def for_run(cls, geometry, cfg) -> "Cells":
         """`of` with a run config's grid, image size, tracking.regions and detection's
-        nms_radius, edge_radius and edge_view."""
+        nms_radius, edge_radius, edge_view and give_way."""
         d = cfg.detection
         sizes = [(m.camera.width, m.camera.height) for _, m in cfg.members()]
         return cls.of(geometry, cfg.grid, sizes if cfg.is_rig else sizes[0], cfg.tracking.regions,
-                      d.nms_radius, d.edge_radius, d.edge_view)
+                      d.nms_radius, d.edge_radius, d.edge_view, d.give_way)
 
     def nearest(self, xyz) -> int:
         """The cell nearest to a point."""
@@ -180,19 +181,15 @@ def _costs(rho, opt: TrackingOptions):
 def peaks(rho_map: np.ndarray, cells: Cells, threshold: float) -> np.ndarray:
     """The cells that matter in a map: its local maxima of at least `threshold`, one per
     cells.nms_radius as the detections (the solid model often explains one person by two
-    neighbouring cells; each would carry a track of its own), less a person's edge beside
-    them (detect.edge_drop). Sorted cell indices."""
-    from .detect import edge_drop, local_maxima
-    from .geometry import closer
+    neighbouring cells; each would carry a track of its own; in a rig, a cell between two
+    people gives way to them: detect.suppress), less a person's edge beside them
+    (detect.edge_drop). Sorted cell indices."""
+    from .detect import edge_drop, local_maxima, suppress
 
     flat = rho_map.ravel()
     cand = np.flatnonzero(local_maxima(rho_map).ravel() & (flat >= threshold))
     cand = cand[np.lexsort((cand, -flat[cand]))]
-    kept: list[int] = []
-    for k in cand:
-        if not kept or not closer(np.linalg.norm(cells.positions[kept] - cells.positions[k], axis=1),
-                                  cells.nms_radius).any():
-            kept.append(int(k))
+    kept = suppress(cand, flat, cells.positions, cells.nms_radius, cells.view_part, cells.give_way)
     kept = edge_drop(kept, flat, cells.positions, cells.view_part, cells.edge_radius, cells.edge_view)
     return np.array(sorted(kept), dtype=np.int64)
 

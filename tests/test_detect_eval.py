@@ -165,6 +165,38 @@ def test_a_rigs_cell_cut_by_one_image_and_hidden_behind_a_detection_in_the_other
     assert found(rect[:1], view[:1], centre[:1]) == [0, 4]
 
 
+def test_in_a_rig_a_detection_between_two_certain_cells_gives_way_to_them():
+    """detection.give_way (docs/rig.md): cells A (0, 0), M (0.3, 0.2) and B (0.4, 0.4), rho*
+    0.99998, 1 and 0.99995, M the strongest. By hand: M-A 0.361 m and M-B 0.224 m,
+    both under the 0.4 m suppression radius, A-B 0.566 m, not: M suppresses two people, so in
+    a rig of two cameras it gives way and A and B are the detections. M alone stays with one
+    camera, with give_way 0 (off), where B is under give_way (0.99999), and where A and B are
+    within the radius of each other (0.6 m: one person). The tracker's peaks go by the same rule."""
+    from dpom_warp.detect import CameraViews
+    from dpom_warp.tracking import Cells, peaks
+
+    locs = grid_locations(5, 6)
+    rect = np.tile([0, 0, 1, 1], (30, 1))
+    a, m_, b = 0, 2 * 6 + 3, 4 * 6 + 4
+    m = np.zeros((5, 6))
+    m.flat[a], m.flat[m_], m.flat[b] = 0.99998, 1.0, 0.99995
+    assert np.isclose(np.linalg.norm(locs[a] - locs[m_]), np.hypot(0.3, 0.2))
+    assert np.isclose(np.linalg.norm(locs[a] - locs[b]), np.hypot(0.4, 0.4))
+    rig, one = CameraViews(np.ones((2, 30))), CameraViews(np.ones((1, 30)))
+
+    def found(views, give_way=0.99, radius=0.4):
+        return [d.k for d in detect(m, locs, rect, 0.5, radius, views, give_way=give_way)]
+
+    assert found(rig) == [a, b]
+    assert found(one) == found(np.ones(30)) == found(None) == [m_]
+    assert found(rig, give_way=0.0) == [m_]
+    assert found(rig, give_way=0.99999) == [m_]
+    assert found(rig, radius=0.6) == [m_]
+    cells = Cells(locs, 0.1, np.zeros(30, bool), 0.4, rig, give_way=0.99)
+    assert peaks(m, cells, 0.5).tolist() == [a, b]
+    assert peaks(m, Cells(locs, 0.1, np.zeros(30, bool), 0.4, one, give_way=0.99), 0.5).tolist() == [m_]
+
+
 def test_view_part_is_the_share_of_the_silhouette_rectangle_in_the_image():
     """Geometry.view_part from the box corners' projection: 1 where the rectangle is whole in
     the image, the clipped rectangle's share of the whole one at the edges, 0 with no

@@ -7,7 +7,7 @@ from typing import Annotated, Literal, Union
 
 from pydantic import ConfigDict, Field, model_validator
 
-from ..detect import EDGE_RADIUS, MIN_LOG_ODDS
+from ..detect import EDGE_RADIUS, GIVE_WAY, MIN_LOG_ODDS
 from ..drift import DriftOptions
 from ..structure import StructureOptions
 from ..geometry import Grid
@@ -86,6 +86,10 @@ class DetectionSection(Node):
         f"grids, 0 (off) in voxel mode"))
     edge_view: Num = Field(0.5, gt=0, le=1, description=(
         "the share of a silhouette's rectangle inside the image under which edge_radius applies"))
+    give_way: Num = Field(GIVE_WAY, ge=0, le=1, description=(
+        "in a rig of several cameras: a detection of at least this rho* whose suppression takes two cells of at "
+        "least this rho* that are not within nms_radius of each other stands between two people and gives way to "
+        "them (docs/rig.md); 0: off. One camera: no effect"))
     min_log_odds: Num = Field(MIN_LOG_ODDS, ge=0, description=(
         "the joint test: a detection whose log posterior odds, with the other detections present and nothing "
         "else, is under this (nats) leaves the map (README, How it works); 0: off"))
