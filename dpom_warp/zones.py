@@ -197,6 +197,12 @@ class Zones:
 
     def __post_init__(self):
         self._regions = Regions([z.polygon for z in self.zones])
+        # every line's start, direction and length: side()'s signed distances for all lines at
+        # once, by the same operations (the same bits: a track on a cell centre sits exactly
+        # at some hysteresis from a line on a cell edge)
+        self._starts = np.array([x.start for x in self.lines], float).reshape(-1, 2)
+        self._dirs = np.array([x.end - x.start for x in self.lines], float).reshape(-1, 2)
+        self._lengths = np.array([np.linalg.norm(x.end - x.start) for x in self.lines], float)
 
     @classmethod
     def from_config(cls, cfg) -> "Zones":
@@ -221,18 +227,23 @@ class Zones:
         xy = np.array([np.asarray(p, float)[:2] for _, p in rows]).reshape(-1, 2)
         counts, now_in = {}, set()
         hits = self._regions.inside(xy)
-        for z, hit in zip(self.zones, hits):
-            counts[z.name] = int(hit.sum())
-            for tid in np.asarray(ids)[hit]:
-                now_in.add((int(tid), z.name))
-                self._open.setdefault((int(tid), z.name), frame)
+        for z, hit, count in zip(self.zones, hits.tolist(), hits.sum(axis=1).tolist()):
+            counts[z.name] = count
+            for tid in (t for t, h in zip(ids, hit) if h):
+                now_in.add((tid, z.name))
+                self._open.setdefault((tid, z.name), frame)
         for key in [k for k in self._open if k not in now_in]:  # left the zone, or the track ended
             self._close(key, frame)
         crossings = []
-        for line in self.lines:
-            d = side(line, xy)
-            for (tid, p), dist in zip(zip(ids, xy), d):
-                crossing = self._step(line, tid, p, float(dist), frame)
+        p = xy[None, :, :] - self._starts[:, None, :]  # (lines, tracks, 2): side() of every line at once
+        d = self._dirs[:, None, :]
+        dists = ((d[..., 0] * p[..., 1] - d[..., 1] * p[..., 0]) / self._lengths[:, None]).tolist()
+        for line, row in zip(self.lines, dists):
+            for tid, p, dist in zip(ids, xy, row):
+                state = self._lines.get((tid, line.name))
+                if state is not None and state.pending is None and state.confirmed == (dist > 0) - (dist < 0):
+                    continue  # on its side, nothing pending: nothing can change (most pairs, most frames)
+                crossing = self._step(line, tid, p, dist, frame)
                 if crossing is not None:
                     crossings.append(crossing)
         self._last = {tid: (frame, p) for tid, p in zip(ids, xy)}
