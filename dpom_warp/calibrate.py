@@ -11,9 +11,11 @@ spread over its sequence) gives its height, pitch and roll, and a frame whose fl
   person seen by two cameras in one rig frame is one point in two frames of reference, and a
   planar turn and shift maps one set onto the other. Every pair of detections in a frame of
   one camera against every pair as far apart in the same frame of the other is a hypothesis
-  (two points fix a turn and a shift); the hypothesis that lays the most detections of the
-  camera within MATCH of another camera's over all frames wins (deterministic, exhaustive),
-  and its matches give the least-squares turn and shift (Procrustes on the floor);
+  (two points fix a turn and a shift); of the hypotheses most agree on (coarse bins of turn
+  and shift, the most voted, up to MAX_SCORED of them: a crowd gives hundreds of thousands),
+  the one that lays the most detections of the camera within MATCH of another camera's over
+  all frames wins (deterministic), and its matches give the least-squares turn and shift
+  (Procrustes on the floor);
 - the static scene (walls, furniture) above the floor, as points: Open3D's point-to-plane ICP
   refines the turn and shift from there (kept when it moves them little), and gives the
   residual; with no frames of people seen by two cameras, the scene alone is registered (its
@@ -47,6 +49,8 @@ MATCH = 0.3  # metres: a camera's detection matches another's within this
 MIN_MATCHES = 8  # people matched across cameras that place a camera
 SPAN = 0.6  # metres: the least distance between the two detections of a hypothesis
 ALIKE = 0.8  # the scene alone: a second best this close to the best is ambiguous
+MAX_SCORED = 8192  # two-point hypotheses scored by their matches: those most agreed on (most_voted)
+VOTE_BIN = (0.25, 5.0)  # metres, degrees: the bins in which hypotheses vote for a turn and a shift
 REFINE_MOVE = (0.15, 3.0)  # the scene's ICP is kept where it moves the people's estimate less than this (m, deg)
 
 
@@ -165,25 +169,60 @@ def _matches(T: np.ndarray, src: list, dst: list) -> tuple[np.ndarray, np.ndarra
     return (np.concatenate(a), np.concatenate(b)) if a else (np.zeros((0, 2)), np.zeros((0, 2)))
 
 
+def hypotheses(src: list, dst: list) -> tuple[np.ndarray, np.ndarray]:
+    """Every two-point hypothesis (module doc), in the order: frame, the placed cameras' pair
+    (i < j, at least SPAN apart), the camera's ordered pair (k != m, as far apart within MATCH):
+    the turn (radians, (h,)) and shift ((h, 2)) laying s_k, s_m on d_i, d_j in least squares
+    (procrustes of the two, in closed form: the turn between the pairs' vectors, the shift
+    between their middles)."""
+    yaws, shifts = [np.zeros(0)], [np.zeros((0, 2))]
+    for f in range(len(src)):
+        d, s_ = np.asarray(dst[f], float), np.asarray(src[f], float)
+        if len(d) < 2 or len(s_) < 2:
+            continue
+        i, j = np.triu_indices(len(d), 1)
+        dv = d[j] - d[i]
+        span = np.linalg.norm(dv, axis=1)
+        i, j, dv, span = i[span >= SPAN], j[span >= SPAN], dv[span >= SPAN], span[span >= SPAN]
+        k, m = np.nonzero(~np.eye(len(s_), dtype=bool))
+        sv = s_[m] - s_[k]
+        a, b = np.nonzero(np.abs(np.linalg.norm(sv, axis=1)[None, :] - span[:, None]) < MATCH)
+        if not len(a):
+            continue
+        u, w = sv[b], dv[a]
+        yaw = np.arctan2(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0], np.sum(u * w, axis=1))
+        c, sn = np.cos(yaw), np.sin(yaw)
+        mid_s, mid_d = (s_[k[b]] + s_[m[b]]) / 2, (d[i[a]] + d[j[a]]) / 2
+        yaws.append(yaw)
+        shifts.append(mid_d - np.stack([c * mid_s[:, 0] - sn * mid_s[:, 1], sn * mid_s[:, 0] + c * mid_s[:, 1]], 1))
+    return np.concatenate(yaws), np.concatenate(shifts)
+
+
+def most_voted(yaw: np.ndarray, shift: np.ndarray, limit: int = MAX_SCORED) -> np.ndarray:
+    """Indices (in order) of at most `limit` hypotheses to score: those of the coarse bins
+    (VOTE_BIN: a turn and a shift) that hold the most hypotheses, whole bins, most first. The
+    right turn and shift is the one most pairs of pairs agree on: a crowd's tens of thousands of
+    hypotheses (26 people: 740 000 in ten frames) need not all be scored, only those near it."""
+    if len(yaw) <= limit:
+        return np.arange(len(yaw))
+    keys = np.stack([np.floor((yaw + np.pi) / np.deg2rad(VOTE_BIN[1])),
+                     np.floor(shift[:, 0] / VOTE_BIN[0]), np.floor(shift[:, 1] / VOTE_BIN[0])], 1).astype(np.int64)
+    bins, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    order = np.lexsort((np.arange(len(bins)), -counts))  # most voted first; ties by the bin
+    taken = order[:max(1, int(np.searchsorted(np.cumsum(counts[order]), limit, side="right")))]
+    chosen = np.flatnonzero(np.isin(inverse.ravel(), taken))
+    return chosen[np.linspace(0, len(chosen) - 1, min(limit, len(chosen))).astype(np.int64)]
+
+
 def match_people(src: list, dst: list) -> tuple[np.ndarray | None, int, float]:
     """The planar turn and shift laying the camera's people `src` (its floor frame, (n, 2) a
     frame) on those of the cameras placed `dst` (the world), the number matched and their RMS
-    distance (module doc: every two-point hypothesis, the most matches, then least squares)."""
-    frames = [f for f in range(len(src)) if len(src[f]) >= 2 and len(dst[f]) >= 2]
-    hyps = []
-    for f in frames:
-        d, s_ = dst[f], src[f]
-        for i in range(len(d)):
-            for j in range(i + 1, len(d)):
-                span = np.linalg.norm(d[j] - d[i])
-                if span < SPAN:
-                    continue
-                for k in range(len(s_)):
-                    for m in range(len(s_)):
-                        if k != m and abs(np.linalg.norm(s_[m] - s_[k]) - span) < MATCH:
-                            hyps.append(procrustes(s_[[k, m]], d[[i, j]]))
-    if not hyps:
+    distance (module doc: the two-point hypotheses most agreed on, the most matches, then least
+    squares)."""
+    yaw, shift = hypotheses(src, dst)
+    if not len(yaw):
         return None, 0, float("nan")
+    hyps = [planar(yaw[h], *shift[h]) for h in most_voted(yaw, shift)]
     flat = [(f, p) for f in range(len(src)) for p in src[f]]  # (not empty: a hypothesis took two of them)
     pts = np.array([p for _, p in flat])
     at = np.array([f for f, _ in flat])
