@@ -471,9 +471,11 @@ def rig_picture(out: Path) -> None:
 
 
 def rig_block(out: Path) -> str:
-    md = bench_markdown("bench.rig", out / "rig", "rig.md", "--frames", "10", "--repeats", "3", "--live", "5")
+    md = bench_markdown("bench.rig", out / "rig", "rig.md", "--frames", "10", "--repeats", "3", "--live", "5",
+                        "--calibrate")
     rig_picture(out)
-    return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.rig --frames 10 --repeats 3 --live 5`; "
+    return "\n".join([md, "", stamp("fast path (defaults); `python -m bench.rig --frames 10 --repeats 3 --live 5 "
+                                    "--calibrate`; "
                                     "times: engine and detections a frame, median of 3 per frame over the frames, each "
                                     "frame by the rig and by each camera alone in turn, one process; live: the rig "
                                     "frames played through the live path (`--play`), one process and three")])

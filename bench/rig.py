@@ -7,7 +7,7 @@ against one camera's, measured in the same process on the same frames.
 
     python -m bench.rig [--frames 10] [--output runs/rig] [--scenes rig3 rig3_tight] [--repeats 5]
                         [--tuning | --draw N] [--object-width 0.5] [--device cpu|cuda:N] [--batch N]
-                        [--set KEY.PATH=VALUE ...] [--live FPS [--workers N ...]]
+                        [--set KEY.PATH=VALUE ...] [--live FPS [--workers N ...]] [--calibrate]
 
 Scenes (the same cameras' layout in each: one at the near end looking along the area, one on
 each side looking across it; 256 x 212 pixels, Kinect v2's field of view):
@@ -24,6 +24,8 @@ inferred) with each --workers count: rig frames a second once running, the share
 latency, and whether every map written is the recorded rig's (the pairing right).
 A second table scores the same detections without the people under 10 % visible from every camera
 (the issue's held-out crowd has none; `dpom-warp eval`'s moda_visible).
+--calibrate also places each scene's cameras with no pose given (calibrate.place_cameras on its
+background and walking frames) and scores the rig with those poses (`calibration`).
 The tables go to OUTPUT/rig.md and rig.json (bench.docs --only rig puts them in the README).
 """
 
@@ -180,6 +182,57 @@ def run_scene(name: str, folder: Path, frames: int, repeats: int, draw: int = 0,
             "rig_over_sum": median["rig"] / sum(median[n] for n in names), "batched": rate}
 
 
+def calibration(name: str, folder: Path, frames: int, draw: int = 0, width: float = WIDTH, device: str = "cpu",
+                sets: list[str] = ()) -> dict:
+    """The scene's rig calibrated with no pose given (calibrate.place_cameras on its rendered
+    background and walking frames): each camera's pose against the rendered one, and the MODA of
+    the rig with the calibrated poses. Calibration knows the floor but not where the world's origin
+    and heading are: its world is turned and shifted on the floor so that the first camera's
+    position and heading are the truth's (its height, pitch and roll stay the fit's), which puts the
+    grid and the ground truth where they were; every other camera is then placed by the calibration."""
+    from dpom_warp import Detector
+    from dpom_warp.calibrate import place_cameras, planar, pose_angles
+    from dpom_warp.config import apply_overrides
+    from dpom_warp.evaluate import load_ground_truth, score_frames
+    from dpom_warp.frames import run_frames
+    from dpom_warp.geometry import pose_from_angles
+    from dpom_warp.loading import config_from_mapping
+    from dpom_warp.worker import read_rig_frame
+
+    raw = {k: v for k, v in rig_config(name, folder, frames, draw, width, device).items() if k != "synthetic"}
+    s = SCENES[name]
+    truth = {n: pose_from_angles(p["height"], p["pitch_deg"], 0.0, p.get("yaw_deg", 0.0), p["x"], p["y"])
+             for n, p in layout(s["height"], s["pitch"], s["area"]).items()}
+    auto = {**raw, "cameras": [{**c, "camera": {k: v for k, v in c["camera"].items() if k != "extrinsics"}}
+                               for c in raw["cameras"]]}
+    t = time.perf_counter()
+    placed = place_cameras(config_from_mapping(apply_overrides(auto, list(sets))), device, log=lambda *_: None)
+    seconds = time.perf_counter() - t
+    first, want = placed[0].T_world_from_camera, truth[placed[0].name]
+    onto = planar(np.deg2rad(pose_angles(want)[3]), *want[:2, 3]) @ np.linalg.inv(
+        planar(np.deg2rad(pose_angles(first)[3]), *first[:2, 3]))  # the calibration's world onto the truth's
+    cameras = {}
+    for p in placed:
+        got, ref = onto @ p.T_world_from_camera, truth[p.name]
+        cos = (np.trace(got[:3, :3].T @ ref[:3, :3]) - 1) / 2
+        cameras[p.name] = {"height_error_m": abs(float(got[2, 3] - ref[2, 3])),
+                           "position_error_m": float(np.linalg.norm(got[:2, 3] - ref[:2, 3])),
+                           "rotation_error_deg": float(np.rad2deg(np.arccos(np.clip(cos, -1.0, 1.0)))),
+                           "people_matched": p.people, "T": got}
+    placed_cfg = {**raw, "cameras": [{**c, "camera": {**c["camera"], "extrinsics": {
+        "T_world_from_camera": cameras[c["name"]]["T"].tolist()}}} for c in raw["cameras"]]}
+    cfg = config_from_mapping(raw)
+    rig_frames = run_frames(cfg, log=lambda *_: None).frames
+    det = Detector.from_config(placed_cfg, list(sets))
+    dets = {f.name: np.array([[x.x, x.y] for x in det.detect(read_rig_frame(cfg, f.paths)).detections]).reshape(-1, 2)
+            for f in rig_frames}
+    gt = load_ground_truth(raw["evaluation"]["ground_truth"])
+    score = score_frames(dets, {f.name: gt[f.name] for f in rig_frames}, 0.5, SEEN)
+    for c in cameras.values():
+        del c["T"]
+    return {"cameras": cameras, "seconds": seconds, "moda": score["moda"], "moda_seen": score["moda_visible"]}
+
+
 def cli_run(run_cfg: dict, path: Path, out: Path, extra: list[str], sets: list[str] = ()) -> Path:
     """`dpom-warp run` of `run_cfg` (written to `path`) into `out`, with `extra` arguments and
     the --set items `sets`; returns `out`."""
@@ -236,6 +289,24 @@ def markdown(results: list[dict], machine: str) -> str:
         rows.append(f"| {r['scene']} | {r['unseen']} of {r['truth']} | " + " | ".join(f"{seen[n]:.3f}" for n in names)
                     + f" | {seen['detection_fusion']:.3f} | **{seen['rig']:.3f}** | "
                       f"{seen['rig'] - seen['detection_fusion']:+.3f} |")
+    if any("calibrated" in r for r in results):
+        rows += ["", "Calibrated with no pose given (`dpom-warp calibrate`'s placement on the same frames; the "
+                 "calibration's world turned and shifted on the floor onto the first camera's true position and "
+                 "heading), each camera's pose against the rendered one and the rig's MODA with the calibrated poses:",
+                 "", "| scene | camera | people matched | height error | position error | rotation error |",
+                 "|---|---|---|---|---|---|"]
+        for r in results:
+            c = r.get("calibrated")
+            for n, e in (c or {}).get("cameras", {}).items():
+                rows.append(f"| {r['scene']} | {n} | {e['people_matched'] if e['people_matched'] is not None else 'first'} | "
+                            f"{100 * e['height_error_m']:.1f} cm | {100 * e['position_error_m']:.1f} cm | "
+                            f"{e['rotation_error_deg']:.2f} deg |")
+        rows += ["", "| scene | MODA, poses given | MODA, calibrated | without the people under 10 % visible: given / "
+                 "calibrated | calibration time |", "|---|---|---|---|---|"]
+        for r in results:
+            if (c := r.get("calibrated")):
+                rows.append(f"| {r['scene']} | {r['moda']['rig']:.3f} | {c['moda']:.3f} | {r['moda_seen']['rig']:.3f} / "
+                            f"{c['moda_seen']:.3f} | {c['seconds']:.0f} s |")
     device = results[0].get("device", "cpu")
     where = machine if device == "cpu" else f"{device} ({machine})"
     notes = [f"{r['scene']}: engine.batch {b['batch']}, {b['rig_frames_per_s']:.1f} rig frames a second = "
@@ -269,6 +340,9 @@ def main():
     ap.add_argument("--live", type=float, default=0.0, metavar="FPS",
                     help="also play the rig frames through the live path at FPS (0: not measured)")
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 3], help="--live's process counts")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="also calibrate each scene's rig with no pose given (dpom-warp calibrate's placement): "
+                         "each camera's pose error and the calibrated rig's MODA")
     args = ap.parse_args()
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -280,6 +354,8 @@ def main():
         folder = Path(".cache/bench") / f"{name}_{args.frames}{'_tuning' if draw == 1000 else f'_draw{draw}' if draw else ''}"
         r = run_scene(name, folder, args.frames, args.repeats, draw, args.object_width, args.device, args.batch,
                       args.set)
+        if args.calibrate:
+            r["calibrated"] = calibration(name, folder, args.frames, draw, args.object_width, args.device, args.set)
         if args.live:
             run_cfg = {k: v for k, v in rig_config(name, folder.resolve(), args.frames, draw, args.object_width,
                                                     args.device).items() if k != "synthetic"}  # (a file's paths: its folder's)
