@@ -201,7 +201,7 @@ def hypotheses(src: list, dst: list) -> tuple[np.ndarray, np.ndarray]:
 def most_voted(yaw: np.ndarray, shift: np.ndarray, limit: int = MAX_SCORED) -> np.ndarray:
     """Indices (in order) of at most `limit` hypotheses to score: those of the coarse bins
     (VOTE_BIN: a turn and a shift) that hold the most hypotheses, whole bins, most first. The
-    right turn and shift is the one most pairs of pairs agree on: a crowd's tens of thousands of
+    right turn and shift is the one most pairs of pairs agree on: a crowd's hundreds of thousands of
     hypotheses (26 people: 740 000 in ten frames) need not all be scored, only those near it."""
     if len(yaw) <= limit:
         return np.arange(len(yaw))
