@@ -183,7 +183,8 @@ def hypotheses(src: list, dst: list) -> tuple[np.ndarray, np.ndarray]:
         i, j = np.triu_indices(len(d), 1)
         dv = d[j] - d[i]
         span = np.linalg.norm(dv, axis=1)
-        i, j, dv, span = i[span >= SPAN], j[span >= SPAN], dv[span >= SPAN], span[span >= SPAN]
+        far = span >= SPAN
+        i, j, dv, span = i[far], j[far], dv[far], span[far]
         k, m = np.nonzero(~np.eye(len(s_), dtype=bool))
         sv = s_[m] - s_[k]
         a, b = np.nonzero(np.abs(np.linalg.norm(sv, axis=1)[None, :] - span[:, None]) < MATCH)

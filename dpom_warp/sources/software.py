@@ -44,6 +44,7 @@ class SoftwareCamera:
         self.sensor.add_read_only_option(rs.option.depth_units, 0.001)
         self.stopped, self.sent, self.thread = threading.Event(), 0, None
         self.accel, self.motion = None if accel is None else tuple(float(a) for a in accel), None
+        self.motion_thread = None  # feeding the accelerometer while registered
         if self.accel is not None:
             self.motion = self._add_accelerometer(rs)
             self.motion_stopped = threading.Event()
@@ -81,7 +82,7 @@ class SoftwareCamera:
     def unregister(self) -> None:
         if self in SOFTWARE:
             SOFTWARE.remove(self)
-        if getattr(self, "motion_thread", None) is not None:
+        if self.motion_thread is not None:
             self.motion_stopped.set()
             self.motion_thread.join(5)
             self.motion_thread = None
