@@ -15,7 +15,11 @@ spread over its sequence) gives its height, pitch and roll, and a frame whose fl
   and shift, the most voted, up to MAX_SCORED of them: a crowd gives hundreds of thousands),
   the one that lays the most detections of the camera within MATCH of another camera's over
   all frames wins (deterministic), and its matches give the least-squares turn and shift
-  (Procrustes on the floor);
+  (Procrustes on the floor). Once every camera has its first guess, the cameras placed so are
+  refined together (`joint_people`): every pair of cameras' detections of the same people at
+  once, in robust least squares (soft L1 at NEAR, a detection's own noise), so that a camera
+  placed early also learns from those placed after it and each camera's error is shared
+  among all the pairs that see its people, not left to the one placed last;
 - the static scene (walls, furniture) above the floor, as points: Open3D's point-to-plane ICP
   refines the turn and shift from there (kept when it moves them little), and gives the
   residual; with no frames of people seen by two cameras, the scene alone is registered (its
@@ -23,7 +27,7 @@ spread over its sequence) gives its height, pitch and roll, and a frame whose fl
   look alike from several places can fool that, so the people are the better cue.
 
 The first camera fixes the world: its given pose where it has one, else its floor frame. Each
-other camera is placed against those placed before it. A camera with fewer than MIN_MATCHES
+other camera is first placed against those placed before it. A camera with fewer than MIN_MATCHES
 people matched and too little of its scene within NEAR of theirs (MIN_OVERLAP) shares too
 little with the others: a one-line error naming it."""
 
@@ -56,8 +60,9 @@ REFINE_MOVE = (0.15, 3.0)  # the scene's ICP is kept where it moves the people's
 
 @dataclass
 class Placed:
-    """A camera placed: its pose in the world, its static points there, and how well they
-    meet the cameras placed before (None for the first)."""
+    """A camera placed: its pose in the world, its static points there, how well they meet
+    the cameras placed before (None for the first), and its people matched with the other
+    cameras' under the poses placed, with their RMS distance."""
 
     name: str
     T_world_from_camera: np.ndarray
@@ -246,9 +251,7 @@ def match_people(src: list, dst: list) -> tuple[np.ndarray | None, int, float]:
         if len(a) < 2:
             break
         T = procrustes(a, b)
-    a, b = _matches(T, src, dst)
-    rms = float(np.sqrt(np.mean(np.sum((a @ T[:2, :2].T + T[:2, 3] - b) ** 2, axis=1)))) if len(a) else float("nan")
-    return T, len(a), rms
+    return _matched(T, src, dst)
 
 
 def scene_points(m: RunConfig, T: np.ndarray, depth: np.ndarray) -> np.ndarray:
@@ -374,6 +377,102 @@ def register(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, bool]:
     return _icp(planar(yaw, x, y), source, target), alike
 
 
+@dataclass
+class _View:
+    """What a camera alone gives calibration: its config, static scene (metres), pose in its own
+    floor frame and the people it finds in each chosen rig frame (that floor frame, (n, 2) each)."""
+
+    name: str
+    m: RunConfig
+    depth: np.ndarray
+    own: np.ndarray
+    seen: list
+
+
+def _pair_matches(world: list) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+    """(a, b, i, j) for every two cameras a < b: the indices i of a's points (flattened over
+    frames, `world[c]` = (points (n, 2), frame of each (n,))) and j of b's whose nearest point
+    of b in the same frame is closer than MATCH."""
+    out = []
+    for a in range(len(world)):
+        for b in range(a + 1, len(world)):
+            (pa, fa), (pb, fb) = world[a], world[b]
+            if not len(pa) or not len(pb):
+                continue
+            d = np.linalg.norm(pa[:, None] - pb[None], axis=-1)
+            d[fa[:, None] != fb[None]] = np.inf
+            j = d.argmin(1)
+            i = np.flatnonzero(d[np.arange(len(pa)), j] < MATCH)
+            if len(i):
+                out.append((a, b, i, j[i]))
+    return out
+
+
+def joint_people(seen: list, W: list, free: list, rounds: int = 5) -> list[np.ndarray]:
+    """The planar poses `W` (each camera's floor frame into the world, 4x4) of the cameras
+    `free` refined together on the people every two cameras find in the same frames (`seen[c]`:
+    camera c's detections a frame, in its floor frame): each round matches every pair's
+    detections under the current poses (nearest within MATCH), then solves for the free
+    cameras' turns and shifts at once, in least squares with a soft L1 loss at NEAR (a
+    detection's noise: a wrong match weighs little), to tolerances far under a millimetre (the
+    few unknowns make that cheap). The others stay as they are."""
+    from scipy.optimize import least_squares
+
+    idx = [c for c in range(len(W)) if free[c]]
+    if not idx:
+        return list(W)
+    pts = [np.concatenate([np.reshape(p, (-1, 2)) for p in s] or [np.zeros((0, 2))]) for s in seen]
+    frame = [np.concatenate([np.full(len(p), f) for f, p in enumerate(s)] or [np.zeros(0, int)]) for s in seen]
+
+    def poses(x):
+        P = list(W)
+        for n, c in enumerate(idx):
+            P[c] = planar(*x[3 * n:3 * n + 3])
+        return P
+
+    def world(P):
+        return [pts[c] @ P[c][:2, :2].T + P[c][:2, 3] for c in range(len(P))]
+
+    x = np.concatenate([[np.arctan2(W[c][1, 0], W[c][0, 0]), W[c][0, 3], W[c][1, 3]] for c in idx])
+    for _ in range(rounds):
+        pairs = _pair_matches([(w, f) for w, f in zip(world(poses(x)), frame)])
+        if not pairs:
+            break
+
+        def residuals(x, pairs=pairs):
+            w = world(poses(x))
+            return np.concatenate([(w[a][i] - w[b][j]).ravel() for a, b, i, j in pairs])
+
+        x = least_squares(residuals, x, loss="soft_l1", f_scale=NEAR, xtol=1e-12, ftol=1e-12, gtol=1e-12).x
+    return poses(x)
+
+
+def _first_guess(views: list, W: list, c: int, where: str, frames: int, log) -> tuple[np.ndarray, bool]:
+    """Camera c's floor frame into the world, placed against the cameras before it (module
+    doc): by the people where at least MIN_MATCHES are matched (True), else by the static scene
+    alone (False); a one-line InputError where neither holds."""
+    v = views[c]
+    dst = [np.concatenate([views[q].seen[f] @ W[q][:2, :2].T + W[q][:2, 3] for q in range(c)]) for f in range(frames)]
+    T, matched, rms = match_people(v.seen, dst)
+    log(f"camera {v.name}: {matched} people matched with the cameras before it in {frames} frames"
+        + (f" (rms {1000 * rms:.0f} mm)" if matched else ""))
+    if matched >= MIN_MATCHES:
+        return T, True
+    source = scene_points(v.m, v.own, v.depth)
+    target = np.concatenate([scene_points(views[q].m, W[q] @ views[q].own, views[q].depth) for q in range(c)])
+    T, alike = register(source, target) if len(source) >= 100 and len(target) >= 100 else (None, True)
+    overlap = scene_fit(T, source, target)[1] if T is not None else 0.0
+    if alike or overlap < MIN_OVERLAP:
+        scene = ("fits several places alike (walls that look the same from each)" if alike and T is not None
+                 else f"has {100 * overlap:.0f} % of its points within {NEAR:g} m of theirs (expected at least "
+                      f"{100 * MIN_OVERLAP:.0f} %)")
+        raise InputError(f"{where}: calibrate: shares too little with the cameras before it: {matched} people "
+                         f"matched across cameras (expected at least {MIN_MATCHES}), and its static scene "
+                         f"alone {scene}; record people walking where both see, or give "
+                         f"cameras[{c}].camera.extrinsics")
+    return T, False
+
+
 def place_cameras(cfg: RunConfig, device: str | None = None, log=print) -> list[Placed]:
     """Every camera of the rig placed in one world (module doc); a one-line InputError naming a
     camera that shares too little with those placed before it."""
@@ -383,41 +482,62 @@ def place_cameras(cfg: RunConfig, device: str | None = None, log=print) -> list[
     chosen = rig.frames
     if len(chosen) > PEOPLE_FRAMES:
         chosen = [chosen[i] for i in np.unique(np.linspace(0, len(chosen) - 1, PEOPLE_FRAMES).astype(int))]
-    placed, people = [], []
+    views, W, by_people = [], [], []
     for c, (name, m) in enumerate(cfg.cameras):
         where = f"cameras[{c}] ({name})"
         depth, what = static_frame(m, log)
         fit = floor_frame(m, depth, f"{where}: {what}")
-        own = fit.T_world_from_camera
-        seen = people_seen(m, fit, [f.paths[c] for f in chosen], device, log)
+        views.append(_View(name, m, depth, fit.T_world_from_camera,
+                           people_seen(m, fit, [f.paths[c] for f in chosen], device, log)))
         if c == 0:
-            T = own if m.pose_auto else m.camera.T_world_from_camera
-            W = T @ np.linalg.inv(own)  # the floor frame into the world: a turn and a shift
-            people.append([p @ W[:2, :2].T + W[:2, 3] for p in seen])
-            placed.append(Placed(name, T, scene_points(m, T, depth)))
+            T = fit.T_world_from_camera if m.pose_auto else m.camera.T_world_from_camera
+            W.append(T @ np.linalg.inv(fit.T_world_from_camera))  # the floor frame into the world: a turn and a shift
+            by_people.append(False)
             continue
-        source, target = scene_points(m, own, depth), np.concatenate([p.points for p in placed])
-        dst = [np.concatenate([q[f] for q in people]) for f in range(len(chosen))]
-        W, matched, rms = match_people(seen, dst)
-        log(f"camera {name}: {matched} people matched across cameras in {len(chosen)} frames"
-            + (f" (rms {1000 * rms:.0f} mm)" if matched else ""))
-        if matched >= MIN_MATCHES:
-            W, residual, overlap = refine_on_scene(W, source, target)
-        else:  # the static scene alone: refused where it fits little, or several places alike
-            W, alike = register(source, target) if len(source) >= 100 and len(target) >= 100 else (None, True)
-            residual, overlap = scene_fit(W, source, target) if W is not None else (0.0, 0.0)
-            if alike or overlap < MIN_OVERLAP:
-                scene = ("fits several places alike (walls that look the same from each)" if alike and W is not None
-                         else f"has {100 * overlap:.0f} % of its points within {NEAR:g} m of theirs (expected at least "
-                              f"{100 * MIN_OVERLAP:.0f} %)")
-                raise InputError(f"{where}: calibrate: shares too little with the cameras before it: {matched} people "
-                                 f"matched across cameras (expected at least {MIN_MATCHES}), and its static scene "
-                                 f"alone {scene}; record people walking where both see, or give "
-                                 f"cameras[{c}].camera.extrinsics")
-        T = W @ own
-        people.append([p @ W[:2, :2].T + W[:2, 3] for p in seen])
-        placed.append(Placed(name, T, scene_points(m, T, depth), residual, overlap, matched, rms))
+        guess, people = _first_guess(views, W, c, where, len(chosen), log)
+        W.append(guess)
+        by_people.append(people)
+    W = joint_people([v.seen for v in views], W, by_people)
+    if any(by_people):
+        log(f"cameras {', '.join(v.name for v, free in zip(views, by_people) if free)} refined together on the "
+            f"people every two cameras see: {_pairs_fit(views, W)}")
+    placed = []
+    for c, v in enumerate(views):
+        if c == 0:
+            placed.append(Placed(v.name, W[0] @ v.own, scene_points(v.m, W[0] @ v.own, v.depth)))
+            continue
+        source = scene_points(v.m, v.own, v.depth)
+        target = np.concatenate([p.points for p in placed])
+        if by_people[c]:
+            W[c], residual, overlap = refine_on_scene(W[c], source, target)
+        else:
+            residual, overlap = scene_fit(W[c], source, target)
+        others = [[views[q].seen[f] @ W[q][:2, :2].T + W[q][:2, 3] for f in range(len(chosen))]
+                  for q in range(len(views)) if q != c]
+        _, matched, rms = _matched(W[c], v.seen, [np.concatenate([o[f] for o in others]) for f in range(len(chosen))])
+        T = W[c] @ v.own
+        placed.append(Placed(v.name, T, scene_points(v.m, T, v.depth), residual, overlap, matched, rms))
     return placed
+
+
+def _pairs_fit(views: list, W: list) -> str:
+    """How well every two cameras' people meet under the poses W: the matches and their RMS."""
+    world = []
+    for v, T in zip(views, W):
+        pts = [np.reshape(p, (-1, 2)) for p in v.seen]
+        world.append((np.concatenate(pts) @ T[:2, :2].T + T[:2, 3],
+                      np.concatenate([np.full(len(p), f) for f, p in enumerate(pts)])))
+    d = [np.linalg.norm(world[a][0][i] - world[b][0][j], axis=1) for a, b, i, j in _pair_matches(world)]
+    d = np.concatenate(d) if d else np.zeros(0)
+    return f"{len(d)} matches" + (f", rms {1000 * np.sqrt(np.mean(d ** 2)):.0f} mm" if len(d) else "")
+
+
+def _matched(T: np.ndarray, src: list, dst: list) -> tuple[np.ndarray, int, float]:
+    """T, the number of `src` points (a frame each) within MATCH of a `dst` point of the same
+    frame under T, and their RMS distance."""
+    a, b = _matches(T, src, dst)
+    rms = float(np.sqrt(np.mean(np.sum((a @ T[:2, :2].T + T[:2, 3] - b) ** 2, axis=1)))) if len(a) else float("nan")
+    return T, len(a), rms
 
 
 def calibrated_mapping(config_path: str | Path, placed: list[Placed], output: str | Path,
@@ -450,9 +570,10 @@ def calibrate(config_path: str | Path, output: str | Path, overrides: list[str] 
     placed = place_cameras(cfg, device, log)
     reports = [p.report() for p in placed]
     for r in reports:
-        fit = "" if r["residual_m"] is None else (f"; {r['people_matched']} people matched, static scene residual "
-                                                   f"{1000 * r['residual_m']:.1f} mm over {100 * r['overlap']:.0f} % "
-                                                   f"of it")
+        rms = f" (rms {1000 * r['people_rms_m']:.0f} mm)" if r["people_rms_m"] is not None else ""
+        fit = "" if r["residual_m"] is None else (f"; {r['people_matched']} people matched with the other cameras'{rms}, "
+                                                   f"static scene residual {1000 * r['residual_m']:.1f} mm over "
+                                                   f"{100 * r['overlap']:.0f} % of it")
         log(f"camera {r['camera']}: {r['height_m']:.3f} m up, pitch {r['pitch_deg']:.2f} deg, roll {r['roll_deg']:.2f} "
             f"deg, yaw {r['yaw_deg']:.2f} deg, at x {r['x_m']:.3f} m, y {r['y_m']:.3f} m{fit}")
     mapping = calibrated_mapping(config_path, placed, output, overrides)
