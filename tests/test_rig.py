@@ -371,7 +371,6 @@ def test_a_crowd_seen_by_two_cameras_gives_their_turn_and_shift():
     assert matched >= 200 and rms < 0.05
 
 
-
 def planted_rig(rng, frames=10):
     """Three cameras' floor frames into the world (the first the world's own) and what each sees
     of 12 people a frame in 6 x 5 m, at least 0.7 m apart (more than twice MATCH: no wrong
