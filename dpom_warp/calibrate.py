@@ -389,6 +389,19 @@ class _View:
     seen: list
 
 
+def _flat(seen: list) -> tuple[np.ndarray, np.ndarray]:
+    """A camera's detections of every frame (`seen`: (n, 2) a frame) as one (N, 2) array, and
+    the frame of each (N,)."""
+    pts = [np.reshape(p, (-1, 2)) for p in seen]
+    return (np.concatenate(pts or [np.zeros((0, 2))]),
+            np.concatenate([np.full(len(p), f) for f, p in enumerate(pts)] or [np.zeros(0, int)]))
+
+
+def _in_world(seen: list, W: np.ndarray) -> list[np.ndarray]:
+    """A camera's detections a frame (its floor frame) moved into the world by the planar W."""
+    return [p @ W[:2, :2].T + W[:2, 3] for p in seen]
+
+
 def _pair_matches(world: list) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
     """(a, b, i, j) for every two cameras a < b: the indices i of a's points (flattened over
     frames, `world[c]` = (points (n, 2), frame of each (n,))) and j of b's whose nearest point
@@ -421,8 +434,7 @@ def joint_people(seen: list, W: list, free: list, rounds: int = 5) -> list[np.nd
     idx = [c for c in range(len(W)) if free[c]]
     if not idx:
         return list(W)
-    pts = [np.concatenate([np.reshape(p, (-1, 2)) for p in s] or [np.zeros((0, 2))]) for s in seen]
-    frame = [np.concatenate([np.full(len(p), f) for f, p in enumerate(s)] or [np.zeros(0, int)]) for s in seen]
+    pts, frame = zip(*(_flat(s) for s in seen))
 
     def poses(x):
         P = list(W)
@@ -452,7 +464,8 @@ def _first_guess(views: list, W: list, c: int, where: str, frames: int, log) -> 
     doc): by the people where at least MIN_MATCHES are matched (True), else by the static scene
     alone (False); a one-line InputError where neither holds."""
     v = views[c]
-    dst = [np.concatenate([views[q].seen[f] @ W[q][:2, :2].T + W[q][:2, 3] for q in range(c)]) for f in range(frames)]
+    before = [_in_world(views[q].seen, W[q]) for q in range(c)]
+    dst = [np.concatenate([p[f] for p in before]) for f in range(frames)]
     T, matched, rms = match_people(v.seen, dst)
     log(f"camera {v.name}: {matched} people matched with the cameras before it in {frames} frames"
         + (f" (rms {1000 * rms:.0f} mm)" if matched else ""))
@@ -512,8 +525,7 @@ def place_cameras(cfg: RunConfig, device: str | None = None, log=print) -> list[
             W[c], residual, overlap = refine_on_scene(W[c], source, target)
         else:
             residual, overlap = scene_fit(W[c], source, target)
-        others = [[views[q].seen[f] @ W[q][:2, :2].T + W[q][:2, 3] for f in range(len(chosen))]
-                  for q in range(len(views)) if q != c]
+        others = [_in_world(views[q].seen, W[q]) for q in range(len(views)) if q != c]
         _, matched, rms = _matched(W[c], v.seen, [np.concatenate([o[f] for o in others]) for f in range(len(chosen))])
         T = W[c] @ v.own
         placed.append(Placed(v.name, T, scene_points(v.m, T, v.depth), residual, overlap, matched, rms))
@@ -524,9 +536,8 @@ def _pairs_fit(views: list, W: list) -> str:
     """How well every two cameras' people meet under the poses W: the matches and their RMS."""
     world = []
     for v, T in zip(views, W):
-        pts = [np.reshape(p, (-1, 2)) for p in v.seen]
-        world.append((np.concatenate(pts) @ T[:2, :2].T + T[:2, 3],
-                      np.concatenate([np.full(len(p), f) for f, p in enumerate(pts)])))
+        pts, frame = _flat(v.seen)
+        world.append((pts @ T[:2, :2].T + T[:2, 3], frame))
     d = [np.linalg.norm(world[a][0][i] - world[b][0][j], axis=1) for a, b, i, j in _pair_matches(world)]
     d = np.concatenate(d) if d else np.zeros(0)
     return f"{len(d)} matches" + (f", rms {1000 * np.sqrt(np.mean(d ** 2)):.0f} mm" if len(d) else "")

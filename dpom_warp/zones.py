@@ -96,8 +96,15 @@ class Regions:
 def side(line: Line, points) -> np.ndarray:
     """(n,) signed distance of each point from the line through from->to: > 0 on its left."""
     d = line.end - line.start
-    p = np.asarray(points, float).reshape(-1, 2) - line.start
-    return (d[0] * p[:, 1] - d[1] * p[:, 0]) / np.linalg.norm(d)
+    return sides(line.start[None], d[None], np.array([np.linalg.norm(d)]), points)[0]
+
+
+def sides(starts: np.ndarray, dirs: np.ndarray, lengths: np.ndarray, points) -> np.ndarray:
+    """(lines, n) signed distances of each point from each line (its start, to - from and its
+    length: (lines, 2), (lines, 2), (lines,)), as side() gives them one line at a time."""
+    p = np.asarray(points, float).reshape(-1, 2)[None, :, :] - starts[:, None, :]
+    d = dirs[:, None, :]
+    return (d[..., 0] * p[..., 1] - d[..., 1] * p[..., 0]) / lengths[:, None]
 
 
 def steps_through(line: Line, p: np.ndarray, q: np.ndarray) -> bool:
@@ -197,9 +204,9 @@ class Zones:
 
     def __post_init__(self):
         self._regions = Regions([z.polygon for z in self.zones])
-        # every line's start, direction and length: side()'s signed distances for all lines at
-        # once, by the same operations (the same bits: a track on a cell centre sits exactly
-        # at some hysteresis from a line on a cell edge)
+        # every line's start, direction and length: sides() of all lines at once, side()'s
+        # operations (the same bits: a track on a cell centre sits exactly at some hysteresis
+        # from a line on a cell edge)
         self._starts = np.array([x.start for x in self.lines], float).reshape(-1, 2)
         self._dirs = np.array([x.end - x.start for x in self.lines], float).reshape(-1, 2)
         self._lengths = np.array([np.linalg.norm(x.end - x.start) for x in self.lines], float)
@@ -235,9 +242,7 @@ class Zones:
         for key in [k for k in self._open if k not in now_in]:  # left the zone, or the track ended
             self._close(key, frame)
         crossings = []
-        p = xy[None, :, :] - self._starts[:, None, :]  # (lines, tracks, 2): side() of every line at once
-        d = self._dirs[:, None, :]
-        dists = ((d[..., 0] * p[..., 1] - d[..., 1] * p[..., 0]) / self._lengths[:, None]).tolist()
+        dists = sides(self._starts, self._dirs, self._lengths, xy).tolist()  # side() of every line at once
         for line, row in zip(self.lines, dists):
             for tid, p, dist in zip(ids, xy, row):
                 state = self._lines.get((tid, line.name))
