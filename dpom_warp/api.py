@@ -46,6 +46,9 @@ class Result:
         rho: the mean-field occupancy before the soft threshold, grid-shaped.
         iterations: mean-field iterations run.
         converged: False when the frame stopped at model.max_iterations above the tolerance.
+        heads: each detection's head position (x, y), world metres, in the detections' order
+            (None where no camera sees its head), or None where the config places none
+            (tracking.positions; heads.py): where `track` puts the tracks.
         timings: seconds: the engine's stages (`lists_s`, `iterations_s`, `threshold_s` and
             within it `joint_lists_s`; a list a camera of the engine's: `lists_s_cameras`, and
             `iterations_s_cameras`, each camera's launches in the loop, None on a GPU), `infer_s`
@@ -58,6 +61,11 @@ class Result:
     iterations: int
     converged: bool
     timings: dict = field(default_factory=dict)
+    heads: list | None = None
+
+    def found(self) -> list:
+        """The detections as heads.placed_rows takes them: [(x, y, head or None)]."""
+        return [(d.x, d.y, h) for d, h in zip(self.detections, self.heads or [None] * len(self.detections))]
 
 
 class Detector:
@@ -203,14 +211,15 @@ class Detector:
             except ListOverflow as e:
                 raise InputError(f"depth (frame {first + start}): {e}") from None
             share = (time.perf_counter() - t0) / len(part)
-            for res in out:
+            for res, frame in zip(out, part):
                 t1 = time.perf_counter()
                 rho_map, dets = self.worker.detections(res)
+                found = self.worker.heads(dets, frame, res)
                 t2 = time.perf_counter()
                 timings = {**res.timings, "infer_s": share, "detect_s": t2 - t1,
                            "total_s": share + t2 - t1}
                 results.append(Result(dets, rho_map, res.rho.reshape(self.config.grid.shape),
-                                      res.iterations, res.converged, timings))
+                                      res.iterations, res.converged, timings, found))
         return results
 
     def track(self, results: list[Result], method: str | None = None, times: list | None = None):
@@ -221,6 +230,7 @@ class Detector:
         as in a run of the recording). Returns (tracks, report): each track has `id`, `frames`
         (indices into `results`), `xyz` (metres), `rho` and `bridged` (frames without a map
         peak)."""
+        from .heads import MATCH, can_place, place_tracks
         from .outputs import fps_of
         from .tracking import Cells, run_tracker
 
@@ -230,8 +240,11 @@ class Detector:
         if times is not None and len(times) != len(results):
             raise ValueError(f"times: expected one timestamp per result ({len(results)}), found {len(times)}")
         fps = (fps_of(list(times)) if times is not None else None) or cfg.inputs.fps
-        return run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, fps, cfg.detection.threshold, method,
-                           None if times is None else list(times))
+        tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, fps, cfg.detection.threshold, method,
+                                     None if times is None else list(times))
+        if can_place(cfg):  # at the detections' heads, as the run's tracks.csv
+            place_tracks(tracks, [r.found() for r in results], MATCH * cfg.detection.nms_radius)
+        return tracks, report
 
     def online_tracker(self, fps: float | None = None) -> "OnlineTracks":
         """Identities as frames come, as a live run gives them: `push` each frame's Result
@@ -245,7 +258,7 @@ class Detector:
         rate = fps or cfg.inputs.fps
         tracker = OnlineTracker(Cells.for_run(self.worker.geometry, cfg), cfg.grid.shape, cfg.tracking, 1.0 / rate,
                                 cfg.detection.threshold)
-        return OnlineTracks(tracker)
+        return OnlineTracks(tracker, cfg)
 
     def find_static_planes(self, depths) -> dict:
         """Walls and furniture (input.structure's planes) found in `depths`, a camera's first
@@ -334,10 +347,21 @@ class OnlineTracks:
     `index` counts the frames pushed from 0, `tracks` is [(id, xyz, bridged)] by id (world
     metres; `bridged`: held without a map peak), the identities tracks.csv would hold."""
 
-    def __init__(self, tracker):
+    def __init__(self, tracker, cfg: RunConfig):
+        from .heads import MATCH, can_place
+
         self._tracker = tracker
         self.tracks: list | None = None  # after finish: every track (id, frames, xyz, rho, bridged)
         self.report: dict | None = None  # after finish: solves, graph sizes, delay
+        self._found: list | None = [] if can_place(cfg) else None  # each frame's detections and heads
+        self._radius = MATCH * cfg.detection.nms_radius
+
+    def _placed(self, committed: list) -> list:
+        from .heads import placed_rows
+
+        if self._found is None:
+            return committed
+        return [(f, placed_rows(rows, self._found[f], self._radius)) for f, rows in committed]
 
     def push(self, result: Result, timestamp: float | None = None) -> list[tuple[int, list]]:
         """The next frame's result (`timestamp`: seconds, its camera's clock); returns the
@@ -345,13 +369,19 @@ class OnlineTracks:
         if self.tracks is not None:
             raise RuntimeError("OnlineTracks.push after finish: expected a new online_tracker()")
         self._tracker.push(result.rho_star, timestamp)
-        return self._tracker.take_committed()
+        if self._found is not None:
+            self._found.append(result.found())
+        return self._placed(self._tracker.take_committed())
 
     def finish(self) -> list[tuple[int, list]]:
         """Commit the frames still waiting and return them; `tracks` then holds every track."""
+        from .heads import place_tracks
+
         if self.tracks is None:
             self.tracks, self.report = self._tracker.finish()
-        return self._tracker.take_committed()
+            if self._found is not None:
+                place_tracks(self.tracks, self._found, self._radius)
+        return self._placed(self._tracker.take_committed())
 
 
 def checked_metres(depth, index: int, cfg: RunConfig, who: str = "") -> np.ndarray:

@@ -126,7 +126,8 @@ def floor_frame(m: RunConfig, depth: np.ndarray, where: str):
 def people_seen(m: RunConfig, fit, files: list, device: str | None, log=print) -> list[np.ndarray]:
     """Where the camera alone finds people in each of `files` (None: no frame), on the floor of
     its own floor frame ((n, 2) a frame): the single-camera engine of its config (its background,
-    model and detection) over a grid on the floor it sees."""
+    model and detection) over a grid on the floor it sees; each at its head where the camera
+    sees it and the config places tracks there (heads.py), else at its cell."""
     from .config import parse_config
     from .session import set_up
     from .worker import FrameWorker, read_frame
@@ -145,8 +146,11 @@ def people_seen(m: RunConfig, fit, files: list, device: str | None, log=print) -
         if f is None:
             out.append(np.zeros((0, 2)))
             continue
-        _, dets = worker.detections(worker.engine.infer(read_frame(cfg, f)))
-        out.append(np.array([[d.x, d.y] for d in dets]).reshape(-1, 2))
+        depth = read_frame(cfg, f)
+        res = worker.engine.infer(depth)
+        _, dets = worker.detections(res)
+        heads = worker.heads(dets, depth, res) or [None] * len(dets)  # (tracking.positions)
+        out.append(np.array([h if h is not None else (d.x, d.y) for d, h in zip(dets, heads)]).reshape(-1, 2))
     return out
 
 

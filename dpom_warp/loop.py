@@ -26,10 +26,15 @@ class OnlineTracks:
     the writers with its tracks and trails (ShownTracks)."""
 
     def __init__(self, view: RunView, writers: Writers, tracker):
+        from .heads import MATCH, can_place
+
         self.writers, self.tracker = writers, tracker
         self.trails = ShownTracks(view.geometry, view.cfg.tracking.trail)
         self.awaiting: dict[int, FrameDone] = {}  # frames pushed, not yet committed
         self.seconds = 0.0  # the tracker's time
+        # each frame's detections and heads, where the run places tracks on heads (heads.py)
+        self.found: list | None = [] if can_place(view.cfg) else None
+        self.radius = MATCH * view.cfg.detection.nms_radius
 
     @classmethod
     def for_run(cls, view: RunView, writers: Writers, fps: float) -> OnlineTracks:
@@ -41,14 +46,22 @@ class OnlineTracks:
                                                 1.0 / fps, cfg.detection.threshold))
 
     def push(self, done: FrameDone) -> None:
+        from .heads import found_in
+
         self.awaiting[done.index] = done
+        if self.found is not None:
+            self.found.append(found_in(done.record))
         t = time.perf_counter()
         self.tracker.push(done.map, done.timestamp)  # frames dropped between: reach by the time apart
         self.seconds += time.perf_counter() - t
         self.publish(self.tracker.take_committed())
 
     def publish(self, committed) -> None:
+        from .heads import placed_rows
+
         for f, rows in committed:
+            if self.found is not None:
+                rows = placed_rows(rows, self.found[f], self.radius)
             shown = self.trails.at(f, rows)
             done = self.awaiting.pop(f, None)
             if done is not None:
@@ -58,9 +71,13 @@ class OnlineTracks:
         """Every frame committed (the last tracking.delay ones handed to the writers); returns
         (tracks, the tracker's report)."""
         t = time.perf_counter()
+        from .heads import place_tracks
+
         tracks, report = self.tracker.finish()
         self.seconds += time.perf_counter() - t
         self.publish(self.tracker.take_committed())
+        if self.found is not None:
+            tracks = place_tracks(tracks, self.found, self.radius)
         return tracks, report
 
 

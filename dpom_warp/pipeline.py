@@ -319,6 +319,9 @@ def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log
     rate = fps or cfg.inputs.fps
     tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, rate, cfg.detection.threshold,
                                  method, times)
+    placed = placed_on_heads(tracks, [out / "frames" / f"{f.stem}.json" for f in done], cfg)
+    if placed is not None:
+        report["positions"] = placed
     report["fps_from"] = "timestamps" if fps else "input.fps"
     log(f"{len(tracks)} tracks ({method}) in {report['time_s']:.2f} s "
         f"({report['ms_per_frame']:.1f} ms per frame)")
@@ -327,6 +330,23 @@ def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log
     if cfg.output.images or cfg.output.rerun or cfg.output.view:
         report["pictures_s"] = time.perf_counter() - t
     return report, RunEnd(names, {}, tracks, rate, times)
+
+
+def placed_on_heads(tracks: list, records: list[Path], cfg) -> dict | None:
+    """`tracks` moved to their detections' heads (heads.place_tracks) as the frames' records
+    (frames/<stem>.json, in the tracks' frame order) found them; returns the tracking block's
+    `positions` (how many track-frames are at a head, how many at a cell centre), or None
+    where the run places none (heads.can_place)."""
+    from .heads import MATCH, can_place, found_in, place_tracks
+
+    if not can_place(cfg):
+        return None
+    found = [found_in(json.loads(path.read_text()) if path.is_file() else {}) for path in records]
+    before = [tr.xyz.copy() for tr in tracks]
+    place_tracks(tracks, found, MATCH * cfg.detection.nms_radius)
+    moved = sum(int(np.any(b != tr.xyz, axis=1).sum()) for b, tr in zip(before, tracks))
+    shown = sum(int((~tr.bridged).sum()) for tr in tracks)
+    return {"at": "head", "head": moved, "cell": shown - moved}
 
 
 def tracked_frames(view: RunView, writers: Writers, done: list[Path], maps, truth, tracks,

@@ -8,9 +8,11 @@ frame rates the pictures must not cost more than the inference.
 from __future__ import annotations
 
 import struct
+import tempfile
 import zlib
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
@@ -432,3 +434,26 @@ def picture_template(layout: PictureLayout) -> Image.Image:
         draw.text((PAD + 4 + 120 * i, height - 12), text, fill=tuple(int(v * 0.7) for v in c) if c != (255, 255, 255) else INK,
                   font=font(11), anchor="lm")
     return canvas
+
+
+def ply_files(stem: str, depth, geometry, dets, cfg) -> dict[str, bytes]:
+    """For Open3D's viewer: ply/<stem>_points.ply (the frame's points, world metres; a rig's:
+    every camera's) and ply/<stem>_boxes.ply (the detected object boxes as a mesh), as bytes."""
+    import open3d as o3d
+
+    views = ([(d, g) for d, g in zip(depth, geometry.parts) if d is not None] if hasattr(geometry, "parts")
+             else [(depth, geometry)])
+    pts = np.concatenate([g.centre + d[d > 0][:, None].astype(np.float64) * g.rays[d > 0] for d, g in views])
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    boxes = o3d.geometry.TriangleMesh()
+    size = np.array([cfg.obj.width, cfg.obj.depth or cfg.obj.width, cfg.obj.height])
+    for d in dets:
+        b = o3d.geometry.TriangleMesh.create_box(*size)
+        lift = 0.0 if cfg.grid.mode == "ground" else size[2] / 2
+        boxes += b.translate(np.array([d.x, d.y, d.z - lift]) - np.array([size[0] / 2, size[1] / 2, 0]))
+    with tempfile.TemporaryDirectory(prefix="dpom-warp-ply-") as tmp:
+        points, mesh = Path(tmp) / "points.ply", Path(tmp) / "boxes.ply"
+        o3d.io.write_point_cloud(str(points), cloud)
+        o3d.io.write_triangle_mesh(str(mesh), boxes)
+        return {f"ply/{stem}_points.ply": points.read_bytes(),
+                f"ply/{stem}_boxes.ply": mesh.read_bytes()}

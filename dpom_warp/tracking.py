@@ -61,6 +61,9 @@ class TrackingOptions(Node):  # the config's `tracking` section: each field decl
     regions: tuple[Annotated[tuple[float, float, float, float], _numbers(4)], ...] = Field(
         (), description="more entry areas [x_min, x_max, y_min, y_max], metres (doors)")
     trail: Int = Field(30, ge=0, description="frames of trail drawn behind a track in the pictures")
+    positions: Annotated[Literal["head", "cell"], Switch] = Field(
+        "head", description="head: a track's position where its detection's head is seen is the head's centre "
+                            "(solid objects with a head on ground grids; heads.py); cell: the map cell's centre")
 
     def resolved_method(self, frames: int) -> str:
         """auto: ksp for two frames or more, else off."""

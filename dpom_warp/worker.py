@@ -30,6 +30,7 @@ from .config import ConfigError, RunConfig
 from .detect import joint_detections
 from .engine import Engine, ListOverflow
 from .geometry import Camera, RigGeometry, build_geometry
+from .heads import HeadFinder, can_place
 from .io import InputError, read_depth
 from .resolution import Resolution, auto_stride
 
@@ -159,6 +160,7 @@ class FrameWorker:
             elif spec.background is not None:
                 engine.set_background(*spec.background)
         self.engine = engine
+        self.head_finder = HeadFinder(spec.cfg, engine, self.geometry) if can_place(spec.cfg) else None
 
     def read(self, items: list[FrameItem]) -> tuple[list, list]:
         """The frames of `items` read: (outcomes of those that cannot be, [(item, depth, read_s)])."""
@@ -237,6 +239,11 @@ class FrameWorker:
         a cell it rejects is 0 in the map returned, which is the run's map)."""
         return detections_of(res, self.geometry, self.cfg)
 
+    def heads(self, dets: list, depth, res) -> list | None:
+        """Each detection's head position in the frame `depth` (a rig's: one a camera) of result
+        `res` (heads.HeadFinder), or None where the run places none (heads.can_place)."""
+        return self.head_finder(dets, depth, res) if self.head_finder is not None else None
+
     def _finish(self, item: FrameItem, depth, res, read_s: float, infer_s: float, grown: list):
         """Detections, map, picture and record of an inferred frame; `infer_s` is the
         frame's share of a batch."""
@@ -244,6 +251,7 @@ class FrameWorker:
         t1 = time.perf_counter()
         rho_map, dets = self.detections(res)
         rho_map = rho_map.astype(np.float32)  # the map written, which later pictures are drawn from
+        found = self.heads(dets, depth, res)
         t2 = time.perf_counter()
         files = {}
         if self.pictures and self.rig:
@@ -257,6 +265,8 @@ class FrameWorker:
                                                           geometry.centre[:2], item.truth, f.name,
                                                           in_view=geometry.rect_area > 0)
         if cfg.output.ply:
+            from .render import ply_files
+
             files.update(ply_files(f.stem, depth, geometry, dets, cfg))
         t3 = time.perf_counter()
         timings = dict(res.timings)
@@ -266,6 +276,8 @@ class FrameWorker:
             "rows": [f"{f.name},{d.x:.4f},{d.y:.4f},{d.z:.4f},{d.rho:.6f},{d.box[0]},{d.box[1]},"
                      f"{d.box[2]},{d.box[3]}" for d in dets],
             "xy": [[d.x, d.y, d.z] if cfg.grid.mode == "voxel" else [d.x, d.y] for d in dets],
+            **({} if found is None else {"heads": [None if h is None else [round(h[0], 4), round(h[1], 4)]
+                                                   for h in found]}),
             "stats": {"frame": f.name, "detections": len(dets), "iterations": res.iterations,
                       "converged": res.converged,
                       "live": res.live, "entries": res.entries, "kept_entries": res.kept_entries,
@@ -310,29 +322,6 @@ def stacked(depths: list, rig: bool):
         return np.stack(depths)
     per_camera = [np.stack([d[c] for d in depths]) for c in range(len(depths[0]))]
     return per_camera if len(per_camera) > 1 else per_camera[0]  # (the engine of a rig of one takes an array)
-
-
-def ply_files(stem: str, depth, geometry, dets, cfg: RunConfig) -> dict[str, bytes]:
-    """For Open3D's viewer: ply/<stem>_points.ply (the frame's points, world metres; a rig's:
-    every camera's) and ply/<stem>_boxes.ply (the detected object boxes as a mesh), as bytes."""
-    import open3d as o3d
-
-    views = ([(d, g) for d, g in zip(depth, geometry.parts) if d is not None] if hasattr(geometry, "parts")
-             else [(depth, geometry)])
-    pts = np.concatenate([g.centre + d[d > 0][:, None].astype(np.float64) * g.rays[d > 0] for d, g in views])
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-    boxes = o3d.geometry.TriangleMesh()
-    size = np.array([cfg.obj.width, cfg.obj.depth or cfg.obj.width, cfg.obj.height])
-    for d in dets:
-        b = o3d.geometry.TriangleMesh.create_box(*size)
-        lift = 0.0 if cfg.grid.mode == "ground" else size[2] / 2
-        boxes += b.translate(np.array([d.x, d.y, d.z - lift]) - np.array([size[0] / 2, size[1] / 2, 0]))
-    with tempfile.TemporaryDirectory(prefix="dpom-warp-ply-") as tmp:
-        points, mesh = Path(tmp) / "points.ply", Path(tmp) / "boxes.ply"
-        o3d.io.write_point_cloud(str(points), cloud)
-        o3d.io.write_triangle_mesh(str(mesh), boxes)
-        return {f"ply/{stem}_points.ply": points.read_bytes(),
-                f"ply/{stem}_boxes.ply": mesh.read_bytes()}
 
 
 # -- compiled kernels for other processes ---------------------------------------------------

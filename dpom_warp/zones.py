@@ -192,7 +192,7 @@ class Zones:
 
     zones: list[Zone]
     lines: list[Line]
-    hysteresis: float = 0.1
+    hysteresis: float = 0.05
     fps: float = 15.0
     stays: list[Stay] = field(default_factory=list)  # closed stays, in the order they closed
     _last: dict = field(default_factory=dict)  # track -> (frame, xy) last seen

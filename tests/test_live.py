@@ -100,9 +100,14 @@ def test_live_run_keeps_the_newest_frame_and_writes_the_outputs(camera_config, c
     stamps = [p["timestamp"] for p in summary["per_frame"]]
     assert [p["frame"] for p in summary["per_frame"]] == names
     maps = np.stack([np.load(out / "maps" / f"{n}.npy").ravel() for n in names])
-    # the live tracker's tracks again from its maps and their times: tracks.csv, exactly
+    # the live tracker's tracks again from its maps and their times, at the heads its frames'
+    # records found: tracks.csv, exactly
+    from dpom_warp.heads import MATCH, found_in, place_tracks
+
     tracks, _ = run_tracker(maps, Cells.for_run(geometry, cfg), cfg.grid.shape, cfg.tracking,
                             summary["tracking"]["fps"], cfg.detection.threshold, "online", stamps)
+    place_tracks(tracks, [found_in(json.loads((out / "frames" / f"{n}.json").read_text())) for n in names],
+                 MATCH * cfg.detection.nms_radius)
     assert tracks and tracks_csv(tracks, names) == (out / "tracks.csv").read_text()
     trails, drawn = ShownTracks(geometry, cfg.tracking.trail), 0
     for i, (n, rows) in enumerate(zip(names, per_frame(tracks, len(names)))):

@@ -1,7 +1,8 @@
 """A run's track files: tracks.csv and track_table.csv as written and read back, a rendered
 run's tracks, pictures and scores, `dpom-warp track` tracking a finished run again without
-inferring (other methods, input.fps, a Rerun recording), and a voxel run's 3D tracks."""
+inferring (other methods, input.fps, a Rerun recording), a voxel run's 3D tracks, and a rendered run's tracks at their heads nearer the truth than at the cells."""
 
+import csv
 import json
 
 import numpy as np
@@ -101,7 +102,8 @@ def test_track_command_retracks_without_inferring(tracked_run, tmp_path, capsys)
     assert (run / "run.json").read_bytes() == made
     # input.fps (README: `track --set input.fps=...`): at 100 frames/s a track may move max_speed / 100 +
     # jitter = 0.22 m between consecutive frames, where at the run's 5 (0.6 m) the tracks step
-    # farther (the rendered people walk 0.3 m a frame)
+    # farther (the rendered people walk 0.3 m a frame); the reach is the cells' (the heads it
+    # places them at move a track by up to a cell's width more)
 
     def longest_step(folder):
         rows = [r.split(",") for r in (folder / "tracks.csv").read_text().splitlines()[1:]]
@@ -112,7 +114,7 @@ def test_track_command_retracks_without_inferring(tracked_run, tmp_path, capsys)
                     if b[0] == a[0] + 1), default=0.0)
 
     assert longest_step(tracked_run[0]) > 0.22 + 1e-9
-    assert main(["track", str(run), "--set", "input.fps=100"]) == 0
+    assert main(["track", str(run), "--set", "input.fps=100", "--set", "tracking.positions=cell"]) == 0
     assert json.loads((run / "summary.json").read_text())["tracking"]["fps"] == 100
     assert longest_step(run) <= 2.0 / 100 + 0.2 + 1e-9
     assert main(["track", str(run), "--set", "model.alpha=1"]) == 2
@@ -164,3 +166,31 @@ def test_rerun_recording_holds_every_frame(tracked_run, tmp_path):
                    "/world/tracks", "/world/trails"):
         assert rows.get(entity) == 8, (entity, rows)
     assert "/world/camera" in rows
+
+
+def _errors(run, truth_file) -> np.ndarray:
+    truth = {f["frame"]: np.array([[o["x"], o["y"]] for o in f["objects"]]) for f in json.load(open(truth_file))}
+    return np.array([np.min(np.hypot(*(truth[r["frame"]] - [float(r["x"]), float(r["y"])]).T))
+                     for r in csv.DictReader(open(run / "tracks.csv")) if r["bridged"] == "0"])
+
+
+def test_a_rendered_run_s_tracks_stand_nearer_the_truth_at_the_heads(tracked_run):
+    """The small rendered run (0.2 m cells: a cell's centre up to 0.14 m from anyone in it): its
+    tracks, at their heads, against the rendered people, then the same maps tracked again at the
+    cells' centres (`dpom-warp track --set tracking.positions=cell`): the heads' mean error under
+    two thirds of the cells', and summary.json counts the track-frames at a head."""
+    from dpom_warp.cli import main
+
+    run, config = tracked_run
+    truth = config.parent / "scene" / "ground_truth.json"
+    heads = _errors(run, truth)
+    positions = json.loads((run / "summary.json").read_text())["tracking"]["positions"]
+    assert positions["head"] > positions["cell"] and positions["head"] + positions["cell"] == len(heads)
+    try:
+        assert main(["track", str(run), "--set", "tracking.positions=cell", "--set", "output.images=false"]) == 0
+        cells = _errors(run, truth)
+        assert "positions" not in json.loads((run / "summary.json").read_text())["tracking"]
+    finally:  # the module's run as it was for the other tests
+        assert main(["track", str(run)]) == 0
+    assert len(cells) == len(heads)
+    assert heads.mean() < 2 / 3 * cells.mean()

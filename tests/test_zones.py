@@ -234,14 +234,14 @@ def test_a_rendered_run_counts_as_its_trajectories_do(tmp_path):
 
 def test_track_counts_other_zones_without_inferring(tmp_path, capsys):
     """`dpom-warp track RUN --zones FILE` counts the file's zones over the run's tracks (the maps
-    untouched); `--set zones=[] --set lines=[]` removes the files; a bad zone is one line."""
+    untouched; the zone half a metre wider than the grid: a track at a head may stand outside it); `--set zones=[] --set lines=[]` removes the files; a bad zone is one line."""
     path = small_zoned(tmp_path, frames=8)
     assert main(["run", str(path), "--no-progress"]) == 0
     out = tmp_path / "out"
     maps = (out / "maps" / "0003.npy").read_bytes()
     zones = tmp_path / "zones.yaml"
-    zones.write_text(yaml.safe_dump({"zones": [{"name": "all", "polygon": [[-2.5, 1.0], [2.5, 1.0], [2.5, 6.5],
-                                                                                   [-2.5, 6.5]]}]}))
+    zones.write_text(yaml.safe_dump({"zones": [{"name": "all", "polygon": [[-3.0, 0.5], [3.0, 0.5], [3.0, 7.0],
+                                                                                   [-3.0, 7.0]]}]}))
     assert main(["track", str(out), "--zones", str(zones)]) == 0
     rows = read_rows(out / "zones.csv")
     tracks = read_rows(out / "tracks.csv")

@@ -192,7 +192,7 @@ class LineSection(Node):
 class CountingSection(Node):
     """How zones and lines count the tracks."""
 
-    hysteresis: Num = Field(0.1, ge=0, description="metres: a track changes side of a line only once this far "
+    hysteresis: Num = Field(0.05, ge=0, description="metres: a track changes side of a line only once this far "
                                                     "beyond it, so one that jitters on the line is counted once "
                                                     "(docs/zones.md: the measured trade-off)")
     events: FilePath | None = Field(None, description="also stream each committed frame's counts and crossings as "

@@ -1,0 +1,174 @@
+"""Where a detected person stands, finer than the grid's cells: the centre of their head, found
+in the frame's points (docs/tracks.md, Positions).
+
+A map peak puts a person on a cell centre, and the model's upright box over a walking body
+(legs and arms swinging, a body turned) moves that cell by centimetres across the line of
+sight: rendered walks put tracks 7 cm from the truth on a 0.1 m grid. The head is the body's
+most stable part and the one a camera above people sees best. For each detection, each camera
+that sees its place: the frame's points (not the background's) within the object's width of the
+cell, between half its height and its height plus HEAD_ABOVE; the topmost of them (above the
+highest point less the head's radius) are the upper half of the head, seen from one side. The
+upper half of a sphere of radius r sampled evenly over its outline, seen from a distance, has
+its mean 2/3 r nearer the camera than its centre along the line of sight (the mean depth of a
+hemisphere over its disc), so the head's centre is their mean moved 2/3 r away from the camera
+along the ray through it; twice, the second time around the first estimate with a narrower
+radius. A camera gives no position when too few points are there (hidden heads) or when they
+spread wider than a head (a wall or a shelf at head height beside the person); a rig's position
+is the mean of its cameras'. Tracks take their frame's detection's head (`place_tracks`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+HEAD_ABOVE = 0.3  # metres above object.height a head may reach (taller people than the box)
+MIN_POINTS = 4  # fewer points of a head: no position from this camera
+REACH = (0.75, 0.55)  # the two passes' radius around the estimate, in object widths
+FOREGROUND_M = 0.1  # a point nearer than its pixel's background by this (or 3 sigma) is the frame's own
+MATCH = 0.5  # a track takes the head of its frame's detection within this share of detection.nms_radius
+
+
+def head_centre(points: np.ndarray, near: np.ndarray, centre: np.ndarray, width: float, height: float,
+                radius: float) -> np.ndarray | None:
+    """The (x, y) under a head's centre from one camera's points (N, 3) in the world, around
+    `near` (x, y): see the module's docstring; None where the camera does not see a head there.
+    `centre`: the camera's centre; `width`, `height`: the object's; `radius`: the head's."""
+    est = np.asarray(near, np.float64)[:2]
+    for reach in REACH:
+        d = np.hypot(points[:, 0] - est[0], points[:, 1] - est[1])
+        around = points[(d < reach * width) & (points[:, 2] > 0.5 * height) & (points[:, 2] < height + HEAD_ABOVE)]
+        if len(around) < MIN_POINTS:
+            return None
+        top = around[around[:, 2] > around[:, 2].max() - radius]
+        if len(top) < MIN_POINTS:
+            return None
+        mean = top.mean(axis=0)
+        spread = np.sqrt(np.mean(np.sum((top[:, :2] - mean[:2]) ** 2, axis=1)))
+        if spread > radius:  # wider than a head's upper half (its points lie within r of the axis)
+            return None
+        ray = mean - centre
+        est = (mean + ray / np.linalg.norm(ray) * (2.0 / 3.0) * radius)[:2]
+    return est
+
+
+def camera_points(depth: np.ndarray, geometry, box, background=None, stride: int = 1,
+                  scale: float = 1.0) -> np.ndarray:
+    """The world points (N, 3) of one camera's frame (metres, full resolution) inside `box`
+    (u0, v0, u1, v1, inclusive) widened by half its width each side and a fifth of its height
+    above, that are not the background's: nearer than `background` (a model.Background at the
+    engine's resolution, `stride` pixels a cell; its mu 0 where it has none) by FOREGROUND_M or
+    three of its sigma, where it has one. `scale`: the frame's drift, divided out first."""
+    h, w = depth.shape
+    u0, v0, u1, v1 = (int(b) for b in box)
+    if u1 < u0 or v1 < v0:
+        return np.zeros((0, 3))
+    pad_u, pad_v = (u1 - u0 + 1) // 2, (v1 - v0 + 1) // 5
+    us, vs = slice(max(u0 - pad_u, 0), min(u1 + pad_u + 1, w)), slice(max(v0 - pad_v, 0), min(v1 + 1, h))
+    z = depth[vs, us].astype(np.float64) / scale
+    seen = z > 0
+    if background is not None:
+        rows = np.arange(vs.start, vs.stop) // stride
+        cols = np.arange(us.start, us.stop) // stride
+        rows, cols = np.minimum(rows, background.mu.shape[0] - 1), np.minimum(cols, background.mu.shape[1] - 1)
+        mu, sigma = background.mu[np.ix_(rows, cols)], background.sigma[np.ix_(rows, cols)]
+        seen &= (mu <= 0) | (z < mu - np.maximum(FOREGROUND_M, 3.0 * sigma))
+    rays = geometry.rays[vs, us][seen]
+    return geometry.centre + z[seen][:, None] * rays
+
+
+def heads(dets, depths: list, geometries: list, backgrounds: list, stride: int, scales: list,
+          obj) -> list[tuple[float, float] | None]:
+    """Each detection's head position (x, y), or None where no camera sees its head: `depths`,
+    `geometries` (full resolution), `backgrounds` (model.Background or None) and `scales` one
+    a camera (a depth None: no frame of that camera); `obj` the config's object section."""
+    radius = float(obj.head_radius)
+    out = []
+    for d in dets:
+        found = []
+        for depth, g, bg, s in zip(depths, geometries, backgrounds, scales):
+            if depth is None or g.rect_area[d.k] <= 0:
+                continue
+            pts = camera_points(depth, g, g.rect[d.k], bg, stride, s)
+            xy = head_centre(pts, np.array([d.x, d.y]), g.centre, obj.width, obj.height, radius) if len(pts) else None
+            if xy is not None:
+                found.append(xy)
+        out.append(tuple(float(v) for v in np.mean(found, axis=0)) if found else None)
+    return out
+
+
+class HeadFinder:
+    """A run's heads (`heads`) frame by frame: its engine's cameras' backgrounds, read once at
+    the first frame (set by then), the frames' drift divided out, its geometry (full
+    resolution; a rig's parts) and object."""
+
+    def __init__(self, cfg, engine, geometry):
+        self.cfg, self.engine = cfg, engine
+        self.rig = hasattr(geometry, "parts")
+        self.parts = list(geometry.parts) if self.rig else [geometry]
+        self.backgrounds: list | None = None
+
+    def __call__(self, dets: list, depth, res) -> list:
+        if not dets:
+            return []
+        if self.backgrounds is None:
+            self.backgrounds = [head_background(self.engine.background_state(c)) for c in range(len(self.parts))]
+        depths = depth if self.rig else [depth]
+        drift = res.drift if isinstance(res.drift, list) else [res.drift] * len(depths)
+        scales = [d.scale if d is not None and d.applied else 1.0 for d in drift]
+        return heads(dets, depths, self.parts, self.backgrounds, self.engine.resolution.stride, scales, self.cfg.obj)
+
+
+def head_background(state):
+    """A camera's background for camera_points from its engine's background_state: None (the
+    floor-only model: every point is the frame's), else its model.Background with no depth (mu
+    0) where the floor model has the pixel."""
+    if state is None:
+        return None
+    bg, fallback = state
+    if fallback is None:
+        return bg
+    return dataclasses.replace(bg, mu=np.where(fallback, 0.0, bg.mu))
+
+
+def can_place(cfg) -> bool:
+    """Whether a run's detections get head positions: tracking.positions `head`, a ground grid
+    and a solid object with a head."""
+    return (cfg.tracking.positions == "head" and cfg.grid.mode == "ground" and cfg.obj.shape == "solid"
+            and cfg.obj.head_radius > 0)
+
+
+def found_in(record: dict) -> list:
+    """A frame record's detections as placed_rows takes them: [(x, y, head (x, y) or None)]."""
+    xy = record.get("xy", [])
+    return [(p[0], p[1], h) for p, h in zip(xy, record.get("heads") or [None] * len(xy))]
+
+
+def placed_rows(rows: list, found: list | None, radius: float) -> list:
+    """A frame's track rows [(id, xyz, bridged)] with each row that is not bridged moved to the
+    head of the nearest of the frame's detections within `radius` of it (`found`: [(x, y, head
+    (x, y) or None)] of the frame's detections; None: as they are)."""
+    if not found:
+        return rows
+    cells = np.array([f[:2] for f in found], np.float64)
+    out = []
+    for tid, xyz, bridged in rows:
+        head = None
+        if not bridged:
+            dist = np.hypot(cells[:, 0] - xyz[0], cells[:, 1] - xyz[1])
+            j = int(np.argmin(dist))
+            head = found[j][2] if dist[j] <= radius else None
+        out.append((tid, xyz if head is None else np.array([head[0], head[1], xyz[2]]), bridged))
+    return out
+
+
+def place_tracks(tracks: list, found: list, radius: float) -> list:
+    """Tracks (track_files.Track, frames indexing `found`) with each frame that is not bridged
+    at its detection's head (placed_rows); `found[t]`: frame t's [(x, y, head or None)]."""
+    for tr in tracks:
+        for i, t in enumerate(tr.frames):
+            if not tr.bridged[i]:
+                (_, xyz, _), = placed_rows([(tr.id, tr.xyz[i], False)], found[t], radius)
+                tr.xyz[i] = xyz
+    return tracks

@@ -1,0 +1,101 @@
+"""Tracks placed at their detections' heads (heads.py): the head's centre from its points, by
+hand on spheres cast into a camera; what is not a head (a wall beside it, too few points); the
+placement of tracks (a rendered run's tracks nearer the truth than the cells': test_track_runs)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dpom_warp.heads import MIN_POINTS, head_centre, place_tracks, placed_rows
+from dpom_warp.track_files import Track
+
+R = 0.11  # the head's radius (object.head_radius's default)
+WIDTH, HEIGHT = 0.4, 1.85  # the object's
+
+
+def cast(centre, forward, head, f=4000.0, n=801, wall_x=None):
+    """The points a pinhole camera at `centre` looking along `forward` (pixels of 1/f radians, an
+    n x n image) sees of a sphere of radius R centred at `head`, and of the plane x = wall_x
+    (from the floor to 2.5 m) where given: the nearest hit of each ray."""
+    forward = np.asarray(forward, float) / np.linalg.norm(forward)
+    side = np.cross(forward, [0.0, 0.0, 1.0] if abs(forward[2]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    up = np.cross(side, forward)
+    a = (np.arange(n) - n // 2) / f
+    u, v = np.meshgrid(a, a)
+    rays = forward + u[..., None] * side + v[..., None] * up
+    rays = rays.reshape(-1, 3) / np.linalg.norm(rays.reshape(-1, 3), axis=1)[:, None]
+    oc = centre - np.asarray(head, float)
+    b = rays @ oc
+    disc = b * b - (oc @ oc - R * R)
+    t = np.where(disc >= 0, -b - np.sqrt(np.maximum(disc, 0)), np.inf)
+    if wall_x is not None:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tw = (wall_x - centre[0]) / rays[:, 0]
+        z = centre[2] + tw * rays[:, 2]
+        tw = np.where((tw > 0) & (z >= 0) & (z <= 2.5), tw, np.inf)
+        t = np.minimum(t, tw)
+    hit = np.isfinite(t)
+    return centre + t[hit, None] * rays[hit]
+
+
+@pytest.mark.parametrize("view", ["above", "side"])
+def test_a_head_seen_from_far_above_or_level_is_found_at_its_centre(view):
+    """Seen from far away (rays nearly parallel, pixels even over the head's outline), the points
+    of the head's upper half (above its top less R) are: from above, the half facing the camera;
+    from the side at its height, the upper half of the half facing the camera. Either way their
+    mean is 2/3 R nearer the camera than the centre along the ray (a hemisphere's mean depth
+    over its disc, the same over a half disc) and level with it across the ray, so moving it 2/3
+    R back along the ray gives the centre: to within the pixels' steps (a millimetre here)."""
+    head = np.array([0.3, 4.2, HEIGHT - R])
+    if view == "above":
+        centre, forward = head + [0.0, 0.0, 30.0], [0.0, 0.0, -1.0]
+    else:
+        centre, forward = head + [0.0, -30.0, 0.0], [0.0, 1.0, 0.0]
+    points = cast(centre, forward, head, f=20000.0)
+    assert len(points) > 10000
+    got = head_centre(points, head[:2] + [0.12, -0.1], centre, WIDTH, HEIGHT, R)
+    assert got is not None and np.hypot(*(got - head[:2])) < 0.002
+
+
+def test_a_head_seen_by_the_demo_s_camera_is_within_a_fifth_of_its_radius():
+    """Between those two views the head's upper half is not the half facing the camera, and the
+    mean moves by part of R: an eye-level camera 2.2 m up, 4 m away (the demo's), still places
+    it within R / 5, where the cells put people a cell's half-width off."""
+    head = np.array([-0.5, 4.0, 1.75 - R])
+    centre = np.array([0.0, 0.0, 2.2])
+    points = cast(centre, head - centre, head, f=365.0, n=121)
+    got = head_centre(points, head[:2] + [0.05, 0.05], centre, WIDTH, HEIGHT, R)
+    assert got is not None and np.hypot(*(got - head[:2])) < R / 5
+
+
+def test_a_wall_beside_the_head_or_too_few_points_give_no_position():
+    """A wall 0.15 m beside the head reaches higher than it: the topmost points within the
+    object's width are the wall's, along it, spread wider than a head's upper half (more than R
+    from their mean): no position. Fewer than MIN_POINTS points: none either."""
+    head = np.array([0.0, 4.0, HEIGHT - R])
+    centre = np.array([0.0, 0.0, 2.2])
+    points = cast(centre, head - centre, head, f=365.0, n=121, wall_x=0.15)
+    assert head_centre(points, head[:2], centre, WIDTH, HEIGHT, R) is None
+    alone = cast(centre, head - centre, head, f=365.0, n=121)
+    assert head_centre(alone, head[:2], centre, WIDTH, HEIGHT, R) is not None
+    assert head_centre(alone[:MIN_POINTS - 1], head[:2], centre, WIDTH, HEIGHT, R) is None
+
+
+def test_tracks_take_the_head_of_their_frame_s_nearest_detection_within_the_radius():
+    """By hand: frame 0 has detections at cells (0, 0) (head (0.03, -0.02)) and (1, 0) (no
+    head); frame 1 one at (2, 2) with head (2.01, 2.04). A row at (0.1, 0) is nearest the
+    first (0.1 m), within 0.2: its head; one at (1, 0.1) is nearest the second, which has none;
+    a bridged row stays; a row 0.3 m from every detection stays."""
+    found = [[(0.0, 0.0, (0.03, -0.02)), (1.0, 0.0, None)], [(2.0, 2.0, (2.01, 2.04))]]
+    rows = [(1, (0.1, 0.0, 0.0), False), (2, (1.0, 0.1, 0.0), False), (3, (0.0, 0.1, 0.0), True),
+            (4, (0.0, 0.3, 0.0), False)]
+    def plain(rows):
+        return [(t, tuple(float(v) for v in p), b) for t, p, b in rows]
+
+    assert plain(placed_rows(rows, found[0], 0.2)) == [(1, (0.03, -0.02, 0.0), False), rows[1], rows[2], rows[3]]
+    assert plain(placed_rows(rows, [], 0.2)) == rows
+    track = Track(7, [0, 1], np.array([[0.1, 0.0, 0.0], [2.1, 2.1, 0.0]]), np.ones(2), np.array([False, False]))
+    place_tracks([track], found, 0.2)
+    assert np.allclose(track.xyz, [[0.03, -0.02, 0.0], [2.01, 2.04, 0.0]])
