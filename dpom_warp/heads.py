@@ -27,6 +27,7 @@ HEAD_ABOVE = 0.3  # metres above object.height a head may reach (taller people t
 MIN_POINTS = 4  # fewer points of a head: no position from this camera
 REACH = (0.75, 0.55)  # the two passes' radius around the estimate, in object widths
 FOREGROUND_M = 0.1  # a point nearer than its pixel's background by this (or 3 sigma) is the frame's own
+PIXELS_A_RADIUS = 5  # camera_points reads every step-th pixel, a head's radius this many steps at least
 MATCH = 0.5  # a track takes the head of its frame's detection within this share of detection.nms_radius
 
 
@@ -53,44 +54,59 @@ def head_centre(points: np.ndarray, near: np.ndarray, centre: np.ndarray, width:
     return est
 
 
-def camera_points(depth: np.ndarray, geometry, box, background=None, stride: int = 1,
-                  scale: float = 1.0) -> np.ndarray:
-    """The world points (N, 3) of one camera's frame (metres, full resolution) inside `box`
-    (u0, v0, u1, v1, inclusive) widened by half its width each side and a fifth of its height
-    above, that are not the background's: nearer than `background` (a model.Background at the
-    engine's resolution, `stride` pixels a cell; its mu 0 where it has none) by FOREGROUND_M or
-    three of its sigma, where it has one. `scale`: the frame's drift, divided out first."""
-    h, w = depth.shape
-    u0, v0, u1, v1 = (int(b) for b in box)
-    if u1 < u0 or v1 < v0:
-        return np.zeros((0, 3))
-    pad_u, pad_v = (u1 - u0 + 1) // 2, (v1 - v0 + 1) // 5
-    us, vs = slice(max(u0 - pad_u, 0), min(u1 + pad_u + 1, w)), slice(max(v0 - pad_v, 0), min(v1 + 1, h))
+def head_pixels(camera, xy, width: float, height: float, radius: float):
+    """Where a head over (x, y) may appear in `camera`'s image: the pixel ranges (row slice,
+    column slice) of the box REACH[0] x width around (x, y) from half the object's `height` to
+    HEAD_ABOVE above it, projected, and the pixels a head's radius spans there (at the box's mean
+    depth): (None, None, 0) where the box is behind the camera or out of the image."""
+    reach = REACH[0] * width
+    corners = np.array([[x, y, z] for x in (xy[0] - reach, xy[0] + reach) for y in (xy[1] - reach, xy[1] + reach)
+                        for z in (0.5 * height, height + HEAD_ABOVE)])
+    u, v, z = camera.project(corners)
+    if np.any(z <= 0.05):
+        return None, None, 0.0
+    u0, u1 = max(int(np.floor(u.min())), 0), min(int(np.ceil(u.max())) + 1, camera.width)
+    v0, v1 = max(int(np.floor(v.min())), 0), min(int(np.ceil(v.max())) + 1, camera.height)
+    if u0 >= u1 or v0 >= v1:
+        return None, None, 0.0
+    return slice(v0, v1), slice(u0, u1), camera.fx * radius / float(z.mean())
+
+
+def camera_points(depth: np.ndarray, geometry, rows: slice, cols: slice, background=None, stride: int = 1,
+                  scale: float = 1.0, step: int = 1) -> np.ndarray:
+    """The world points (N, 3) of one camera's frame (metres, full resolution) in `rows` and
+    `cols` (head_pixels), every `step`-th pixel of them, that are not the background's: nearer
+    than `background` (a model.Background at the engine's resolution, `stride` pixels a cell;
+    its mu 0 where it has none) by FOREGROUND_M or three of its sigma, where it has one.
+    `scale`: the frame's drift, divided out first."""
+    vs, us = slice(rows.start, rows.stop, step), slice(cols.start, cols.stop, step)
     z = depth[vs, us].astype(np.float64) / scale
     seen = z > 0
     if background is not None:
-        rows = np.arange(vs.start, vs.stop) // stride
-        cols = np.arange(us.start, us.stop) // stride
-        rows, cols = np.minimum(rows, background.mu.shape[0] - 1), np.minimum(cols, background.mu.shape[1] - 1)
-        mu, sigma = background.mu[np.ix_(rows, cols)], background.sigma[np.ix_(rows, cols)]
+        r = np.minimum(np.arange(vs.start, vs.stop, step) // stride, background.mu.shape[0] - 1)
+        c = np.minimum(np.arange(us.start, us.stop, step) // stride, background.mu.shape[1] - 1)
+        mu, sigma = background.mu[np.ix_(r, c)], background.sigma[np.ix_(r, c)]
         seen &= (mu <= 0) | (z < mu - np.maximum(FOREGROUND_M, 3.0 * sigma))
-    rays = geometry.rays[vs, us][seen]
-    return geometry.centre + z[seen][:, None] * rays
+    return geometry.centre + z[seen][:, None] * geometry.rays[vs, us][seen]
 
 
-def heads(dets, depths: list, geometries: list, backgrounds: list, stride: int, scales: list,
+def heads(dets, depths: list, cameras: list, geometries: list, backgrounds: list, stride: int, scales: list,
           obj) -> list[tuple[float, float] | None]:
     """Each detection's head position (x, y), or None where no camera sees its head: `depths`,
-    `geometries` (full resolution), `backgrounds` (model.Background or None) and `scales` one
-    a camera (a depth None: no frame of that camera); `obj` the config's object section."""
+    `cameras` and `geometries` (full resolution), `backgrounds` (model.Background or None) and
+    `scales` one a camera (a depth None: no frame of that camera); `obj` the config's object
+    section."""
     radius = float(obj.head_radius)
     out = []
     for d in dets:
         found = []
-        for depth, g, bg, s in zip(depths, geometries, backgrounds, scales):
-            if depth is None or g.rect_area[d.k] <= 0:
+        for depth, camera, g, bg, s in zip(depths, cameras, geometries, backgrounds, scales):
+            if depth is None:
                 continue
-            pts = camera_points(depth, g, g.rect[d.k], bg, stride, s)
+            rows, cols, pixels = head_pixels(camera, (d.x, d.y), obj.width, obj.height, radius)
+            if rows is None:
+                continue
+            pts = camera_points(depth, g, rows, cols, bg, stride, s, max(1, int(pixels / PIXELS_A_RADIUS)))
             xy = head_centre(pts, np.array([d.x, d.y]), g.centre, obj.width, obj.height, radius) if len(pts) else None
             if xy is not None:
                 found.append(xy)
@@ -99,12 +115,13 @@ def heads(dets, depths: list, geometries: list, backgrounds: list, stride: int, 
 
 
 class HeadFinder:
-    """A run's heads (`heads`) frame by frame: its engine's cameras' backgrounds, read once at
-    the first frame (set by then), the frames' drift divided out, its geometry (full
-    resolution; a rig's parts) and object."""
+    """A run's heads (`heads`) frame by frame: its cameras (a rig's list) and geometry (full
+    resolution; a rig's parts), its engine's backgrounds, read once at the first frame (set by
+    then), the frames' drift divided out, and its object."""
 
-    def __init__(self, cfg, engine, geometry):
+    def __init__(self, cfg, engine, cameras, geometry):
         self.cfg, self.engine = cfg, engine
+        self.cameras = list(cameras) if isinstance(cameras, (list, tuple)) else [cameras]
         self.rig = hasattr(geometry, "parts")
         self.parts = list(geometry.parts) if self.rig else [geometry]
         self.backgrounds: list | None = None
@@ -117,7 +134,7 @@ class HeadFinder:
         depths = depth if self.rig else [depth]
         drift = res.drift if isinstance(res.drift, list) else [res.drift] * len(depths)
         scales = [d.scale if d is not None and d.applied else 1.0 for d in drift]
-        return heads(dets, depths, self.parts, self.backgrounds, self.engine.resolution.stride, scales, self.cfg.obj)
+        return heads(dets, depths, self.cameras, self.parts, self.backgrounds, self.engine.resolution.stride, scales, self.cfg.obj)
 
 
 def head_background(state):

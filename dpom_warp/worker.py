@@ -160,7 +160,7 @@ class FrameWorker:
             elif spec.background is not None:
                 engine.set_background(*spec.background)
         self.engine = engine
-        self.head_finder = HeadFinder(spec.cfg, engine, self.geometry) if can_place(spec.cfg) else None
+        self.head_finder = HeadFinder(spec.cfg, engine, spec.camera, self.geometry) if can_place(spec.cfg) else None
 
     def read(self, items: list[FrameItem]) -> tuple[list, list]:
         """The frames of `items` read: (outcomes of those that cannot be, [(item, depth, read_s)])."""

@@ -99,3 +99,43 @@ def test_tracks_take_the_head_of_their_frame_s_nearest_detection_within_the_radi
     track = Track(7, [0, 1], np.array([[0.1, 0.0, 0.0], [2.1, 2.1, 0.0]]), np.ones(2), np.array([False, False]))
     place_tracks([track], found, 0.2)
     assert np.allclose(track.xyz, [[0.03, -0.02, 0.0], [2.01, 2.04, 0.0]])
+
+
+def depth_image(camera, head):
+    """The z-depth image `camera` reads of a sphere of radius R centred at `head` over the floor
+    (z = 0), by casting each pixel's ray (geometry.Camera.rays: its parameter is z-depth)."""
+    rays, c = camera.rays(), camera.centre
+    oc = c - np.asarray(head, float)
+    a = np.sum(rays * rays, axis=-1)
+    b = rays @ oc
+    disc = b * b - a * (oc @ oc - R * R)
+    t = np.where(disc >= 0, (-b - np.sqrt(np.maximum(disc, 0))) / a, np.inf)
+    with np.errstate(divide="ignore"):
+        floor = np.where(rays[..., 2] < 0, -c[2] / rays[..., 2], np.inf)
+    t = np.minimum(t, floor)
+    return np.where(np.isfinite(t), t, 0.0).astype(np.float32)
+
+
+@pytest.mark.parametrize("mounting", ["ceiling", "eye level"])
+def test_a_frame_s_head_is_found_from_the_ceiling_and_from_eye_level(mounting):
+    """heads() on whole frames (the pixels it reads projected from the cell, every step-th, the
+    floor left out by height, no background): a camera on the ceiling straight over the head
+    (the exact case above: within the pixels' steps, 5 mm at 160 x 120) and the demo's camera
+    2.2 m up, pitched 20 deg (within R / 5, as above)."""
+    from types import SimpleNamespace
+
+    from dpom_warp.geometry import Camera, pose_from_angles
+    from dpom_warp.heads import heads
+
+    if mounting == "ceiling":
+        head, pose, bound = np.array([0.0, 4.0, HEIGHT - R]), pose_from_angles(3.0, 90.0, y_m=4.0), 0.005
+    else:
+        head, pose, bound = np.array([-0.5, 4.0, 1.75 - R]), pose_from_angles(2.2, 20.0), R / 5
+    camera = Camera(160, 120, 150.0, 150.0, 79.5, 59.5, pose)
+    geometry = SimpleNamespace(rays=camera.rays(), centre=camera.centre)
+    obj = SimpleNamespace(head_radius=R, width=WIDTH, height=HEIGHT)
+    cell = SimpleNamespace(x=head[0] + 0.1, y=head[1] - 0.1)  # a cell's centre beside the person
+    (got,) = heads([cell], [depth_image(camera, head)], [camera], [geometry], [None], 1, [1.0], obj)
+    assert got is not None and np.hypot(got[0] - head[0], got[1] - head[1]) < bound
+    empty = np.where(depth_image(camera, head) > 0, depth_image(camera, head[:2].tolist() + [-5.0]), 0)
+    assert heads([cell], [empty], [camera], [geometry], [None], 1, [1.0], obj) == [None]  # the floor alone
