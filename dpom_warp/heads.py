@@ -5,16 +5,18 @@ A map peak puts a person on a cell centre, and the model's upright box over a wa
 (legs and arms swinging, a body turned) moves that cell by centimetres across the line of
 sight: rendered walks put tracks 7 cm from the truth on a 0.1 m grid. The head is the body's
 most stable part and the one a camera above people sees best. For each detection, each camera
-that sees its place: the frame's points (not the background's) within the object's width of the
-cell, between half its height and its height plus HEAD_ABOVE; the topmost of them (above the
-highest point less the head's radius) are the upper half of the head, seen from one side. The
-upper half of a sphere of radius r sampled evenly over its outline, seen from a distance, has
-its mean 2/3 r nearer the camera than its centre along the line of sight (the mean depth of a
-hemisphere over its disc), so the head's centre is their mean moved 2/3 r away from the camera
-along the ray through it; twice, the second time around the first estimate with a narrower
-radius. A camera gives no position when too few points are there (hidden heads) or when they
-spread wider than a head (a wall or a shelf at head height beside the person); a rig's position
-is the mean of its cameras'. Tracks take their frame's detection's head (`place_tracks`).
+that sees its place: the frame's points (not the background's) within half the object's width of
+the cell, above half its height; the topmost of them (above the highest point less the head's
+radius) are the upper half of the head, seen from one side. The upper half of a sphere of radius
+r sampled evenly over its outline, seen from a distance, has its mean 2/3 r nearer the camera
+than its centre along the line of sight (the mean depth of a hemisphere over its disc), so the
+head's centre is their mean moved 2/3 r away from the camera along the ray through it; twice, the
+second time around the first estimate with a slightly wider radius. A camera gives no position
+when too few points are there (a hidden head), when some reach HEAD_ABOVE over the object's
+height (a wall, a shelf, a door frame), when the topmost spread wider than a head (a shelf at
+head height beside the person), when the head lies farther than FROM_CELL from the cell (a
+taller neighbour's) or when the image's edge cuts it (its inner part's mean lies inward); a rig's
+position is the mean of its cameras'. Tracks take their frame's detection's head (`place_tracks`).
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ import numpy as np
 
 HEAD_ABOVE = 0.3  # metres above object.height a head may reach (taller people than the box)
 MIN_POINTS = 4  # fewer points of a head: no position from this camera
-REACH = (0.75, 0.55)  # the two passes' radius around the estimate, in object widths
+REACH = (0.5, 0.55)  # the two passes' radius around the estimate, in object widths
+FROM_CELL = 0.5  # a head farther than this many object widths from its cell is another's
 FOREGROUND_M = 0.1  # a point nearer than its pixel's background by this (or 3 sigma) is the frame's own
 PIXELS_A_RADIUS = 5  # camera_points reads every step-th pixel, a head's radius this many steps at least
 MATCH = 0.5  # a track takes the head of its frame's detection within this share of detection.nms_radius
@@ -33,14 +36,14 @@ MATCH = 0.5  # a track takes the head of its frame's detection within this share
 
 def head_centre(points: np.ndarray, near: np.ndarray, centre: np.ndarray, width: float, height: float,
                 radius: float) -> np.ndarray | None:
-    """The (x, y) under a head's centre from one camera's points (N, 3) in the world, around
-    `near` (x, y): see the module's docstring; None where the camera does not see a head there.
+    """A head's centre (x, y, z) from one camera's points (N, 3) in the world, around `near`
+    (x, y): see the module's docstring; None where the camera does not see a head there.
     `centre`: the camera's centre; `width`, `height`: the object's; `radius`: the head's."""
     est = np.asarray(near, np.float64)[:2]
     for reach in REACH:
         d = np.hypot(points[:, 0] - est[0], points[:, 1] - est[1])
-        around = points[(d < reach * width) & (points[:, 2] > 0.5 * height) & (points[:, 2] < height + HEAD_ABOVE)]
-        if len(around) < MIN_POINTS:
+        around = points[(d < reach * width) & (points[:, 2] > 0.5 * height)]
+        if len(around) < MIN_POINTS or around[:, 2].max() > height + HEAD_ABOVE:  # (taller than a head: a wall)
             return None
         top = around[around[:, 2] > around[:, 2].max() - radius]
         if len(top) < MIN_POINTS:
@@ -50,18 +53,19 @@ def head_centre(points: np.ndarray, near: np.ndarray, centre: np.ndarray, width:
         if spread > radius:  # wider than a head's upper half (its points lie within r of the axis)
             return None
         ray = mean - centre
-        est = (mean + ray / np.linalg.norm(ray) * (2.0 / 3.0) * radius)[:2]
-    return est
+        head = mean + ray / np.linalg.norm(ray) * (2.0 / 3.0) * radius
+        est = head[:2]
+    return head
 
 
 def head_pixels(camera, xy, width: float, height: float, radius: float):
     """Where a head over (x, y) may appear in `camera`'s image: the pixel ranges (row slice,
-    column slice) of the box REACH[0] x width around (x, y) from half the object's `height` to
-    HEAD_ABOVE above it, projected, and the pixels a head's radius spans there (at the box's mean
-    depth): (None, None, 0) where the box is behind the camera or out of the image."""
-    reach = REACH[0] * width
+    column slice) of the box max(REACH) x width around (x, y) from half the object's `height` to
+    HEAD_ABOVE and 0.2 m above it, projected, and the pixels a head's radius spans there (at the
+    box's mean depth): (None, None, 0) where the box is behind the camera or out of the image."""
+    reach = max(REACH) * width
     corners = np.array([[x, y, z] for x in (xy[0] - reach, xy[0] + reach) for y in (xy[1] - reach, xy[1] + reach)
-                        for z in (0.5 * height, height + HEAD_ABOVE)])
+                        for z in (0.5 * height, height + HEAD_ABOVE + 0.2)])  # (what rises above a head)
     u, v, z = camera.project(corners)
     if np.any(z <= 0.05):
         return None, None, 0.0
@@ -70,6 +74,14 @@ def head_pixels(camera, xy, width: float, height: float, radius: float):
     if u0 >= u1 or v0 >= v1:
         return None, None, 0.0
     return slice(v0, v1), slice(u0, u1), camera.fx * radius / float(z.mean())
+
+
+def inside(camera, head: np.ndarray, radius: float) -> bool:
+    """Whether a head (its centre, world metres) lies whole inside `camera`'s image: one the
+    image's edge cuts shows its inner part only, whose mean lies inward of the head's."""
+    u, v, z = camera.project(head[None])
+    r = camera.fx * radius / z[0] if z[0] > 0 else np.inf
+    return bool(r <= u[0] <= camera.width - 1 - r and r <= v[0] <= camera.height - 1 - r)
 
 
 def camera_points(depth: np.ndarray, geometry, rows: slice, cols: slice, background=None, stride: int = 1,
@@ -107,9 +119,10 @@ def heads(dets, depths: list, cameras: list, geometries: list, backgrounds: list
             if rows is None:
                 continue
             pts = camera_points(depth, g, rows, cols, bg, stride, s, max(1, int(pixels / PIXELS_A_RADIUS)))
-            xy = head_centre(pts, np.array([d.x, d.y]), g.centre, obj.width, obj.height, radius) if len(pts) else None
-            if xy is not None:
-                found.append(xy)
+            head = head_centre(pts, np.array([d.x, d.y]), g.centre, obj.width, obj.height, radius) if len(pts) else None
+            if (head is not None and np.hypot(head[0] - d.x, head[1] - d.y) <= FROM_CELL * obj.width
+                    and inside(camera, head, radius)):
+                found.append(head[:2])
         out.append(tuple(float(v) for v in np.mean(found, axis=0)) if found else None)
     return out
 
