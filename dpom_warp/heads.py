@@ -153,13 +153,17 @@ class HeadFinder:
 def head_background(state):
     """A camera's background for camera_points from its engine's background_state: None (the
     floor-only model: every point is the frame's), else its model.Background with no depth (mu
-    0) where the floor model has the pixel."""
+    0) where the floor model has the pixel, and each pixel's depth the nearest of its 3 x 3
+    neighbours' (the engine's pixels are `stride` of the frame's: at a wall's edge a frame's pixel
+    on the wall may fall in an engine pixel that reads what is behind it)."""
+    from scipy.ndimage import minimum_filter
+
     if state is None:
         return None
     bg, fallback = state
-    if fallback is None:
-        return bg
-    return dataclasses.replace(bg, mu=np.where(fallback, 0.0, bg.mu))
+    known = bg.mu > 0 if fallback is None else (bg.mu > 0) & ~np.asarray(fallback, bool)
+    near = minimum_filter(np.where(known, bg.mu, np.inf), size=3, mode="nearest")
+    return dataclasses.replace(bg, mu=np.where(np.isfinite(near), near, 0.0))
 
 
 def can_place(cfg) -> bool:

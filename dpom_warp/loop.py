@@ -70,9 +70,9 @@ class OnlineTracks:
     def finish(self) -> tuple[list, dict]:
         """Every frame committed (the last tracking.delay ones handed to the writers); returns
         (tracks, the tracker's report)."""
-        t = time.perf_counter()
         from .heads import place_tracks
 
+        t = time.perf_counter()
         tracks, report = self.tracker.finish()
         self.seconds += time.perf_counter() - t
         self.publish(self.tracker.take_committed())

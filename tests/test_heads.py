@@ -117,17 +117,22 @@ def test_tracks_take_the_head_of_their_frame_s_nearest_detection_within_the_radi
     assert np.allclose(track.xyz, [[0.03, -0.02, 0.0], [2.01, 2.04, 0.0]])
 
 
-def depth_image(camera, head):
+def depth_image(camera, head, wall_x=None, wall_top=2.5):
     """The z-depth image `camera` reads of a sphere of radius R centred at `head` over the floor
-    (z = 0), by casting each pixel's ray (geometry.Camera.rays: its parameter is z-depth)."""
+    (z = 0) and before the plane x = wall_x (`wall_top` high) where given, by casting each pixel's ray
+    (geometry.Camera.rays: its parameter is z-depth)."""
     rays, c = camera.rays(), camera.centre
     oc = c - np.asarray(head, float)
     a = np.sum(rays * rays, axis=-1)
     b = rays @ oc
     disc = b * b - a * (oc @ oc - R * R)
     t = np.where(disc >= 0, (-b - np.sqrt(np.maximum(disc, 0))) / a, np.inf)
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):
         floor = np.where(rays[..., 2] < 0, -c[2] / rays[..., 2], np.inf)
+        if wall_x is not None:
+            tw = (wall_x - c[0]) / rays[..., 0]
+            z = c[2] + tw * rays[..., 2]
+            t = np.minimum(t, np.where((tw > 0) & (z >= 0) & (z <= wall_top), tw, np.inf))
     t = np.minimum(t, floor)
     return np.where(np.isfinite(t), t, 0.0).astype(np.float32)
 
@@ -155,3 +160,52 @@ def test_a_frame_s_head_is_found_from_the_ceiling_and_from_eye_level(mounting):
     assert got is not None and np.hypot(got[0] - head[0], got[1] - head[1]) < bound
     empty = np.where(depth_image(camera, head) > 0, depth_image(camera, head[:2].tolist() + [-5.0]), 0)
     assert heads([cell], [empty], [camera], [geometry], [None], 1, [1.0], obj) == [None]  # the floor alone
+
+
+def test_a_rig_s_head_is_the_mean_of_its_cameras_and_a_camera_without_a_frame_is_left_out():
+    """Two cameras (the ceiling's and the demo's eye-level one) see one head: the rig's position
+    is the mean of what each finds alone; with the second camera's frame missing (None) it is the
+    first camera's alone."""
+    from types import SimpleNamespace
+
+    from dpom_warp.geometry import Camera, pose_from_angles
+    from dpom_warp.heads import heads
+
+    head = np.array([0.2, 4.0, HEIGHT - R])
+    cams = [Camera(160, 120, 150.0, 150.0, 79.5, 59.5, pose_from_angles(3.0, 90.0, y_m=4.0)),
+            Camera(160, 120, 150.0, 150.0, 79.5, 59.5, pose_from_angles(2.2, 20.0))]
+    geos = [SimpleNamespace(rays=c.rays(), centre=c.centre) for c in cams]
+    obj = SimpleNamespace(head_radius=R, width=WIDTH, height=HEIGHT)
+    cell = SimpleNamespace(x=head[0] + 0.1, y=head[1])
+    depths = [depth_image(c, head) for c in cams]
+    alone = [heads([cell], [d], [c], [g], [None], 1, [1.0], obj)[0] for d, c, g in zip(depths, cams, geos)]
+    assert all(a is not None for a in alone) and alone[0] != alone[1]
+    (both,) = heads([cell], depths, cams, geos, [None, None], 1, [1.0, 1.0], obj)
+    assert np.allclose(both, np.mean(alone, axis=0), atol=1e-12)
+    assert heads([cell], [depths[0], None], cams, geos, [None, None], 1, [1.0, 1.0], obj) == [alone[0]]
+
+
+def test_a_wall_in_the_background_is_left_out_and_the_head_beside_it_found():
+    """The demo's camera, a head 0.15 m before a 2.2 m wall (on its far side, nothing read above
+    it): with no background the wall rises over any head within reach (no position); with the
+    background (the wall and floor alone, at half the resolution as an engine at stride 2 holds
+    it, as head_background gives it a run: where a frame's pixel on the wall's top edge falls in
+    an engine pixel above it, which reads nothing, its neighbours' nearest depth is the wall's)
+    its points are not the frame's and the head is found within R / 5, as without the wall."""
+    from types import SimpleNamespace
+
+    from dpom_warp.geometry import Camera, pose_from_angles
+    from dpom_warp.heads import head_background, heads
+    from dpom_warp.model import Background
+
+    head = np.array([-0.5, 4.0, 1.75 - R])
+    camera = Camera(160, 120, 150.0, 150.0, 79.5, 59.5, pose_from_angles(2.2, 20.0))
+    geometry = SimpleNamespace(rays=camera.rays(), centre=camera.centre)
+    obj = SimpleNamespace(head_radius=R, width=WIDTH, height=HEIGHT)
+    cell = SimpleNamespace(x=head[0], y=head[1] - 0.1)
+    frame = depth_image(camera, head, wall_x=head[0] - 0.15, wall_top=2.2)
+    assert heads([cell], [frame], [camera], [geometry], [None], 1, [1.0], obj) == [None]
+    mu = depth_image(camera, head - [0.0, 0.0, 10.0], wall_x=head[0] - 0.15, wall_top=2.2)[::2, ::2].astype(np.float64)
+    bg = head_background((Background(mu, np.full(mu.shape, 0.01), np.zeros(mu.shape), np.zeros(mu.shape)), None))
+    (got,) = heads([cell], [frame], [camera], [geometry], [bg], 2, [1.0], obj)
+    assert got is not None and np.hypot(got[0] - head[0], got[1] - head[1]) < R / 5
