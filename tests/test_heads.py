@@ -1,6 +1,8 @@
 """Tracks placed at their detections' heads (heads.py): the head's centre from its points, by
-hand on spheres cast into a camera; what is not a head (a wall beside it, too few points); the
-placement of tracks (a rendered run's tracks nearer the truth than the cells': test_track_runs)."""
+hand on spheres cast into a camera (from above, level, the demo's camera, whole frames from the
+ceiling and eye level, a rig's two cameras); what is not a head (a wall beside it, unless the
+background has it; too few points; a taller neighbour's); the placement of tracks (a rendered
+run's tracks nearer the truth than the cells': test_track_runs)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
 """A run's track files: tracks.csv and track_table.csv as written and read back, a rendered
 run's tracks, pictures and scores, `dpom-warp track` tracking a finished run again without
-inferring (other methods, input.fps, a Rerun recording), a voxel run's 3D tracks, and a rendered run's tracks at their heads nearer the truth than at the cells."""
+inferring (other methods, input.fps, a Rerun recording), a voxel run's 3D tracks, and a
+rendered run's tracks at their heads nearer the truth than at the cells."""
 
 import csv
 import json
