@@ -163,14 +163,18 @@ def procrustes(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return planar(yaw, *t)
 
 
+def _moved(points: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Floor points (n, 2) moved by the planar transform T (4x4: its turn and shift on the floor)."""
+    return points @ T[:2, :2].T + T[:2, 3]
+
+
 def _matches(T: np.ndarray, src: list, dst: list) -> tuple[np.ndarray, np.ndarray]:
     """The pairs (src point, its nearest dst point of the same frame) closer than MATCH under T."""
     a, b = [], []
     for s_f, d_f in zip(src, dst):
         if not len(s_f) or not len(d_f):
             continue
-        moved = s_f @ T[:2, :2].T + T[:2, 3]
-        dist = np.linalg.norm(moved[:, None] - d_f[None], axis=-1)
+        dist = np.linalg.norm(_moved(s_f, T)[:, None] - d_f[None], axis=-1)
         near = dist.argmin(1)
         ok = dist[np.arange(len(s_f)), near] < MATCH
         a.append(s_f[ok])
@@ -403,7 +407,7 @@ def _flat(seen: list) -> tuple[np.ndarray, np.ndarray]:
 
 def _in_world(seen: list, W: np.ndarray) -> list[np.ndarray]:
     """A camera's detections a frame (its floor frame) moved into the world by the planar W."""
-    return [p @ W[:2, :2].T + W[:2, 3] for p in seen]
+    return [_moved(p, W) for p in seen]
 
 
 def _pair_matches(world: list) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
@@ -447,7 +451,7 @@ def joint_people(seen: list, W: list, free: list, rounds: int = 5) -> list[np.nd
         return P
 
     def world(P):
-        return [pts[c] @ P[c][:2, :2].T + P[c][:2, 3] for c in range(len(P))]
+        return [_moved(pts[c], P[c]) for c in range(len(P))]
 
     x = np.concatenate([[np.arctan2(W[c][1, 0], W[c][0, 0]), W[c][0, 3], W[c][1, 3]] for c in idx])
     for _ in range(rounds):
@@ -538,10 +542,7 @@ def place_cameras(cfg: RunConfig, device: str | None = None, log=print) -> list[
 
 def _pairs_fit(views: list, W: list) -> str:
     """How well every two cameras' people meet under the poses W: the matches and their RMS."""
-    world = []
-    for v, T in zip(views, W):
-        pts, frame = _flat(v.seen)
-        world.append((pts @ T[:2, :2].T + T[:2, 3], frame))
+    world = [(_moved(pts, T), frame) for (pts, frame), T in zip((_flat(v.seen) for v in views), W)]
     d = [np.linalg.norm(world[a][0][i] - world[b][0][j], axis=1) for a, b, i, j in _pair_matches(world)]
     d = np.concatenate(d) if d else np.zeros(0)
     return f"{len(d)} matches" + (f", rms {1000 * np.sqrt(np.mean(d ** 2)):.0f} mm" if len(d) else "")
@@ -551,7 +552,7 @@ def _matched(T: np.ndarray, src: list, dst: list) -> tuple[np.ndarray, int, floa
     """T, the number of `src` points (a frame each) within MATCH of a `dst` point of the same
     frame under T, and their RMS distance."""
     a, b = _matches(T, src, dst)
-    rms = float(np.sqrt(np.mean(np.sum((a @ T[:2, :2].T + T[:2, 3] - b) ** 2, axis=1)))) if len(a) else float("nan")
+    rms = float(np.sqrt(np.mean(np.sum((_moved(a, T) - b) ** 2, axis=1)))) if len(a) else float("nan")
     return T, len(a), rms
 
 
