@@ -230,7 +230,7 @@ class Detector:
         as in a run of the recording). Returns (tracks, report): each track has `id`, `frames`
         (indices into `results`), `xyz` (metres), `rho` and `bridged` (frames without a map
         peak)."""
-        from .heads import MATCH, can_place, place_tracks
+        from .heads import Placer
         from .outputs import fps_of
         from .tracking import Cells, run_tracker
 
@@ -242,8 +242,9 @@ class Detector:
         fps = (fps_of(list(times)) if times is not None else None) or cfg.inputs.fps
         tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, fps, cfg.detection.threshold, method,
                                      None if times is None else list(times))
-        if can_place(cfg):  # at the detections' heads, as the run's tracks.csv
-            place_tracks(tracks, [r.found() for r in results], MATCH * cfg.detection.nms_radius)
+        placer = Placer.of(cfg)
+        if placer is not None:  # at the detections' heads, as the run's tracks.csv
+            placer.tracks(tracks, [r.found() for r in results])
         return tracks, report
 
     def online_tracker(self, fps: float | None = None) -> "OnlineTracks":
@@ -348,20 +349,17 @@ class OnlineTracks:
     metres; `bridged`: held without a map peak), the identities tracks.csv would hold."""
 
     def __init__(self, tracker, cfg: RunConfig):
-        from .heads import MATCH, can_place
+        from .heads import Placer
 
         self._tracker = tracker
         self.tracks: list | None = None  # after finish: every track (id, frames, xyz, rho, bridged)
         self.report: dict | None = None  # after finish: solves, graph sizes, delay
-        self._found: list | None = [] if can_place(cfg) else None  # each frame's detections and heads
-        self._radius = MATCH * cfg.detection.nms_radius
+        self._placer = Placer.of(cfg)  # each frame's detections and heads (None: tracks at the cells)
 
     def _placed(self, committed: list) -> list:
-        from .heads import placed_rows
-
-        if self._found is None:
+        if self._placer is None:
             return committed
-        return [(f, placed_rows(rows, self._found[f], self._radius)) for f, rows in committed]
+        return [(f, self._placer.rows(f, rows)) for f, rows in committed]
 
     def push(self, result: Result, timestamp: float | None = None) -> list[tuple[int, list]]:
         """The next frame's result (`timestamp`: seconds, its camera's clock); returns the
@@ -369,18 +367,16 @@ class OnlineTracks:
         if self.tracks is not None:
             raise RuntimeError("OnlineTracks.push after finish: expected a new online_tracker()")
         self._tracker.push(result.rho_star, timestamp)
-        if self._found is not None:
-            self._found.append(result.found())
+        if self._placer is not None:
+            self._placer.add(result.found())
         return self._placed(self._tracker.take_committed())
 
     def finish(self) -> list[tuple[int, list]]:
         """Commit the frames still waiting and return them; `tracks` then holds every track."""
-        from .heads import place_tracks
-
         if self.tracks is None:
             self.tracks, self.report = self._tracker.finish()
-            if self._found is not None:
-                place_tracks(self.tracks, self._found, self._radius)
+            if self._placer is not None:
+                self._placer.tracks(self.tracks)
         return self._placed(self._tracker.take_committed())
 
 

@@ -179,30 +179,59 @@ def found_in(record: dict) -> list:
     return [(p[0], p[1], h) for p, h in zip(xy, record.get("heads") or [None] * len(xy))]
 
 
+def head_near(found: list | None, xyz, radius: float):
+    """The head (x, y) of the nearest of a frame's detections (`found`: [(x, y, head (x, y) or
+    None)]) within `radius` of `xyz`, or None."""
+    if not found:
+        return None
+    dist = [np.hypot(x - xyz[0], y - xyz[1]) for x, y, _ in found]
+    j = int(np.argmin(dist))
+    return found[j][2] if dist[j] <= radius else None
+
+
 def placed_rows(rows: list, found: list | None, radius: float) -> list:
     """A frame's track rows [(id, xyz, bridged)] with each row that is not bridged moved to the
-    head of the nearest of the frame's detections within `radius` of it (`found`: [(x, y, head
-    (x, y) or None)] of the frame's detections; None: as they are)."""
-    if not found:
-        return rows
-    cells = np.array([f[:2] for f in found], np.float64)
+    head of the nearest of the frame's detections within `radius` of it (head_near; `found`
+    None: as they are)."""
     out = []
     for tid, xyz, bridged in rows:
-        head = None
-        if not bridged:
-            dist = np.hypot(cells[:, 0] - xyz[0], cells[:, 1] - xyz[1])
-            j = int(np.argmin(dist))
-            head = found[j][2] if dist[j] <= radius else None
+        head = None if bridged else head_near(found, xyz, radius)
         out.append((tid, xyz if head is None else np.array([head[0], head[1], xyz[2]]), bridged))
     return out
 
 
-def place_tracks(tracks: list, found: list, radius: float) -> list:
-    """Tracks (track_files.Track, frames indexing `found`) with each frame that is not bridged
-    at its detection's head (placed_rows); `found[t]`: frame t's [(x, y, head or None)]."""
+def place_tracks(tracks: list, found: list, radius: float) -> int:
+    """Tracks (track_files.Track, frames indexing `found`) moved in place: each frame that is
+    not bridged at its detection's head (head_near; `found[t]`: frame t's detections); returns
+    how many track-frames are at a head."""
+    placed = 0
     for tr in tracks:
         for i, t in enumerate(tr.frames):
-            if not tr.bridged[i]:
-                (_, xyz, _), = placed_rows([(tr.id, tr.xyz[i], False)], found[t], radius)
-                tr.xyz[i] = xyz
-    return tracks
+            head = None if tr.bridged[i] else head_near(found[t], tr.xyz[i], radius)
+            if head is not None:
+                tr.xyz[i, :2] = head
+                placed += 1
+    return placed
+
+
+class Placer:
+    """A run's tracks placed at their detections' heads: as each frame's detections come
+    (`add`), the rows an online tracker commits (`rows`), and whole tracks (`tracks`). `of(cfg)`
+    is None where the run places none (can_place)."""
+
+    def __init__(self, radius: float):
+        self.radius, self.found = radius, []
+
+    @classmethod
+    def of(cls, cfg) -> "Placer | None":
+        return cls(MATCH * cfg.detection.nms_radius) if can_place(cfg) else None
+
+    def add(self, found: list) -> None:
+        self.found.append(found)
+
+    def rows(self, frame: int, rows: list) -> list:
+        return placed_rows(rows, self.found[frame], self.radius)
+
+    def tracks(self, tracks: list, found: list | None = None) -> int:
+        """place_tracks over the frames added (or `found`)."""
+        return place_tracks(tracks, self.found if found is None else found, self.radius)

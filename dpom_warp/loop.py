@@ -26,15 +26,13 @@ class OnlineTracks:
     the writers with its tracks and trails (ShownTracks)."""
 
     def __init__(self, view: RunView, writers: Writers, tracker):
-        from .heads import MATCH, can_place
+        from .heads import Placer
 
         self.writers, self.tracker = writers, tracker
         self.trails = ShownTracks(view.geometry, view.cfg.tracking.trail)
         self.awaiting: dict[int, FrameDone] = {}  # frames pushed, not yet committed
         self.seconds = 0.0  # the tracker's time
-        # each frame's detections and heads, where the run places tracks on heads (heads.py)
-        self.found: list | None = [] if can_place(view.cfg) else None
-        self.radius = MATCH * view.cfg.detection.nms_radius
+        self.placer = Placer.of(view.cfg)  # each frame's detections and heads (None: tracks at the cells)
 
     @classmethod
     def for_run(cls, view: RunView, writers: Writers, fps: float) -> OnlineTracks:
@@ -49,19 +47,17 @@ class OnlineTracks:
         from .heads import found_in
 
         self.awaiting[done.index] = done
-        if self.found is not None:
-            self.found.append(found_in(done.record))
+        if self.placer is not None:
+            self.placer.add(found_in(done.record))
         t = time.perf_counter()
         self.tracker.push(done.map, done.timestamp)  # frames dropped between: reach by the time apart
         self.seconds += time.perf_counter() - t
         self.publish(self.tracker.take_committed())
 
     def publish(self, committed) -> None:
-        from .heads import placed_rows
-
         for f, rows in committed:
-            if self.found is not None:
-                rows = placed_rows(rows, self.found[f], self.radius)
+            if self.placer is not None:
+                rows = self.placer.rows(f, rows)
             shown = self.trails.at(f, rows)
             done = self.awaiting.pop(f, None)
             if done is not None:
@@ -70,14 +66,12 @@ class OnlineTracks:
     def finish(self) -> tuple[list, dict]:
         """Every frame committed (the last tracking.delay ones handed to the writers); returns
         (tracks, the tracker's report)."""
-        from .heads import place_tracks
-
         t = time.perf_counter()
         tracks, report = self.tracker.finish()
         self.seconds += time.perf_counter() - t
         self.publish(self.tracker.take_committed())
-        if self.found is not None:
-            tracks = place_tracks(tracks, self.found, self.radius)
+        if self.placer is not None:
+            self.placer.tracks(tracks)
         return tracks, report
 
 

@@ -337,16 +337,15 @@ def placed_on_heads(tracks: list, records: list[Path], cfg) -> dict | None:
     (frames/<stem>.json, in the tracks' frame order) found them; returns the tracking block's
     `positions` (how many track-frames are at a head, how many at a cell centre), or None
     where the run places none (heads.can_place)."""
-    from .heads import MATCH, can_place, found_in, place_tracks
+    from .heads import Placer, found_in
 
-    if not can_place(cfg):
+    placer = Placer.of(cfg)
+    if placer is None:
         return None
     found = [found_in(json.loads(path.read_text()) if path.is_file() else {}) for path in records]
-    before = [tr.xyz.copy() for tr in tracks]
-    place_tracks(tracks, found, MATCH * cfg.detection.nms_radius)
-    moved = sum(int(np.any(b != tr.xyz, axis=1).sum()) for b, tr in zip(before, tracks))
+    at_heads = placer.tracks(tracks, found)
     shown = sum(int((~tr.bridged).sum()) for tr in tracks)
-    return {"at": "head", "head": moved, "cell": shown - moved}
+    return {"at": "head", "head": at_heads, "cell": shown - at_heads}
 
 
 def tracked_frames(view: RunView, writers: Writers, done: list[Path], maps, truth, tracks,
