@@ -14,7 +14,8 @@ from pictures import assert_picture
 
 def small_config(tmp_path, frames=3, **changes):
     """The demo config shrunk to a 128x106 camera and a coarse grid, rendering `frames` frames
-    (3 people, 4 background frames) into tmp_path/scene; `changes` replace top-level sections."""
+    (3 people, 4 background frames) into tmp_path/scene, no evaluation figures; `changes` replace
+    top-level sections."""
     cfg = yaml.safe_load(open(CONFIGS / "demo_people.yaml"))
     cache = tmp_path / "scene"
     cfg["device"] = "cpu"
@@ -24,6 +25,7 @@ def small_config(tmp_path, frames=3, **changes):
                          intrinsics={"fx": 91.25, "fy": 91.25, "cx": 63.5, "cy": 52.5})
     cfg["grid"].update(x=[-2.5, 2.5, 0.2], y=[1.0, 6.5, 0.2])
     cfg["evaluation"]["ground_truth"] = f"{cache}/ground_truth.json"
+    cfg["evaluation"]["plots"] = False  # 1.7 s of matplotlib a run; the tests of the figures turn them on
     cfg["output"]["dir"] = str(tmp_path / "out")
     cfg["synthetic"].update(cache=str(cache), frames=frames, background_frames=4, people=3, seed=3)
     for k, v in changes.items():
