@@ -79,16 +79,44 @@ def pose_warnings(report: dict, in_view: float, cells: int, floor_xy=None) -> li
     return out
 
 
-def posed(cfg: RunConfig, fit, fitted_on: str, frames, t0: float, log):
+def posed(cfg: RunConfig, fit, fitted_on: str, frames, t0: float, log, of_median: bool = False):
     """The camera posed by a floor fit and summary.json's ground_fit report, the fit logged
-    ("ground plane from `fitted_on`: ..."); `frames`: what the report says it was fitted on."""
+    ("ground plane from `fitted_on`: ..."); `frames`: what the report says it was fitted on.
+    The floor's depth noise goes into the report (`depth_noise`), with a warning where the
+    model's is far from it (noise_warning), unless the fit was on a median of frames
+    (`of_median`: auto's estimated background, whose noise is less than a frame's)."""
     floor = f"; {floor_words(fit.floor_xy)}" if fit.floor_xy is not None else ""
     log(f"ground plane from {fitted_on}: camera {fit.camera_height:.3f} m above the floor, pitch "
         f"{fit.pitch_deg:.2f} deg, roll {fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms "
         f"{1000 * fit.rms_m:.1f} mm){floor}")
     report = {**fit.report(), "rms_m": fit.rms_m, "floor_xy": fit.floor_xy, "frames": frames,
               "fit_s": time.perf_counter() - t0, **_ambiguity(fit, log)}
+    if fit.noise is not None and not of_median:
+        report["depth_noise"] = fit.noise
+        warned = noise_warning(fit.noise, cfg.model.sensor_noise)
+        if warned:
+            log(f"warning: {warned}")
+            report["noise_warning"] = warned
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
+
+
+NOISE_OFF = 1.3  # the floor's noise this many times the model's, or the model's this many times the floor's: a warning
+
+
+def noise_warning(noise: dict, model_noise) -> str | None:
+    """One line when the floor's depth noise (ground.floor_noise) is NOISE_OFF times
+    model.sensor_noise's sigma or more, or 1 / NOISE_OFF or less (over its bins, weighted by
+    their readings), naming the key and the (a, b) the floor shows (with the model's a); else None."""
+    from .ground import noise_b, noise_words
+
+    a, b = model_noise
+    z, sigma, n = (np.array(c, float) for c in zip(*noise["bins"]))
+    ratio = float(np.sum(n * sigma) / np.sum(n * (a + b * z ** 2)))
+    if 1.0 / NOISE_OFF < ratio < NOISE_OFF:
+        return None
+    return (f"model.sensor_noise: the floor's depth readings scatter {ratio:.1f}x what [{a:g}, {b:g}] says "
+            f"({noise_words(noise)}); this sensor's is about [{a:g}, {noise_b(noise['bins'], a):g}] (sigma(z) = a + b z^2, metres): "
+            f"set model.sensor_noise to it")
 
 
 def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):
@@ -380,4 +408,4 @@ def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=pri
                          f"background: {e}") from None
     refuse_low_view_from_above(cfg, fit, f"{files[0]} and {len(files) - 1} more frames (their estimated background)")
     return posed(cfg, fit, f"the background estimated on {len(files)} frames",
-                 f"estimated background of {len(files)} frames", t, log)
+                 f"estimated background of {len(files)} frames", t, log, of_median=True)

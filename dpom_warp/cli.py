@@ -176,7 +176,7 @@ def _fit_ground(args) -> int:
     import yaml
 
     from .config import load_camera_file
-    from .ground import GroundOptions, fit_ground_files, fit_ground_named, frames_named
+    from .ground import GroundOptions, fit_ground_files, fit_ground_named, frames_named, noise_words
     from .sources import recording_frames
     from .io import InputError, write_text_atomic
     from .names import is_live, is_recording
@@ -217,6 +217,9 @@ def _fit_ground(args) -> int:
         x0, x1, y0, y1 = fit.floor_xy
         print(f"floor in view within {args.depth_max:g} m, in this pose's world: x {x0:g} to {x1:g} m, "
               f"y {y0:g} to {y1:g} m")
+    if fit.noise is not None:  # the sensor's noise, for model.sensor_noise
+        print(f"depth noise on the floor: {noise_words(fit.noise)}: model.sensor_noise about "
+              f"[{fit.noise['a']:g}, {fit.noise['b']:g}]")
     if not args.output:
         print(text, end="")
     return 0

@@ -83,6 +83,7 @@ class GroundFit:
         floor_xy: (x_min, x_max, y_min, y_max) of the floor in view, world metres: the 1st
             and 99th percentiles of the inliers (within depth_max), outward to 0.1 m (where a
             ground grid goes; people nearer than its near edge may still be in view).
+        noise: the depth noise the floor's readings show (floor_noise), or None.
     """
 
     normal: np.ndarray
@@ -95,6 +96,7 @@ class GroundFit:
     rms_m: float
     ambiguity: str | None = None
     floor_xy: tuple[float, float, float, float] | None = None
+    noise: dict | None = None
 
     def report(self) -> dict:
         """The pose as written by `dpom-warp fit-ground` (pastable into camera.extrinsics)."""
@@ -392,7 +394,58 @@ def fit_ground(points: np.ndarray, options: GroundOptions = GroundOptions(), see
     pose = pose_from_plane(n, d)
     return GroundFit(normal=n, offset=d, T_world_from_camera=pose, camera_height=d, pitch_deg=pitch,
                      roll_deg=roll, inlier_count=count, rms_m=rms, ambiguity=ambiguity,
-                     floor_xy=floor_extent(in_range, n, d, pose, options.distance_threshold))
+                     floor_xy=floor_extent(in_range, n, d, pose, options.distance_threshold),
+                     noise=floor_noise(pts, n, d, options.noise[0], options.depth_max))
+
+
+NOISE_BIN_M = 0.5  # floor_noise's range bins, metres
+NOISE_MIN_POINTS = 200  # readings a bin needs
+NOISE_GRAZING_DEG = 15.0  # rays meeting the floor at less than this are left out
+NOISE_BAND = 0.05  # readings farther from the floor along the ray than this share of its depth are not its
+
+
+def floor_noise(points: np.ndarray, normal: np.ndarray, offset: float, a: float, depth_max: float) -> dict | None:
+    """The depth noise the floor's readings show: along each ray that meets the floor (n, d)
+    within depth_max at NOISE_GRAZING_DEG or more, the reading's depth z minus the floor's z_p
+    (readings within NOISE_BAND z_p of it); in NOISE_BIN_M bins of z_p with NOISE_MIN_POINTS
+    readings or more, sigma = 1.4826 x the median absolute deviation (what stands on the floor,
+    within the band, moves it little) at their median z_p (the floor's near edge fills only the
+    far end of its bin), and b of sigma(z) = a + b z^2 with `a` given, least
+    squares weighted by the bins' readings. Returns {"a", "b", "bins": [[z, sigma, readings],
+    ...]} (metres), or None with fewer than two such bins. A single frame's noise (a median of
+    several frames, auto's background, has less)."""
+    pts = np.asarray(points, dtype=np.float64)
+    z = pts[:, 2]
+    rays = pts / z[:, None]
+    ray_dot = rays @ normal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zp = np.where(ray_dot < 0, -offset / ray_dot, np.inf)
+    grazing = np.abs(ray_dot) / np.linalg.norm(rays, axis=1)
+    near = ((zp <= depth_max) & (grazing >= math.sin(math.radians(NOISE_GRAZING_DEG)))
+            & (np.abs(z - zp) < NOISE_BAND * zp))
+    r, zp = (z - zp)[near], zp[near]
+    bins = []
+    for lo in np.arange(np.floor(zp.min() / NOISE_BIN_M) * NOISE_BIN_M if len(zp) else 0.0, depth_max, NOISE_BIN_M):
+        inside = (zp >= lo) & (zp < lo + NOISE_BIN_M)
+        if inside.sum() >= NOISE_MIN_POINTS:
+            rr = r[inside]
+            bins.append([round(float(np.median(zp[inside])), 3),
+                         round(1.4826 * float(np.median(np.abs(rr - np.median(rr)))), 5), int(inside.sum())])
+    if len(bins) < 2:
+        return None
+    return {"a": a, "b": noise_b(bins, a), "bins": bins}
+
+
+def noise_words(noise: dict, bins: int = 4) -> str:
+    """floor_noise's first `bins` bins in words: "18 mm at 2.5 m, 21 mm at 2.7 m, ..."."""
+    return ", ".join(f"{1000 * s:.0f} mm at {z:.1f} m" for z, s, _ in noise["bins"][:bins])
+
+
+def noise_b(bins: list, a: float) -> float:
+    """b of sigma(z) = a + b z^2 through floor_noise's bins ([z, sigma, readings]) with `a`
+    given: least squares weighted by their readings, at least 0, to 1e-5."""
+    zc, sigma, n = (np.array(c, float) for c in zip(*bins))
+    return round(max(float(np.sum(n * (sigma - a) * zc ** 2) / np.sum(n * zc ** 4)), 0.0), 5)
 
 
 def floor_extent(points: np.ndarray, normal: np.ndarray, offset: float, pose: np.ndarray,

@@ -184,7 +184,9 @@ class ModelParams(Node):  # the config's `model` section (config.model_section: 
                                           "(the solid's surface, or the facing plane), metres")
     sensor_noise: Pair = Field((0.002, 0.0015),
                                description="sensor sigma(z) = a + b z^2, metres; adds to sigma_object "
-                                           "and floors the background spread")
+                                           "and floors the background spread (a Kinect v2's; a floor "
+                                           "fit measures the sensor's: summary.json ground_fit.depth_noise, "
+                                           "a warning when 1.3x off)")
     outlier_prob: Num = Field(0.05, gt=0, lt=1, description="pi_out")
     missing_prob: Num = Field(0.05, ge=0, lt=1,
                               description="pi_inf of objects and of the floor-only background")

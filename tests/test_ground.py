@@ -177,6 +177,11 @@ def test_fit_ground_cli_writes_a_pose_that_pastes_into_a_config(tmp_path, capsys
                      printed)
     x0, x1, y0, y1 = map(float, seen.groups())
     assert -2.0 < x0 < -1.0 and 1.0 < x1 < 2.0 and 1.5 < y0 < 3.0 and 5.0 < y1 <= 6.0
+    # and the sensor's noise, a Kinect v1's (as test_run_with_auto_pose_on_the_real_frame)
+    noise = re.search(r"depth noise on the floor: (\d+) mm at (\S+) m, .*: model.sensor_noise about "
+                      r"\[0.002, (\S+)\]", printed)
+    sigma, z, b = int(noise[1]), float(noise[2]), float(noise[3])
+    assert b == pytest.approx(0.0025, rel=0.15) and sigma / 1000 == pytest.approx(0.002 + b * z ** 2, rel=0.2)
     pose = yaml.safe_load(out.read_text())
     assert set(pose) == {"T_world_from_camera", "camera_height", "pitch_deg", "roll_deg", "inlier_count"}
     cfg = yaml.safe_load(open(CONFIGS / "real_five_people.yaml"))
@@ -207,6 +212,43 @@ def test_fit_ground_cli_no_floor_is_one_line_exit_2(tmp_path, capsys):
     assert "expected auto or three numbers" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("noise", [(0.002, 0.0015), (0.002, 0.003), (0.001, 0.0008)])
+def test_the_floor_says_the_sensors_depth_noise(noise):
+    """ground.floor_noise: a floor rendered with sigma(z) = a + b z^2 and two people and a cabinet
+    standing on it gives back b within 8 % (the people and the cabinet's foot are within the
+    band, the median absolute deviation leaves them out); each bin's sigma within 10 % of
+    a + b z^2 at its readings' median depth."""
+    rng = np.random.default_rng(3)
+    cam = camera(pose_from_angles(1.6, 20, 0))
+    meshes = [_box((20, 20, 0.1), (0, 5, -0.05)), _box((0.6, 0.4, 1.2), (1.0, 3.5, 0.6)),
+              person_mesh(1.75, 0.3, 1.0).translate((-0.5, 3.0, 0)), person_mesh(1.6, 1.2, 2.0).translate((0.2, 4.5, 0))]
+    _, frames = rendered(cam, meshes, rng, frames=1, spec=SceneSpec(noise=noise))
+    a, b = noise
+    fit = fit_ground_frames(frames, cam, GroundOptions(noise=(a, 0.0015)))  # b is what is measured
+    assert fit.noise["a"] == a and fit.noise["b"] == pytest.approx(b, rel=0.08)
+    z, sigma, n = (np.array(c) for c in zip(*fit.noise["bins"]))
+    assert len(z) >= 4 and (n >= 200).all() and np.all(np.diff(z) > 0.3)
+    np.testing.assert_allclose(sigma, a + b * z ** 2, rtol=0.1)
+
+
+def test_a_model_noise_far_from_the_floors_is_said():
+    from dpom_warp.camera_setup import noise_warning
+
+    bins = [[2.0, 0.008, 300], [3.0, 0.0155, 100]]  # what a + b z^2 gives with (0.002, 0.0015)
+    floor = {"a": 0.002, "b": 0.0015, "bins": bins}
+    assert noise_warning(floor, (0.002, 0.0015)) is None
+    assert noise_warning(floor, (0.002, 0.0015 * 1.2)) is None  # 0.0095 and 0.0155 + 0.0027: 1.18x
+    louder = {"a": 0.002, "b": 0.0, "bins": [[z, 1.5 * s, k] for z, s, k in bins]}  # (b: the ground's a's)
+    said = noise_warning(louder, (0.002, 0.0015))
+    assert said.startswith("model.sensor_noise: the floor's depth readings scatter 1.5x what [0.002, 0.0015] "
+                           "says (12 mm at 2.0 m, 23 mm at 3.0 m); this sensor's is about [0.002, 0.00241]")
+    # b = sum n (sigma - a) z^2 / sum n z^4 = (300 x 0.010 x 4 + 100 x 0.02125 x 9) / (300 x 16 + 100 x 81)
+    quieter = {"a": 0.002, "b": 0.0, "bins": [[z, s / 1.5, k] for z, s, k in bins]}
+    assert "scatter 0.7x what" in noise_warning(quieter, (0.002, 0.0015))
+    # the b suggested goes with the model's a: (300 x 0.011 x 4 + 100 x 0.02225 x 9) / 12900
+    assert "this sensor's is about [0.001, 0.00258]" in noise_warning(louder, (0.001, 0.0015))
+
+
 def test_run_with_auto_pose_on_the_real_frame(tmp_path, capsys):
     cfg = yaml.safe_load(open(CONFIGS / "real_five_people.yaml"))
     cfg["input"]["frames"] = str(REAL / "depth_mm.png")
@@ -224,9 +266,16 @@ def test_run_with_auto_pose_on_the_real_frame(tmp_path, capsys):
     assert ((xy[:, 1] > 1.5) & (xy[:, 1] < 3.2)).sum() >= 5
     assert_picture(tmp_path / "out" / "images" / "depth_mm.png", (512 + 200, 424))
     assert "warnings" not in summary["ground_fit"]  # a plausible floor, the corridor grid in view
+    # the corridor config's Kinect v1 noise is the floor's (b 0.0025; no warning), the default is not
+    assert summary["ground_fit"]["depth_noise"]["b"] == pytest.approx(0.0025, rel=0.15)
+    assert "noise_warning" not in summary["ground_fit"]
     assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "readme"),  # the README's grid
                  "--set", "grid.x=[-2, 2, 0.1]", "--set", "grid.y=[1, 6, 0.1]"]) == 0
     assert "warnings" not in json.load(open(tmp_path / "readme" / "summary.json"))["ground_fit"]
+    assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "default_noise"),
+                 "--set", "model.sensor_noise=[0.002, 0.0015]"]) == 0
+    said = [x for x in capsys.readouterr().out.splitlines() if x.startswith("warning: model.sensor_noise:")]
+    assert len(said) == 1 and "scatter 1.7x what [0.002, 0.0015] says" in said[0]
     # the grid moved 2.5 m to the right, beside the corridor: said in one line, kept in summary.json
     assert main(["run", str(path), "--no-progress", "--output", str(tmp_path / "beside"),
                  "--set", "grid.x=[1.0, 7.0, 0.1]"]) == 0
