@@ -344,7 +344,8 @@ def recipe_words(out: Path) -> str:
 
     real = ROOT.parent / "shared" / "data" / "real" / "five_people"
     four = out / "recipe.yaml"
-    four.write_text(yaml.safe_dump({"input": {"frames": str(real / "depth_mm.png")}, "camera": str(real / "camera.yaml"),
+    four.write_text(yaml.safe_dump({"input": {"frames": str(real / "depth_mm.png")},
+                                    "camera": str(real / "camera.yaml"),
                                     "grid": {"x": [-2, 2, 0.1], "y": [1, 6, 0.1]}, "device": "cpu"}))
     plain = run_config(str(four), out / "recipe", ["output.images=false"])
     g = plain["ground_fit"]

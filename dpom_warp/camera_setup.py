@@ -100,7 +100,7 @@ def posed(cfg: RunConfig, fit, fitted_on: str, frames, t0: float, log, of_median
     return dataclasses.replace(cfg.camera, T_world_from_camera=fit.T_world_from_camera), report
 
 
-NOISE_OFF = 1.3  # the floor's noise this many times the model's, or the model's this many times the floor's: a warning
+NOISE_OFF = 1.3  # the floor's noise this many times the model's, or the model's the floor's: a warning
 
 
 def noise_warning(noise: dict, model_noise) -> str | None:
@@ -114,9 +114,10 @@ def noise_warning(noise: dict, model_noise) -> str | None:
     ratio = float(np.sum(n * sigma) / np.sum(n * (a + b * z ** 2)))
     if 1.0 / NOISE_OFF < ratio < NOISE_OFF:
         return None
+    own = noise_b(noise["bins"], a)
     return (f"model.sensor_noise: the floor's depth readings scatter {ratio:.1f}x what [{a:g}, {b:g}] says "
-            f"({noise_words(noise)}); this sensor's is about [{a:g}, {noise_b(noise['bins'], a):g}] (sigma(z) = a + b z^2, metres): "
-            f"set model.sensor_noise to it")
+            f"({noise_words(noise)}); this sensor's is about [{a:g}, {own:g}] (sigma(z) = a + b z^2, "
+            f"metres): set model.sensor_noise to it")
 
 
 def fit_camera_pose(cfg: RunConfig, files: list[Path], log=print):

@@ -221,7 +221,8 @@ def test_the_floor_says_the_sensors_depth_noise(noise):
     rng = np.random.default_rng(3)
     cam = camera(pose_from_angles(1.6, 20, 0))
     meshes = [_box((20, 20, 0.1), (0, 5, -0.05)), _box((0.6, 0.4, 1.2), (1.0, 3.5, 0.6)),
-              person_mesh(1.75, 0.3, 1.0).translate((-0.5, 3.0, 0)), person_mesh(1.6, 1.2, 2.0).translate((0.2, 4.5, 0))]
+              person_mesh(1.75, 0.3, 1.0).translate((-0.5, 3.0, 0)),
+              person_mesh(1.6, 1.2, 2.0).translate((0.2, 4.5, 0))]
     _, frames = rendered(cam, meshes, rng, frames=1, spec=SceneSpec(noise=noise))
     a, b = noise
     fit = fit_ground_frames(frames, cam, GroundOptions(noise=(a, 0.0015)))  # b is what is measured
