@@ -238,12 +238,14 @@ def test_a_model_noise_far_from_the_floors_is_said():
     bins = [[2.0, 0.008, 300], [3.0, 0.0155, 100]]  # what a + b z^2 gives with (0.002, 0.0015)
     floor = {"a": 0.002, "b": 0.0015, "bins": bins}
     assert noise_warning(floor, (0.002, 0.0015)) is None
-    assert noise_warning(floor, (0.002, 0.0015 * 1.2)) is None  # 0.0095 and 0.0155 + 0.0027: 1.18x
-    louder = {"a": 0.002, "b": 0.0, "bins": [[z, 1.5 * s, k] for z, s, k in bins]}  # (b: the ground's a's)
+    # a model of (0.002, 0.0018) says 0.0092 and 0.0182: the floor's (2.4 + 1.55) / (2.76 + 1.82) = 0.86 of it
+    assert noise_warning(floor, (0.002, 0.0018)) is None
+    # 1.5 times the scatter (the warning's pair is its own, from the bins: "b" is not read)
+    louder = {"a": 0.002, "b": 0.0, "bins": [[z, 1.5 * s, k] for z, s, k in bins]}
     said = noise_warning(louder, (0.002, 0.0015))
+    # b = sum n (sigma - a) z^2 / sum n z^4 = (300 x 0.010 x 4 + 100 x 0.02125 x 9) / (300 x 16 + 100 x 81)
     assert said.startswith("model.sensor_noise: the floor's depth readings scatter 1.5x what [0.002, 0.0015] "
                            "says (12 mm at 2.0 m, 23 mm at 3.0 m); this sensor's is about [0.002, 0.00241]")
-    # b = sum n (sigma - a) z^2 / sum n z^4 = (300 x 0.010 x 4 + 100 x 0.02125 x 9) / (300 x 16 + 100 x 81)
     quieter = {"a": 0.002, "b": 0.0, "bins": [[z, s / 1.5, k] for z, s, k in bins]}
     assert "scatter 0.7x what" in noise_warning(quieter, (0.002, 0.0015))
     # the b suggested goes with the model's a: (300 x 0.011 x 4 + 100 x 0.02225 x 9) / 12900
