@@ -79,19 +79,18 @@ def pose_warnings(report: dict, in_view: float, cells: int, floor_xy=None) -> li
     return out
 
 
-def posed(cfg: RunConfig, fit, fitted_on: str, frames, t0: float, log, of_median: bool = False):
+def posed(cfg: RunConfig, fit, fitted_on: str, frames, t0: float, log):
     """The camera posed by a floor fit and summary.json's ground_fit report, the fit logged
     ("ground plane from `fitted_on`: ..."); `frames`: what the report says it was fitted on.
-    The floor's depth noise goes into the report (`depth_noise`), with a warning where the
-    model's is far from it (noise_warning), unless the fit was on a median of frames
-    (`of_median`: auto's estimated background, whose noise is less than a frame's)."""
+    The floor's depth noise, where the fit has one, goes into the report (`depth_noise`), with
+    a warning where the model's is far from it (noise_warning)."""
     floor = f"; {floor_words(fit.floor_xy)}" if fit.floor_xy is not None else ""
     log(f"ground plane from {fitted_on}: camera {fit.camera_height:.3f} m above the floor, pitch "
         f"{fit.pitch_deg:.2f} deg, roll {fit.roll_deg:.2f} deg ({fit.inlier_count} inliers, rms "
         f"{1000 * fit.rms_m:.1f} mm){floor}")
     report = {**fit.report(), "rms_m": fit.rms_m, "floor_xy": fit.floor_xy, "frames": frames,
               "fit_s": time.perf_counter() - t0, **_ambiguity(fit, log)}
-    if fit.noise is not None and not of_median:
+    if fit.noise is not None:
         report["depth_noise"] = fit.noise
         warned = noise_warning(fit.noise, cfg.model.sensor_noise)
         if warned:
@@ -408,5 +407,6 @@ def fit_pose_on_estimate(cfg: RunConfig, files: list[Path], device: str, log=pri
         raise InputError(f"{files[0]} and {len(files) - 1} more frames: in their estimated "
                          f"background: {e}") from None
     refuse_low_view_from_above(cfg, fit, f"{files[0]} and {len(files) - 1} more frames (their estimated background)")
+    fit = dataclasses.replace(fit, noise=None)  # a median of frames is quieter than the sensor
     return posed(cfg, fit, f"the background estimated on {len(files)} frames",
-                 f"estimated background of {len(files)} frames", t, log, of_median=True)
+                 f"estimated background of {len(files)} frames", t, log)

@@ -190,9 +190,7 @@ def _refine(points, normal, offset, options: GroundOptions, max_turn_deg: float 
     rays = points / z[:, None]
 
     def inliers(normal, offset):
-        ray_dot = rays @ normal
-        with np.errstate(divide="ignore"):
-            plane_depth = np.where(ray_dot < 0, -offset / ray_dot, np.inf)
+        plane_depth = floor_depth(rays, normal, offset)
         zp = np.minimum(plane_depth, z.max())
         sigma = a + b * zp ** 2
         band = np.maximum(0.5 * options.distance_threshold, 3.0 * sigma)
@@ -220,6 +218,14 @@ def _refine(points, normal, offset, options: GroundOptions, max_turn_deg: float 
     near = inliers(normal, offset)[0]
     rms = float(np.sqrt(np.mean((points[near] @ normal + offset) ** 2))) if near.any() else float("nan")
     return normal, offset, int(near.sum()), rms
+
+
+def floor_depth(rays: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
+    """Where each ray (x/z, y/z, 1) meets the plane n . X + d = 0: its depth z = -d / (n . r),
+    inf for a ray that does not go down to it (n . r >= 0)."""
+    ray_dot = rays @ normal
+    with np.errstate(divide="ignore"):
+        return np.where(ray_dot < 0, -offset / ray_dot, np.inf)
 
 
 AUTO_TURN_DEG = 10.0  # up: auto judges a candidate by its refined plane unless that turned further
@@ -417,15 +423,15 @@ def floor_noise(points: np.ndarray, normal: np.ndarray, offset: float, a: float,
     pts = np.asarray(points, dtype=np.float64)
     z = pts[:, 2]
     rays = pts / z[:, None]
-    ray_dot = rays @ normal
-    with np.errstate(divide="ignore", invalid="ignore"):
-        zp = np.where(ray_dot < 0, -offset / ray_dot, np.inf)
-    grazing = np.abs(ray_dot) / np.linalg.norm(rays, axis=1)
+    zp = floor_depth(rays, normal, offset)
+    grazing = np.abs(rays @ normal) / np.linalg.norm(rays, axis=1)
     near = ((zp <= depth_max) & (grazing >= math.sin(math.radians(NOISE_GRAZING_DEG)))
             & (np.abs(z - zp) < NOISE_BAND * zp))
     r, zp = (z - zp)[near], zp[near]
+    if not len(zp):
+        return None
     bins = []
-    for lo in np.arange(np.floor(zp.min() / NOISE_BIN_M) * NOISE_BIN_M if len(zp) else 0.0, depth_max, NOISE_BIN_M):
+    for lo in np.arange(np.floor(zp.min() / NOISE_BIN_M) * NOISE_BIN_M, depth_max, NOISE_BIN_M):
         inside = (zp >= lo) & (zp < lo + NOISE_BIN_M)
         if inside.sum() >= NOISE_MIN_POINTS:
             rr = r[inside]

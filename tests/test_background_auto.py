@@ -210,6 +210,7 @@ def test_auto_background_with_workers_and_fitted_pose(tmp_path):
     fit = json.load(open(tmp_path / "fit" / "summary.json"))["ground_fit"]
     assert fit["frames"] == "estimated background of 6 frames"
     assert abs(fit["camera_height"] - 2.2) < 0.03 and abs(fit["pitch_deg"] - 20.0) < 0.5
+    assert "depth_noise" not in fit  # a median of frames is quieter than the sensor: no noise said
 
 
 def test_auto_background_samples_max_frames_in_chunks_of_16(tmp_path, monkeypatch):
