@@ -6,6 +6,7 @@ import dataclasses
 import json
 import time
 from collections import Counter
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -278,7 +279,8 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
                          "frames_per_worker": dict(sorted(plan.by_worker.items()))}
     stamps = {f.name: plan.records[f.name].get("timestamp") for f in done}
     summary["tracking"], end = track_run(plan.view, plan.writers, done, truth, log=lambda *_: None,
-                                         fps=fps_of(list(stamps.values())), timestamps=stamps)
+                                         fps=fps_of(list(stamps.values())), timestamps=stamps,
+                                         records=plan.records)
     summary["timings"]["setup_s"] = plan.setup_s
     summary["timings"]["total_s"] = time.perf_counter() - plan.t_start
     end.records, end.summary = plan.records, summary
@@ -296,11 +298,13 @@ def finish_run(plan: RunPlan, runner: dict) -> dict:
 
 
 def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log=print,
-              fps: float | None = None, timestamps: dict | None = None) -> tuple[dict, RunEnd]:
+              fps: float | None = None, timestamps: dict | None = None,
+              records: dict | None = None) -> tuple[dict, RunEnd]:
     """Tracks of a run whose maps are written (maps/<stem>.npy of the `done` frames, in
     order), then every frame's tracks handed to the writers (`tracked`: the pictures with the
     tracks, deferred until now, and the Rerun log). `fps`: the frames' rate from their
-    timestamps (default input.fps). Returns (the `tracking` block of summary.json, the RunEnd
+    timestamps (default input.fps). `records`: the frames' records by name where the run holds
+    them (else read from frames/<stem>.json, as `dpom-warp track` does). Returns (the `tracking` block of summary.json, the RunEnd
     the writers finish with: the frames, their tracks). tracking.method off (or a single
     frame): no tracks (their tables removed)."""
     from .tracking import Cells, FrameMaps, run_tracker
@@ -319,7 +323,7 @@ def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log
     rate = fps or cfg.inputs.fps
     tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, rate, cfg.detection.threshold,
                                  method, times)
-    placed = placed_on_heads(tracks, [out / "frames" / f"{f.stem}.json" for f in done], cfg)
+    placed = placed_on_heads(tracks, ((records or {}).get(f.name) or read_record(out, f) for f in done), cfg)
     if placed is not None:
         report["positions"] = placed
     report["fps_from"] = "timestamps" if fps else "input.fps"
@@ -332,9 +336,15 @@ def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log
     return report, RunEnd(names, {}, tracks, rate, times)
 
 
-def placed_on_heads(tracks: list, records: list[Path], cfg) -> dict | None:
+def read_record(out: Path, frame: Path) -> dict:
+    """A finished frame's record, frames/<stem>.json ({} where there is none)."""
+    path = out / "frames" / f"{frame.stem}.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def placed_on_heads(tracks: list, records: Iterable[dict], cfg) -> dict | None:
     """`tracks` moved to their detections' heads (heads.place_tracks) as the frames' records
-    (frames/<stem>.json, in the tracks' frame order) found them; returns the tracking block's
+    (in the tracks' frame order; taken only where the run places tracks) found them; returns the tracking block's
     `positions` (how many track-frames are at a head, how many at a cell centre), or None
     where the run places none (heads.can_place)."""
     from .heads import Placer, found_in
@@ -342,7 +352,7 @@ def placed_on_heads(tracks: list, records: list[Path], cfg) -> dict | None:
     placer = Placer.of(cfg)
     if placer is None:
         return None
-    found = [found_in(json.loads(path.read_text()) if path.is_file() else {}) for path in records]
+    found = [found_in(record) for record in records]
     at_heads = placer.tracks(tracks, found)
     shown = sum(int((~tr.bridged).sum()) for tr in tracks)
     return {"at": "head", "head": at_heads, "cell": shown - at_heads}
