@@ -304,9 +304,9 @@ def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log
     order), then every frame's tracks handed to the writers (`tracked`: the pictures with the
     tracks, deferred until now, and the Rerun log). `fps`: the frames' rate from their
     timestamps (default input.fps). `records`: the frames' records by name where the run holds
-    them (else read from frames/<stem>.json, as `dpom-warp track` does). Returns (the `tracking` block of summary.json, the RunEnd
-    the writers finish with: the frames, their tracks). tracking.method off (or a single
-    frame): no tracks (their tables removed)."""
+    them (else read from frames/<stem>.json, as `dpom-warp track` does). Returns (the
+    `tracking` block of summary.json, the RunEnd the writers finish with: the frames, their
+    tracks). tracking.method off (or a single frame): no tracks (their tables removed)."""
     from .tracking import Cells, FrameMaps, run_tracker
 
     cfg, out = view.cfg, view.out
@@ -344,9 +344,9 @@ def read_record(out: Path, frame: Path) -> dict:
 
 def placed_on_heads(tracks: list, records: Iterable[dict], cfg) -> dict | None:
     """`tracks` moved to their detections' heads (heads.place_tracks) as the frames' records
-    (in the tracks' frame order; taken only where the run places tracks) found them; returns the tracking block's
-    `positions` (how many track-frames are at a head, how many at a cell centre), or None
-    where the run places none (heads.can_place)."""
+    (in the tracks' frame order; taken only where the run places tracks) found them; returns
+    the tracking block's `positions` (how many track-frames are at a head, how many at a cell
+    centre), or None where the run places none (heads.can_place)."""
     from .heads import Placer, found_in
 
     placer = Placer.of(cfg)
