@@ -165,7 +165,7 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
             plan.records[f.name] = record
         else:
             plan.todo.append(f)
-            if resume and (out / "frames" / f"{f.stem}.json").exists():
+            if resume and record_path(out, f).exists():
                 again.append(f.name)
     if resume:
         log(f"resuming: {len(plan.records)} frames already done, {len(plan.todo)} to go"
@@ -173,10 +173,15 @@ def open_output(plan: RunPlan, overwrite: bool, resume: bool, log=print) -> None
                f"{', '.join(again[:5])}{', ...' if len(again) > 5 else ''})" if again else ""))
 
 
+def record_path(out: Path, frame: Path) -> Path:
+    """Where a run in `out` keeps a frame's record: frames/<stem>.json."""
+    return out / "frames" / f"{frame.stem}.json"
+
+
 def _finished_record(out: Path, frame: Path) -> dict | None:
     """A frame's record where the frame is finished: the record readable and its map there (a
     record is written last, so a missing map was removed since, and the frame is done again)."""
-    record, map_file = out / "frames" / f"{frame.stem}.json", out / "maps" / f"{frame.stem}.npy"
+    record, map_file = record_path(out, frame), out / "maps" / f"{frame.stem}.npy"
     if not (record.is_file() and map_file.is_file()):
         return None
     try:
@@ -303,8 +308,8 @@ def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log
     """Tracks of a run whose maps are written (maps/<stem>.npy of the `done` frames, in
     order), then every frame's tracks handed to the writers (`tracked`: the pictures with the
     tracks, deferred until now, and the Rerun log). `fps`: the frames' rate from their
-    timestamps (default input.fps). `records`: the frames' records by name where the run holds
-    them (else read from frames/<stem>.json, as `dpom-warp track` does). Returns (the
+    timestamps (default input.fps). `records`: each of the `done` frames' record by name, as the
+    run holds them (None: read from frames/<stem>.json, as `dpom-warp track` does). Returns (the
     `tracking` block of summary.json, the RunEnd the writers finish with: the frames, their
     tracks). tracking.method off (or a single frame): no tracks (their tables removed)."""
     from .tracking import Cells, FrameMaps, run_tracker
@@ -323,7 +328,8 @@ def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log
     rate = fps or cfg.inputs.fps
     tracks, report = run_tracker(maps, cells, cfg.grid.shape, cfg.tracking, rate, cfg.detection.threshold,
                                  method, times)
-    placed = placed_on_heads(tracks, ((records or {}).get(f.name) or read_record(out, f) for f in done), cfg)
+    placed = placed_on_heads(tracks, (records[f.name] if records is not None else read_record(out, f)
+                                      for f in done), cfg)
     if placed is not None:
         report["positions"] = placed
     report["fps_from"] = "timestamps" if fps else "input.fps"
@@ -338,7 +344,7 @@ def track_run(view: RunView, writers: Writers, done: list[Path], truth=None, log
 
 def read_record(out: Path, frame: Path) -> dict:
     """A finished frame's record, frames/<stem>.json ({} where there is none)."""
-    path = out / "frames" / f"{frame.stem}.json"
+    path = record_path(out, frame)
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
