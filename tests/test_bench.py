@@ -140,3 +140,34 @@ def test_detection_level_fusion_of_the_rig_bench_by_hand():
     np.testing.assert_allclose(two["f"], [[0.4 / 3, 0.35 / 3]], atol=1e-12)
     np.testing.assert_allclose(one["g"], [[0.0, 0.0], [0.2, 0.0]], atol=1e-12)
     assert two["g"].shape == (0, 2)
+
+
+def test_support_pieces_give_back_a_rendered_panel_and_drop_small_ones():
+    """bench.support: a 0.4 x 1.1 m upright panel at y = 4 (x 0.2 to 0.6, 0.5 to 1.6 m high)
+    before a far wall, seen from 1.3 m up, comes back as one piece with its spans (to a pixel's
+    width, 4 / 120 m, and the percentiles' trim), the floor under it left out by the height
+    range; a 0.1 m square (about 9 pixels) is no piece at 40."""
+    from bench.support import box_share, pieces
+    from dpom_warp.geometry import Camera, pose_from_angles
+
+    cam = Camera(160, 120, 120.0, 120.0, 79.5, 59.5, pose_from_angles(1.3, 5.0))
+    d, c = cam.rays(), cam.centre
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor = np.where(d[..., 2] < 0, -c[2] / d[..., 2], np.inf)
+        t4, t6 = (4.0 - c[1]) / d[..., 1], (6.0 - c[1]) / d[..., 1]
+    p4 = c + t4[..., None] * d
+    panel = (p4[..., 0] >= 0.2) & (p4[..., 0] <= 0.6) & (p4[..., 2] >= 0.5) & (p4[..., 2] <= 1.6)
+    square = (p4[..., 0] >= -0.3) & (p4[..., 0] <= -0.2) & (p4[..., 2] >= 1.0) & (p4[..., 2] <= 1.1)
+    depth = np.minimum(floor, np.where(panel | square, t4, t6))
+    found = pieces(depth, cam, (0.4, 4.0), 0.4, (0.08, 2.15))
+    assert len(found) == 1
+    (p,) = found
+    assert p["pixels"] == int(panel.sum())
+    assert abs(p["y"] - 4.0) < 1e-9
+    assert p["x"][0] == pytest.approx(0.2, abs=0.04) and p["x"][1] == pytest.approx(0.6, abs=0.04)
+    assert p["z"][0] == pytest.approx(0.5, abs=0.04) and p["z"][1] == pytest.approx(1.6, abs=0.04)
+    v, u = np.nonzero(panel)
+    assert (p["u"], p["v"]) == ((u.min(), u.max()), (v.min(), v.max()))
+    assert box_share(found, (u.min(), v.min(), u.max(), v.max())) == pytest.approx(
+        panel.sum() / ((u.max() - u.min() + 1) * (v.max() - v.min() + 1)))
+    assert 5 <= square.sum() < 40 and pieces(depth, cam, (-0.25, 4.0), 0.4, (0.08, 2.15)) == []
