@@ -106,11 +106,10 @@ def noise_warning(noise: dict, model_noise) -> str | None:
     """One line when the floor's depth noise (ground.floor_noise) is NOISE_OFF times
     model.sensor_noise's sigma or more, or 1 / NOISE_OFF or less (over its bins, weighted by
     their readings), naming the key and the (a, b) the floor shows (with the model's a); else None."""
-    from .ground import noise_b, noise_words
+    from .ground import noise_b, noise_ratio, noise_words
 
     a, b = model_noise
-    z, sigma, n = (np.array(c, float) for c in zip(*noise["bins"]))
-    ratio = float(np.sum(n * sigma) / np.sum(n * (a + b * z ** 2)))
+    ratio = noise_ratio(noise["bins"], a, b)
     if 1.0 / NOISE_OFF < ratio < NOISE_OFF:
         return None
     own = noise_b(noise["bins"], a)

@@ -454,6 +454,13 @@ def noise_b(bins: list, a: float) -> float:
     return round(max(float(np.sum(n * (sigma - a) * zc ** 2) / np.sum(n * zc ** 4)), 0.0), 5)
 
 
+def noise_ratio(bins: list, a: float, b: float) -> float:
+    """How many times sigma(z) = a + b z^2 the floor_noise bins' sigmas are, over the bins
+    weighted by their readings: sum(n sigma) / sum(n (a + b z^2))."""
+    zc, sigma, n = (np.array(c, float) for c in zip(*bins))
+    return float(np.sum(n * sigma) / np.sum(n * (a + b * zc ** 2)))
+
+
 def floor_extent(points: np.ndarray, normal: np.ndarray, offset: float, pose: np.ndarray,
                  distance: float) -> tuple[float, float, float, float] | None:
     """(x_min, x_max, y_min, y_max) in world metres of the camera-frame `points` within

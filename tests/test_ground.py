@@ -234,12 +234,14 @@ def test_the_floor_says_the_sensors_depth_noise(noise):
 
 def test_a_model_noise_far_from_the_floors_is_said():
     from dpom_warp.camera_setup import noise_warning
+    from dpom_warp.ground import noise_ratio
 
     bins = [[2.0, 0.008, 300], [3.0, 0.0155, 100]]  # what a + b z^2 gives with (0.002, 0.0015)
     floor = {"a": 0.002, "b": 0.0015, "bins": bins}
     assert noise_warning(floor, (0.002, 0.0015)) is None
     # a model of (0.002, 0.0018) says 0.0092 and 0.0182: the floor's (2.4 + 1.55) / (2.76 + 1.82) = 0.86 of it
     assert noise_warning(floor, (0.002, 0.0018)) is None
+    assert noise_ratio(bins, 0.002, 0.0018) == pytest.approx(3.95 / 4.58)
     # 1.5 times the scatter (the warning's pair is its own, from the bins: "b" is not read)
     louder = {"a": 0.002, "b": 0.0, "bins": [[z, 1.5 * s, k] for z, s, k in bins]}
     said = noise_warning(louder, (0.002, 0.0015))
