@@ -80,10 +80,15 @@ def main():
     a = ap.parse_args()
     os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".cache" / "warp"))
     from dpom_warp.api import Detector
+    from dpom_warp.config import ConfigError
+    from dpom_warp.io import InputError
     from dpom_warp.sources import expand
     from dpom_warp.worker import read_frame
 
-    det = Detector.from_config(a.config, a.set, log=print)
+    try:
+        det = Detector.from_config(a.config, a.set, log=print)
+    except (ConfigError, InputError) as e:
+        raise SystemExit(f"error: {e}") from None
     cfg = det.config
     if cfg.is_rig:
         raise SystemExit(f"{a.config}: expected a one-camera config, found a rig")
