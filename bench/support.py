@@ -6,7 +6,8 @@ For each detection of one frame (or each --at location), the readings whose worl
 within --radius metres of its place on the floor, above input.structure.floor_gap and below
 object.height + 0.3 m, joined into 8-connected pieces of the full-resolution image: each
 piece's pixels, median depth, world x span and y (its 2nd to 98th percentiles, the median)
-and height span, and the share of the detection's box the pieces fill.
+and height span, where its outline is its own top (what stands behind shows above it) and how
+high that top is, and the share of the detection's box the pieces fill.
 
     python -m bench.support CONFIG [--set key=value ...] [--frame N] [--radius 0.4]
                             [--at X,Y ...] [--min-pixels 40]
@@ -53,8 +54,33 @@ def pieces(depth_m: np.ndarray, camera, at, radius: float, z_range, min_pixels: 
         out.append({"pixels": int(len(v)), "u": (int(u.min()), int(u.max())), "v": (int(v.min()), int(v.max())),
                     "depth": float(np.median(depth_m[v, u])),
                     "x": tuple(float(t) for t in np.percentile(q[:, 0], [2, 98])), "y": float(np.median(q[:, 1])),
-                    "z": tuple(float(t) for t in np.percentile(q[:, 2], [2, 98]))})
+                    "z": tuple(float(t) for t in np.percentile(q[:, 2], [2, 98])),
+                    "top": free_top(depth_m, p, v, u)})
     return sorted(out, key=lambda c: -c["pixels"])
+
+
+TOP_LOOK = 30  # rows looked up above a piece's top pixel for the next reading
+TOP_GAP = 0.3  # metres: that reading this much farther makes the top pixel a free top
+
+
+def free_top(depth_m: np.ndarray, p: np.ndarray, v: np.ndarray, u: np.ndarray) -> dict | None:
+    """Where a piece's outline is its own top: in each column, its topmost pixel whose next
+    reading above (within TOP_LOOK rows, no-reading pixels skipped) is TOP_GAP or more farther
+    (what stands behind shows above it; a nearer reading there hides the top instead).
+    {"columns", "x" (span), "z" (lowest, highest)} of those pixels' world points, or None where
+    no column has one. A head's top is round and 0.2 m wide; a partition's, straight."""
+    tops = []
+    for c in np.unique(u):
+        r = int(v[u == c].min())
+        above = depth_m[max(r - TOP_LOOK, 0):r, c][::-1]
+        seen = above[np.isfinite(above) & (above > 0)]
+        if len(seen) and seen[0] >= depth_m[r, c] + TOP_GAP:
+            tops.append(p[r, c])
+    if not tops:
+        return None
+    t = np.array(tops)
+    return {"columns": len(t), "x": (float(t[:, 0].min()), float(t[:, 0].max())),
+            "z": (float(t[:, 2].min()), float(t[:, 2].max()))}
 
 
 def box_share(found: list[dict], box) -> float:
@@ -65,8 +91,11 @@ def box_share(found: list[dict], box) -> float:
 
 
 def piece_line(c: dict) -> str:
+    t = c["top"]
+    top = (f"; its own top in {t['columns']} columns, x {t['x'][0]:.2f} to {t['x'][1]:.2f}, {t['z'][0]:.2f} to "
+           f"{t['z'][1]:.2f} m high" if t else "; no top of its own in view")
     return (f"  {c['pixels']:5d} px  u {c['u'][0]}-{c['u'][1]}  v {c['v'][0]}-{c['v'][1]}  depth {c['depth']:.2f} m  "
-            f"x {c['x'][0]:.2f} to {c['x'][1]:.2f}  y {c['y']:.2f}  z {c['z'][0]:.2f} to {c['z'][1]:.2f} m")
+            f"x {c['x'][0]:.2f} to {c['x'][1]:.2f}  y {c['y']:.2f}  z {c['z'][0]:.2f} to {c['z'][1]:.2f} m{top}")
 
 
 def main():

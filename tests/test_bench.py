@@ -146,7 +146,9 @@ def test_support_pieces_give_back_a_rendered_panel_and_drop_small_ones():
     """bench.support: a 0.4 x 1.1 m upright panel at y = 4 (x 0.2 to 0.6, 0.5 to 1.6 m high)
     before a far wall, seen from 1.3 m up, comes back as one piece with its spans (to a pixel's
     width, 4 / 120 m, and the percentiles' trim), the floor under it left out by the height
-    range; a 0.1 m square (about 9 pixels) is no piece at 40."""
+    range, and its top its own (the wall shows above it) at 1.6 m except where a bar nearer the
+    camera (y = 3, x 0.3 to 0.4, 1.5 to 1.7 m high: it hides x 0.4 to 0.53 of the panel's top)
+    lies over it; a 0.1 m square (about 9 pixels) is no piece at 40."""
     from bench.support import box_share, pieces
     from dpom_warp.geometry import Camera, pose_from_angles
 
@@ -154,20 +156,27 @@ def test_support_pieces_give_back_a_rendered_panel_and_drop_small_ones():
     d, c = cam.rays(), cam.centre
     with np.errstate(divide="ignore", invalid="ignore"):
         floor = np.where(d[..., 2] < 0, -c[2] / d[..., 2], np.inf)
-        t4, t6 = (4.0 - c[1]) / d[..., 1], (6.0 - c[1]) / d[..., 1]
-    p4 = c + t4[..., None] * d
+        t3, t4, t6 = ((y - c[1]) / d[..., 1] for y in (3.0, 4.0, 6.0))
+    p3, p4 = c + t3[..., None] * d, c + t4[..., None] * d
     panel = (p4[..., 0] >= 0.2) & (p4[..., 0] <= 0.6) & (p4[..., 2] >= 0.5) & (p4[..., 2] <= 1.6)
     square = (p4[..., 0] >= -0.3) & (p4[..., 0] <= -0.2) & (p4[..., 2] >= 1.0) & (p4[..., 2] <= 1.1)
-    depth = np.minimum(floor, np.where(panel | square, t4, t6))
+    bar = (p3[..., 0] >= 0.3) & (p3[..., 0] <= 0.4) & (p3[..., 2] >= 1.5) & (p3[..., 2] <= 1.7)
+    depth = np.minimum(floor, np.where(bar, t3, np.where(panel | square, t4, t6)))
+    seen = panel & ~bar
     found = pieces(depth, cam, (0.4, 4.0), 0.4, (0.08, 2.15))
     assert len(found) == 1
     (p,) = found
-    assert p["pixels"] == int(panel.sum())
+    assert p["pixels"] == int(seen.sum())
     assert abs(p["y"] - 4.0) < 1e-9
     assert p["x"][0] == pytest.approx(0.2, abs=0.04) and p["x"][1] == pytest.approx(0.6, abs=0.04)
     assert p["z"][0] == pytest.approx(0.5, abs=0.04) and p["z"][1] == pytest.approx(1.6, abs=0.04)
-    v, u = np.nonzero(panel)
+    v, u = np.nonzero(seen)
     assert (p["u"], p["v"]) == ((u.min(), u.max()), (v.min(), v.max()))
     assert box_share(found, (u.min(), v.min(), u.max(), v.max())) == pytest.approx(
-        panel.sum() / ((u.max() - u.min() + 1) * (v.max() - v.min() + 1)))
+        seen.sum() / ((u.max() - u.min() + 1) * (v.max() - v.min() + 1)))
+    top = p["top"]
+    hidden = {int(k) for k in np.unique(np.nonzero(bar & panel)[1])}  # columns where the bar covers the top
+    assert hidden and top["columns"] == len(set(u.tolist()) - hidden)
+    assert top["x"][0] == pytest.approx(0.2, abs=0.04) and top["x"][1] == pytest.approx(0.6, abs=0.04)
+    assert 1.6 - 4.0 / 120 <= top["z"][0] <= top["z"][1] <= 1.6
     assert 5 <= square.sum() < 40 and pieces(depth, cam, (-0.25, 4.0), 0.4, (0.08, 2.15)) == []
