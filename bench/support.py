@@ -37,7 +37,7 @@ def pieces(depth_m: np.ndarray, camera, at, radius: float, z_range, min_pixels: 
     """The connected pieces (8-connected, `min_pixels` or more) of the readings whose world
     point is within `radius` of `at` = (x, y) on the floor and between `z_range` = (lo, hi)
     high, largest first: {"pixels", "u", "v" (spans), "depth" (median), "x" (2nd, 98th
-    percentile), "y" (median), "z" (2nd, 98th percentile)}."""
+    percentile), "y" (median), "z" (2nd, 98th percentile), "top" (free_top)}."""
     from scipy import ndimage
 
     p = world_points(depth_m, camera)
@@ -122,6 +122,8 @@ def main():
     if cfg.is_rig:
         raise SystemExit(f"{a.config}: expected a one-camera config, found a rig")
     files = expand(cfg.inputs.frames, "input.frames", cfg.inputs.topic, lambda *_: None)
+    if not 0 <= a.frame < len(files):
+        raise SystemExit(f"error: --frame: expected 0 to {len(files) - 1} ({cfg.inputs.frames}), found {a.frame}")
     depth = read_frame(cfg, files[a.frame])
     result = det.detect(depth)
     z_range = (cfg.inputs.structure.floor_gap, cfg.obj.height + 0.3)
