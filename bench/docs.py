@@ -349,7 +349,7 @@ def recipe_words(out: Path) -> str:
                                     "grid": {"x": [-2, 2, 0.1], "y": [1, 6, 0.1]}, "device": "cpu"}))
     plain = run_config(str(four), out / "recipe", ["output.images=false"])
     g = plain["ground_fit"]
-    a = 0.002  # model.sensor_noise's default a
+    a = plain["config"]["model"]["sensor_noise"][0]  # the model's a, as the warning keeps it
     b = noise_b(g["depth_noise"]["bins"], a)
     said = g.get("noise_warning", "no warning")
     own = run_config(str(four), out / "recipe_noise", ["output.images=false", f"model.sensor_noise=[{a}, {b}]"])

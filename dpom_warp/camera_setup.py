@@ -15,7 +15,7 @@ import numpy as np
 from .background import BackgroundEstimator, sample_frames
 from .config import ConfigError, RunConfig
 from .geometry import build_geometry
-from .ground import fit_ground_files, fit_ground_named, frames_named
+from .ground import fit_ground_files, fit_ground_named, frames_named, noise_b, noise_ratio, noise_words
 from .io import InputError, depth_scale_hint
 from .names import is_live
 from .resolution import Resolution
@@ -106,8 +106,6 @@ def noise_warning(noise: dict, model_noise) -> str | None:
     """One line when the floor's depth noise (ground.floor_noise) is NOISE_OFF times
     model.sensor_noise's sigma or more, or 1 / NOISE_OFF or less (over its bins, weighted by
     their readings), naming the key and the (a, b) the floor shows (with the model's a); else None."""
-    from .ground import noise_b, noise_ratio, noise_words
-
     a, b = model_noise
     ratio = noise_ratio(noise["bins"], a, b)
     if 1.0 / NOISE_OFF < ratio < NOISE_OFF:
